@@ -1,0 +1,38 @@
+"""Console entry point ``rlgrasp-train`` (same as ``python scripts/train.py``).
+
+The Hydra configs live at the repository root (``configs/``), next to the ``rlgrasp`` package, so
+the console script needs a source checkout (``pip install -e .``); ``RLGRASP_CONFIG_DIR`` points it
+at another config tree.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import hydra
+from omegaconf import DictConfig
+
+from rlgrasp.train.config import register_configs
+
+CONFIG_DIR = os.environ.get(
+    "RLGRASP_CONFIG_DIR", str(Path(__file__).resolve().parents[2] / "configs")
+)
+
+register_configs()
+
+
+def run(cfg: DictConfig) -> float:
+    """Train and return the final evaluation success rate (what a Hydra sweeper optimizes)."""
+    from rlgrasp.train.loop import train
+
+    return train(cfg)
+
+
+@hydra.main(config_path=CONFIG_DIR, config_name="train", version_base="1.3")
+def main(cfg: DictConfig) -> float:
+    return run(cfg)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,78 @@
+"""Periodic evaluation: deterministic actions on the same seeded episodes every time.
+
+Runs in the learner process on a small ``SerialEnv`` so it needs no extra workers; with a few envs
+and one episode each it costs about one collection batch.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import torch
+from tensordict import TensorDictBase
+from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
+
+from rlgrasp.train.collect import make_batched_env
+
+
+def episode_stats(td: TensorDictBase) -> dict[str, torch.Tensor]:
+    """Return, length and success of each env's first finished episode in a ``[envs, time]`` rollout."""
+    done = td["next", "done"].reshape(td.shape)
+    finished = done.any(-1)
+    first = torch.where(finished, done.float().argmax(-1), torch.full_like(finished, td.shape[-1] - 1, dtype=torch.long))
+    steps = torch.arange(td.shape[-1]).expand(td.shape)
+    upto = steps <= first.unsqueeze(-1)
+    reward = td["next", "reward"].reshape(td.shape)
+    out = {
+        "finished": finished,
+        "return": (reward * upto).sum(-1),
+        "length": (first + 1).float(),
+    }
+    if ("next", "is_success") in td.keys(True):
+        success = td["next", "is_success"].reshape(td.shape)
+        out["success"] = success.gather(-1, first.unsqueeze(-1)).squeeze(-1).float()
+    return out
+
+
+class Evaluator:
+    """Evaluates ``episodes`` episodes on ``num_envs`` in-process envs seeded from ``seed``."""
+
+    def __init__(self, env_cfg: dict[str, Any], episodes: int, num_envs: int, seed: int) -> None:
+        self.env_cfg = env_cfg
+        self.episodes = episodes
+        self.num_envs = max(1, min(num_envs, episodes))
+        self.seed = seed
+        self.max_steps = int(env_cfg.get("max_episode_steps", 50))
+        self._env: EnvBase | None = None
+
+    @torch.no_grad()
+    def run(self, policy) -> dict[str, float]:
+        if self._env is None:
+            self._env = make_batched_env(
+                self.env_cfg,
+                self.num_envs,
+                self.seed,
+                torch_threads=torch.get_num_threads(),
+                episode_stats=False,
+                seed_torch=False,
+            )
+        returns, successes = [], []
+        rounds = math.ceil(self.episodes / self.num_envs)
+        with set_exploration_type(ExplorationType.DETERMINISTIC):
+            for r in range(rounds):
+                self._env.set_seed(self.seed + r * self.num_envs)
+                td = self._env.rollout(self.max_steps, policy, break_when_any_done=False)
+                stats = episode_stats(td)
+                returns.append(stats["return"])
+                if "success" in stats:
+                    successes.append(stats["success"])
+        out = {"mean_reward": float(torch.cat(returns)[: self.episodes].mean())}
+        if successes:
+            out["success_rate"] = float(torch.cat(successes)[: self.episodes].mean())
+        return out
+
+    def close(self) -> None:
+        if self._env is not None and not self._env.is_closed:
+            self._env.close()
+        self._env = None

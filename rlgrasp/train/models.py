@@ -1,0 +1,156 @@
+"""Actor and critic builders: MLPs behind a shared observation normalizer."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+from tensordict.nn import (
+    AddStateIndependentNormalScale,
+    InteractionType,
+    TensorDictModule,
+)
+from torch import nn
+from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
+
+OBS_KEY = "observation"
+
+_ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU}
+
+
+class RunningNorm(nn.Module):
+    """Running mean/std normalizer of observations, living inside the actor and the critic.
+
+    Why not TorchRL's ``VecNorm``: with the process collector every worker would keep its own
+    statistics in its own process, and getting them back into the learner and the checkpoint is
+    awkward. Here the statistics are buffers of the policy: the learner updates them from each
+    batch, ``update_policy_weights_()`` ships them to the workers with the weights, and they are in
+    the checkpoint's state dict, so evaluation from a checkpoint normalizes exactly like training.
+    """
+
+    def __init__(self, dim: int, clip: float = 10.0, enabled: bool = True, eps: float = 1e-8) -> None:
+        super().__init__()
+        self.clip = clip
+        self.enabled = enabled
+        self.eps = eps
+        self.register_buffer("mean", torch.zeros(dim))
+        self.register_buffer("var", torch.ones(dim))
+        self.register_buffer("count", torch.zeros((), dtype=torch.float64))
+
+    @torch.no_grad()
+    def update(self, obs: torch.Tensor) -> None:
+        """Merge a batch's moments into the running ones (Chan et al. parallel algorithm)."""
+        if not self.enabled:
+            return
+        x = obs.reshape(-1, self.mean.shape[-1]).to(torch.float64)
+        n = x.shape[0]
+        if n == 0:
+            return
+        b_mean, b_var = x.mean(0), x.var(0, unbiased=False)
+        tot = self.count + n
+        delta = b_mean - self.mean.double()
+        new_mean = self.mean.double() + delta * n / tot
+        m2 = self.var.double() * self.count + b_var * n + delta.pow(2) * self.count * n / tot
+        self.mean.copy_(new_mean.to(self.mean.dtype))
+        self.var.copy_((m2 / tot).to(self.var.dtype))
+        self.count.copy_(tot)
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        if not self.enabled:
+            return obs
+        out = (obs - self.mean) / torch.sqrt(self.var + self.eps)
+        return out.clamp(-self.clip, self.clip)
+
+
+def _mlp(in_dim: int, out_dim: int, hidden: Sequence[int], activation: str, last_gain: float) -> MLP:
+    mlp = MLP(
+        in_features=in_dim,
+        out_features=out_dim,
+        num_cells=list(hidden),
+        activation_class=_ACTIVATIONS[activation],
+    )
+    # Orthogonal init as in the PPO reference implementations; a small last layer keeps the
+    # initial policy close to zero-mean and the initial values close to zero.
+    linears = [m for m in mlp.modules() if isinstance(m, nn.Linear)]
+    for i, layer in enumerate(linears):
+        gain = last_gain if i == len(linears) - 1 else 2**0.5
+        nn.init.orthogonal_(layer.weight, gain=gain)
+        nn.init.zeros_(layer.bias)
+    return mlp
+
+
+class ActorNet(nn.Module):
+    """normalized obs -> MLP -> (loc, state-independent scale)."""
+
+    def __init__(self, norm: RunningNorm, obs_dim: int, act_dim: int, model_cfg) -> None:
+        super().__init__()
+        self.norm = norm
+        self.mlp = _mlp(obs_dim, act_dim, model_cfg.hidden_sizes, model_cfg.activation, 0.01)
+        self.scale = AddStateIndependentNormalScale(
+            act_dim, scale_lb=model_cfg.min_std, init_value=model_cfg.init_log_std
+        )
+
+    def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.scale(self.mlp(self.norm(obs)))
+
+
+class CriticNet(nn.Module):
+    """normalized obs -> MLP -> state value."""
+
+    def __init__(self, norm: RunningNorm, obs_dim: int, model_cfg) -> None:
+        super().__init__()
+        self.norm = norm
+        self.mlp = _mlp(obs_dim, 1, model_cfg.hidden_sizes, model_cfg.activation, 1.0)
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.mlp(self.norm(obs))
+
+
+def build_actor(
+    norm: RunningNorm,
+    obs_dim: int,
+    action_low: torch.Tensor,
+    action_high: torch.Tensor,
+    model_cfg,
+    deterministic: bool = False,
+) -> ProbabilisticActor:
+    """A TanhNormal policy squashed into the action bounds (no clipping bias in the log-probs).
+
+    ``deterministic=True`` makes the mode of the distribution the default action outside any
+    ``set_exploration_type`` context (for evaluation from a checkpoint).
+    """
+    act_dim = int(action_low.numel())
+    low, high = _bound(action_low), _bound(action_high)
+    net = TensorDictModule(
+        ActorNet(norm, obs_dim, act_dim, model_cfg), in_keys=[OBS_KEY], out_keys=["loc", "scale"]
+    )
+    return ProbabilisticActor(
+        net,
+        in_keys=["loc", "scale"],
+        distribution_class=TanhNormal,
+        distribution_kwargs={"low": low, "high": high, "tanh_loc": False},
+        return_log_prob=True,
+        default_interaction_type=(
+            InteractionType.DETERMINISTIC if deterministic else InteractionType.RANDOM
+        ),
+    )
+
+
+def _bound(b: torch.Tensor) -> float | torch.Tensor:
+    # A scalar bound stays device-agnostic (tensors in distribution_kwargs are not moved by .to()).
+    b = torch.as_tensor(b, dtype=torch.float32).flatten()
+    return float(b[0]) if bool((b == b[0]).all()) else b
+
+
+def build_critic(norm: RunningNorm, obs_dim: int, model_cfg) -> ValueOperator:
+    return ValueOperator(CriticNet(norm, obs_dim, model_cfg), in_keys=[OBS_KEY])
+
+
+def build_models(
+    obs_dim: int, action_low: torch.Tensor, action_high: torch.Tensor, model_cfg
+) -> tuple[ProbabilisticActor, ValueOperator, RunningNorm]:
+    """Actor and critic sharing one normalizer (the actor alone is shipped to the workers)."""
+    norm = RunningNorm(obs_dim, clip=model_cfg.obs_clip, enabled=model_cfg.obs_norm)
+    actor = build_actor(norm, obs_dim, action_low, action_high, model_cfg)
+    critic = build_critic(norm, obs_dim, model_cfg)
+    return actor, critic, norm

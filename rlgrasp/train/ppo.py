@@ -1,0 +1,138 @@
+"""The PPO update: GAE recomputed each epoch, clipped loss over shuffled minibatches.
+
+TorchRL provides the pieces (``GAE``, ``ClipPPOLoss``, ``SamplerWithoutReplacement``); this module
+only adds what it lacks: the learning-rate schedule, the target-KL stop, finiteness checks and the
+per-update metrics.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import torch
+from tensordict import TensorDictBase
+from torchrl.data import LazyTensorStorage, ReplayBuffer, SamplerWithoutReplacement
+from torchrl.objectives import ClipPPOLoss
+from torchrl.objectives.value import GAE
+
+from rlgrasp.train.models import RunningNorm
+
+
+class NonFiniteError(RuntimeError):
+    """A NaN or inf appeared in the loss, the gradients or the parameters."""
+
+
+class PPOLearner:
+    """Owns the loss, the advantage estimator and the optimizer; ``update`` does one PPO round."""
+
+    def __init__(self, actor, critic, norm: RunningNorm, algo_cfg: Any, device: torch.device):
+        self.cfg = algo_cfg
+        self.norm = norm
+        self.device = device
+        self.loss = ClipPPOLoss(
+            actor,
+            critic,
+            clip_epsilon=algo_cfg.clip_epsilon,
+            entropy_bonus=True,
+            entropy_coeff=algo_cfg.entropy_coeff,
+            critic_coeff=algo_cfg.critic_coeff,
+            loss_critic_type=algo_cfg.loss_critic_type,
+            normalize_advantage=algo_cfg.normalize_advantage,
+        )
+        self.gae = GAE(
+            gamma=algo_cfg.gamma, lmbda=algo_cfg.gae_lambda, value_network=critic, average_gae=False
+        )
+        self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=algo_cfg.lr, eps=algo_cfg.adam_eps)
+        self.params = [p for p in self.loss.parameters()]
+
+    def lr_at(self, frames: int, total_frames: int) -> float:
+        """Linear annealing by frames (so a resumed run continues the same schedule)."""
+        if not self.cfg.anneal_lr or total_frames <= 0:
+            return self.cfg.lr
+        frac = max(self.cfg.min_lr_frac, 1.0 - frames / total_frames)
+        return self.cfg.lr * frac
+
+    def set_lr(self, lr: float) -> None:
+        for group in self.optimizer.param_groups:
+            group["lr"] = lr
+
+    def update(self, batch: TensorDictBase) -> dict[str, float]:
+        """One PPO round on a ``[envs, time]`` batch; returns averaged metrics."""
+        cfg = self.cfg
+        batch = batch.to(self.device)
+        self.norm.update(batch["observation"])
+        n = batch.numel()
+        mb = min(cfg.minibatch_size, n)
+        buffer = self._buffer(n, mb)
+        sums: dict[str, float] = {}
+        count = 0
+        stopped_early = False
+        for _epoch in range(cfg.epochs):
+            with torch.no_grad():
+                self.gae(batch)
+            buffer.empty()
+            buffer.extend(batch.reshape(-1))
+            for _ in range(n // mb):
+                minibatch = buffer.sample()
+                losses = self.loss(minibatch)
+                total = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
+                if not torch.isfinite(total):
+                    raise NonFiniteError(
+                        "non-finite PPO loss "
+                        + ", ".join(f"{k}={float(v):.4g}" for k, v in losses.items() if v.numel() == 1)
+                    )
+                self.optimizer.zero_grad(set_to_none=True)
+                total.backward()
+                grad_norm = torch.nn.utils.clip_grad_norm_(self.params, cfg.max_grad_norm)
+                if not torch.isfinite(grad_norm):
+                    raise NonFiniteError(f"non-finite gradient norm {float(grad_norm)}")
+                self.optimizer.step()
+                kl = float(losses["kl_approx"])
+                for key, value in (
+                    ("policy_loss", losses["loss_objective"]),
+                    ("value_loss", losses["loss_critic"]),
+                    ("entropy", losses["entropy"]),
+                    ("approx_kl", losses["kl_approx"]),
+                    ("clipfrac", losses["clip_fraction"]),
+                    ("grad_norm", grad_norm),
+                ):
+                    sums[key] = sums.get(key, 0.0) + float(value.detach())
+                count += 1
+                if cfg.target_kl is not None and kl > cfg.target_kl:
+                    stopped_early = True
+                    break
+            if stopped_early:
+                break
+        self.check_params()
+        metrics = {k: v / max(count, 1) for k, v in sums.items()}
+        metrics["explained_variance"] = explained_variance(batch)
+        metrics["epochs"] = float(_epoch + 1)
+        metrics["minibatches"] = float(count)
+        return metrics
+
+    def _buffer(self, n: int, mb: int) -> ReplayBuffer:
+        """One buffer reused across updates (same batch size every round)."""
+        if getattr(self, "_rb_shape", None) != (n, mb):
+            self._rb = ReplayBuffer(
+                storage=LazyTensorStorage(n, device=self.device),
+                sampler=SamplerWithoutReplacement(drop_last=True),
+                batch_size=mb,
+            )
+            self._rb_shape = (n, mb)
+        return self._rb
+
+    def check_params(self) -> None:
+        for p in self.params:
+            if not torch.isfinite(p).all():
+                raise NonFiniteError("non-finite values in the network parameters")
+
+
+def explained_variance(batch: TensorDictBase) -> float:
+    """1 - Var(returns - values) / Var(returns), from the last GAE pass."""
+    target = batch["value_target"].flatten()
+    value = batch["state_value"].flatten()
+    var = target.var()
+    if var.item() == 0 or math.isnan(var.item()):
+        return float("nan")
+    return float(1.0 - (target - value).var() / var)

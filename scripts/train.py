@@ -1,0 +1,22 @@
+"""Train a grasping policy: python scripts/train.py experiment=grasp_ppo [key=value ...]."""
+
+import sys
+from pathlib import Path
+
+import hydra
+from omegaconf import DictConfig
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout, uninstalled
+from rlgrasp.train.cli import run
+from rlgrasp.train.config import register_configs
+
+register_configs()
+
+
+@hydra.main(config_path="../configs", config_name="train", version_base="1.3")
+def main(cfg: DictConfig) -> float:
+    return run(cfg)
+
+
+if __name__ == "__main__":
+    main()
