@@ -76,6 +76,9 @@ class PandaGraspEnv(gym.Env):
         camera_distance: float = 0.9,
         camera_yaw: float = 50.0,
         camera_pitch: float = -30.0,
+        solver_iterations: int = 50,
+        robot_urdf: str = "franka_panda/panda.urdf",
+        cube_urdf: str = "cube_small.urdf",
     ):
         if control_mode not in CONTROL_MODES:
             raise ValueError(
@@ -104,9 +107,14 @@ class PandaGraspEnv(gym.Env):
         self.camera = (camera_distance, camera_yaw, camera_pitch)
         self.metadata = {**self.metadata, "render_fps": round(1.0 / (time_step * substeps))}
 
-        self.scene = Scene(time_step=time_step, gui=render_mode == "human")
+        self.scene = Scene(
+            time_step=time_step,
+            gui=render_mode == "human",
+            cube_urdf=cube_urdf,
+            solver_iterations=solver_iterations,
+        )
         self.client = self.scene.client
-        self.robot = Panda(self.client)
+        self.robot = Panda(self.client, robot_urdf)
         self.robot.reset(NEUTRAL_POSE)
         self._initial_state = self.client.saveState()
 

@@ -33,15 +33,18 @@ class Scene:
         gui: bool = False,
         cube_urdf: str = "cube_small.urdf",
         cube_scales: Sequence[float] = (0.8, 0.9, 1.0, 1.1, 1.2),
+        solver_iterations: int = 50,
     ):
+        cube_path = data_path(cube_urdf)  # fail before connecting
         self.client = BulletClient(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
         c = self.client
         c.setTimeStep(time_step)
         # Needed for bit-identical replays after restoreState (RESEARCH.md section 1).
-        c.setPhysicsEngineParameter(deterministicOverlappingPairs=1)
+        c.setPhysicsEngineParameter(
+            deterministicOverlappingPairs=1, numSolverIterations=int(solver_iterations)
+        )
         self.time_step = time_step
         self.plane = c.loadURDF(data_path("plane.urdf"))
-        cube_path = data_path(cube_urdf)
         self.cube_scales = tuple(sorted(cube_scales))
         self.cubes = [
             c.loadURDF(cube_path, self._park_position(i, s), globalScaling=s)
