@@ -73,10 +73,10 @@ class PandaGraspEnv(gym.Env):
         render_mode: str | None = None,
         render_width: int = 320,
         render_height: int = 240,
-        camera_distance: float = 0.9,
-        camera_yaw: float = 50.0,
-        camera_pitch: float = -30.0,
-        solver_iterations: int = 50,
+        camera_distance: float = 1.1,
+        camera_yaw: float = 60.0,
+        camera_pitch: float = -25.0,
+        solver_iterations: int = 20,
         robot_urdf: str = "franka_panda/panda.urdf",
         cube_urdf: str = "cube_small.urdf",
     ):
@@ -215,7 +215,7 @@ class PandaGraspEnv(gym.Env):
         width, height = self.render_size
         distance, yaw, pitch = self.camera
         view = self.client.computeViewMatrixFromYawPitchRoll(
-            cameraTargetPosition=[*NOMINAL_CUBE_XY, 0.1],
+            cameraTargetPosition=[NOMINAL_CUBE_XY[0] - 0.15, NOMINAL_CUBE_XY[1], 0.2],
             distance=distance,
             yaw=yaw,
             pitch=pitch,
