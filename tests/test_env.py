@@ -218,12 +218,13 @@ def test_sparse_reward_and_terminate_on_success(make_env):
     env = make_env(randomization="none", reward="sparse", terminate_on_success=True)
     expert = ScriptedExpert(env.obs_slices)
     obs, _ = env.reset(seed=2)
-    for step in range(50):
+    steps = 0
+    terminated = truncated = False
+    while not (terminated or truncated):
         obs, reward, terminated, truncated, info = env.step(expert(obs))
         assert reward == float(info["is_success"])
-        if terminated:
-            break
-    assert terminated and info["is_success"] and step < 49
+        steps += 1
+    assert terminated and info["is_success"] and steps < 50
 
 
 def test_scripted_expert_lifts_under_default_randomization(make_env):

@@ -112,7 +112,10 @@ class Panda:
     def apply_torques(self, tau: np.ndarray) -> None:
         """Must be called before every physics step: an applied torque lapses after one step."""
         self.client.setJointMotorControlArray(
-            self.body, self.arm, pybullet.TORQUE_CONTROL, forces=np.clip(tau, -self.max_torque, self.max_torque)
+            self.body,
+            self.arm,
+            pybullet.TORQUE_CONTROL,
+            forces=np.clip(tau, -self.max_torque, self.max_torque),
         )
 
     def gravity_torques(self) -> np.ndarray:
