@@ -7,7 +7,9 @@ at another config tree.
 
 from __future__ import annotations
 
+import logging
 import os
+import sys
 from pathlib import Path
 
 import hydra
@@ -15,18 +17,24 @@ from omegaconf import DictConfig
 
 from rlgrasp.train.config import register_configs
 
-CONFIG_DIR = os.environ.get(
-    "RLGRASP_CONFIG_DIR", str(Path(__file__).resolve().parents[2] / "configs")
-)
+CONFIG_DIR = os.environ.get("RLGRASP_CONFIG_DIR", str(Path(__file__).resolve().parents[2] / "configs"))
 
 register_configs()
 
 
 def run(cfg: DictConfig) -> float:
-    """Train and return the final evaluation success rate (what a Hydra sweeper optimizes)."""
-    from rlgrasp.train.loop import train
+    """Train and return the final evaluation success rate (what a Hydra sweeper optimizes).
 
-    return train(cfg)
+    A fault (env crash, NaN) ends the process with exit code 1 and its message, without a
+    traceback through Hydra's machinery.
+    """
+    from rlgrasp.train.loop import TrainingError, train
+
+    try:
+        return train(cfg)
+    except TrainingError as exc:
+        logging.getLogger("rlgrasp.train").error("training stopped: %s", exc)
+        sys.exit(1)
 
 
 @hydra.main(config_path=CONFIG_DIR, config_name="train", version_base="1.3")

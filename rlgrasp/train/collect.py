@@ -10,6 +10,7 @@ from __future__ import annotations
 import functools
 import importlib
 import os
+import re
 import traceback
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -33,12 +34,12 @@ def resolve_factory(spec: str) -> Callable[..., EnvBase]:
 
 def env_kwargs(env_cfg: Mapping[str, Any]) -> dict[str, Any]:
     """The factory's keyword arguments: every ``env`` field except ``factory``, ``kwargs`` merged in."""
-    kwargs = {k: v for k, v in env_cfg.items() if k not in ("factory", "kwargs")}
+    kwargs = {k: v for k, v in env_cfg.items() if k not in ("factory", "gym_factory", "kwargs")}
     kwargs.update(env_cfg.get("kwargs") or {})
     return kwargs
 
 
-def _guard(env: EnvBase, name: str, error_dir: str | None) -> EnvBase:
+def _guard(env: Any, name: str, error_dir: str | None, methods=("_step", "_reset")) -> Any:
     """Make a failing step/reset leave a report naming the env, then re-raise.
 
     The process collector only says "At least one process failed: worker N"; the learner reads
@@ -47,14 +48,15 @@ def _guard(env: EnvBase, name: str, error_dir: str | None) -> EnvBase:
     """
     if error_dir is None:
         return env
-    for method in ("_step", "_reset"):
+    for method in methods:
         original = getattr(env, method)
 
         def guarded(*args, _original=original, _method=method, **kwargs):
             try:
                 return _original(*args, **kwargs)
             except Exception as exc:
-                path = Path(error_dir) / f"{ERROR_FILE_PREFIX}{name.replace(' ', '_')}.txt"
+                slug = re.sub(r"\W+", "_", name).strip("_")
+                path = Path(error_dir) / f"{ERROR_FILE_PREFIX}{slug}.txt"
                 path.parent.mkdir(parents=True, exist_ok=True)
                 path.write_text(
                     f"{name} failed in {_method.lstrip('_')}: {type(exc).__name__}: {exc}\n\n"
@@ -79,6 +81,43 @@ def make_env(
     return _guard(env, f"{name} (seed {seed})", error_dir)
 
 
+# Info entries copied into the tensordict by the gym_sync path (those the env provides).
+INFO_DTYPES = {"is_success": torch.bool, "grasped": torch.bool, "lift_height": torch.float32}
+
+
+def _make_gym_env(env_cfg: Mapping[str, Any], name: str, error_dir: str | None) -> Any:
+    env = resolve_factory(env_cfg["gym_factory"])(**env_kwargs(env_cfg))
+    return _guard(env, name, error_dir, ("step", "reset"))
+
+
+def make_vector_env(
+    env_cfg: Mapping[str, Any], num_envs: int, base_seed: int, worker: int, error_dir: str | None
+) -> EnvBase:
+    """``GymWrapper(SyncVectorEnv(...))``: one TensorDict conversion per batch step.
+
+    Autoreset is disabled so that TorchRL resets finished envs itself (``reset_mask``) and the
+    final observation of an episode is kept. Vector infos arrive as arrays, which TorchRL's
+    ``default_info_dict_reader`` reads directly.
+    """
+    import gymnasium as gym
+    from torchrl.data import Composite, Unbounded
+    from torchrl.envs import GymWrapper, default_info_dict_reader
+
+    fns = [
+        functools.partial(_make_gym_env, env_cfg, f"worker {worker} env {i}", error_dir)
+        for i in range(num_envs)
+    ]
+    venv = gym.vector.SyncVectorEnv(fns, autoreset_mode=gym.vector.AutoresetMode.DISABLED)
+    _, info = venv.reset(seed=base_seed)
+    keys = [k for k in INFO_DTYPES if k in info]
+    env = GymWrapper(venv)
+    if keys:
+        spec = Composite({k: Unbounded((num_envs,), dtype=INFO_DTYPES[k]) for k in keys}, shape=(num_envs,))
+        env.set_info_dict_reader(default_info_dict_reader(keys, spec=spec))
+    env.set_seed(base_seed)  # envs seeded base_seed + i
+    return env
+
+
 def make_batched_env(
     env_cfg: Mapping[str, Any],
     num_envs: int,
@@ -88,8 +127,9 @@ def make_batched_env(
     error_dir: str | None = None,
     episode_stats: bool = True,
     seed_torch: bool = True,
+    vector: str = "gym_sync",
 ) -> EnvBase:
-    """A ``SerialEnv`` of ``num_envs`` envs seeded ``base_seed + i``, plus episode return/length.
+    """A batch of ``num_envs`` envs seeded ``base_seed + i``, plus episode return/length.
 
     Top-level so that spawned workers can unpickle it; it also sets the worker's torch threads and
     seeds the worker's torch RNG (the policy samples actions there).
@@ -97,13 +137,16 @@ def make_batched_env(
     torch.set_num_threads(torch_threads)
     if seed_torch:
         torch.manual_seed(base_seed)
-    fns = [
-        functools.partial(
-            make_env, env_cfg, base_seed + i, f"worker {worker} env {i}", error_dir
-        )
-        for i in range(num_envs)
-    ]
-    env = SerialEnv(num_envs, fns)
+    if vector == "gym_sync":
+        env = make_vector_env(env_cfg, num_envs, base_seed, worker, error_dir)
+    elif vector == "serial":
+        fns = [
+            functools.partial(make_env, env_cfg, base_seed + i, f"worker {worker} env {i}", error_dir)
+            for i in range(num_envs)
+        ]
+        env = SerialEnv(num_envs, fns)
+    else:
+        raise ValueError(f"collector.vector must be 'gym_sync' or 'serial', got {vector!r}")
     if episode_stats:
         env = TransformedEnv(env, Compose(RewardSum(), StepCounter()))
     return env
@@ -134,6 +177,7 @@ def build_collector(
             0,
             torch.get_num_threads(),
             error_dir,
+            vector=c.vector,
         )
         return Collector(env, policy, **common)
     if c.backend != "process":
@@ -147,6 +191,7 @@ def build_collector(
             w,
             c.torch_threads,
             error_dir,
+            vector=c.vector,
         )
         for w in range(c.num_workers)
     ]

@@ -22,6 +22,8 @@ class EnvConfig:
     """Keyword arguments of the env factory (``factory`` names it as ``module:function``)."""
 
     factory: str = DEFAULT_ENV_FACTORY
+    # The plain gymnasium env, used when collector.vector=gym_sync (one SyncVectorEnv per worker).
+    gym_factory: str = "rlgrasp.envs:PandaGraspEnv"
     control_mode: str = "ee_delta"
     randomization: str = "default"
     max_episode_steps: int = 50
@@ -79,8 +81,9 @@ class CollectorConfig:
     num_workers: int = 2
     envs_per_worker: int = 4
     steps_per_env: int = 128
-    # "serial": TorchRL SerialEnv per worker; "gym_sync": one gymnasium SyncVectorEnv per worker.
-    vector: str = "serial"
+    # "gym_sync": one gymnasium SyncVectorEnv per worker wrapped once for TorchRL (one TensorDict
+    # conversion per batch step, measured faster); "serial": TorchRL SerialEnv of per-env wrappers.
+    vector: str = "gym_sync"
     torch_threads: int = 1
 
 

@@ -20,7 +20,9 @@ def episode_stats(td: TensorDictBase) -> dict[str, torch.Tensor]:
     """Return, length and success of each env's first finished episode in a ``[envs, time]`` rollout."""
     done = td["next", "done"].reshape(td.shape)
     finished = done.any(-1)
-    first = torch.where(finished, done.float().argmax(-1), torch.full_like(finished, td.shape[-1] - 1, dtype=torch.long))
+    first = torch.where(
+        finished, done.float().argmax(-1), torch.full_like(finished, td.shape[-1] - 1, dtype=torch.long)
+    )
     steps = torch.arange(td.shape[-1]).expand(td.shape)
     upto = steps <= first.unsqueeze(-1)
     reward = td["next", "reward"].reshape(td.shape)

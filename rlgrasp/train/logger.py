@@ -84,8 +84,13 @@ class RunLogger:
 
 
 def progress_line(
-    frames: int, total: int, sps: float, success: float | None, ret: float | None,
-    eval_success: float | None, eta_s: float,
+    frames: int,
+    total: int,
+    sps: float,
+    success: float | None,
+    ret: float | None,
+    eval_success: float | None,
+    eta_s: float,
 ) -> str:
     """``frames 12,800/100,000 [###-------]  13% | SPS 2,345 | ... | ETA 0:01:23``."""
     frac = min(frames / total, 1.0) if total > 0 else 0.0

@@ -13,7 +13,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from rlgrasp.train import checkpoint as ckpt_lib
-from rlgrasp.train.collect import build_collector, make_env, read_env_errors
+from rlgrasp.train.collect import build_collector, make_batched_env, read_env_errors
 from rlgrasp.train.evaluate import Evaluator
 from rlgrasp.train.logger import RunLogger, flatten, log, progress_line, setup_text_log
 from rlgrasp.train.models import OBS_KEY, build_models
@@ -36,9 +36,9 @@ def frames_per_batch(cfg: Any) -> int:
     return workers * c.envs_per_worker * c.steps_per_env
 
 
-def _env_spec(env_cfg: dict[str, Any]) -> dict[str, Any]:
-    """Observation/action sizes and bounds, from one throw-away env."""
-    env = make_env(env_cfg)
+def _env_spec(env_cfg: dict[str, Any], vector: str = "gym_sync") -> dict[str, Any]:
+    """Observation/action sizes and bounds, from one throw-away env built like the workers' ones."""
+    env = make_batched_env(env_cfg, 1, 0, episode_stats=False, seed_torch=False, vector=vector)
     try:
         obs_dim = int(env.observation_spec[OBS_KEY].shape[-1])
         action_spec = env.action_spec
@@ -46,7 +46,13 @@ def _env_spec(env_cfg: dict[str, Any]) -> dict[str, Any]:
         high = action_spec.space.high.flatten().tolist()
     finally:
         env.close()
-    return {"obs_key": OBS_KEY, "obs_dim": obs_dim, "action_dim": len(low), "action_low": low, "action_high": high}
+    return {
+        "obs_key": OBS_KEY,
+        "obs_dim": obs_dim,
+        "action_dim": len(low),
+        "action_low": low,
+        "action_high": high,
+    }
 
 
 def _config_diff(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
@@ -90,7 +96,7 @@ def train(cfg: DictConfig) -> float:
     torch.manual_seed(cfg.seed)
 
     env_cfg = dict(config["env"])
-    spec = _env_spec(env_cfg)
+    spec = _env_spec(env_cfg, cfg.collector.vector)
     actor, critic, norm = build_models(
         spec["obs_dim"], torch.tensor(spec["action_low"]), torch.tensor(spec["action_high"]), cfg.model
     )
@@ -136,7 +142,9 @@ def train(cfg: DictConfig) -> float:
         path = ckpt_lib.write_checkpoints(ckpt_dir, state(), cfg.checkpoint.keep_last, is_best)
         log.info("checkpoint %s", path)
 
-    logger = RunLogger(run_dir / "tensorboard", cfg.logger.backend, purge_step=frames if resumed else None)
+    logger = RunLogger(
+        run_dir / "tensorboard", cfg.logger.backend, purge_step=frames + 1 if resumed else None
+    )
     if resumed is None:
         logger.text("config", OmegaConf.to_yaml(config), 0)
     evaluator = Evaluator(
@@ -167,7 +175,11 @@ def train(cfg: DictConfig) -> float:
     ckpt_due = _Due(cfg.checkpoint.interval_frames, frames)
     log.info(
         "run dir %s | device %s | %d frames per batch (%s) | %s",
-        run_dir, device, fpb, cfg.collector.backend, spec,
+        run_dir,
+        device,
+        fpb,
+        cfg.collector.backend,
+        spec,
     )
 
     collector = None
@@ -267,7 +279,10 @@ def train(cfg: DictConfig) -> float:
     success = float(result.get("success_rate", float("nan")))
     logger.hparams(
         flatten(config),
-        {"hparam/eval_success_rate": success, "hparam/eval_mean_reward": result.get("mean_reward", float("nan"))},
+        {
+            "hparam/eval_success_rate": success,
+            "hparam/eval_mean_reward": result.get("mean_reward", float("nan")),
+        },
     )
     logger.close()
     log.info("finished at %s frames (%s): eval %s", f"{frames:,}", status, result)
@@ -281,10 +296,16 @@ def _finished_episodes(batch) -> dict[str, float]:
         return {}
     out = {}
     if ("next", "episode_reward") in batch.keys(True):
-        out["charts/episodic_return"] = float(batch["next", "episode_reward"].reshape(batch.shape)[done].mean())
+        out["charts/episodic_return"] = float(
+            batch["next", "episode_reward"].reshape(batch.shape)[done].mean()
+        )
     if ("next", "step_count") in batch.keys(True):
-        out["charts/episodic_length"] = float(batch["next", "step_count"].reshape(batch.shape)[done].float().mean())
+        out["charts/episodic_length"] = float(
+            batch["next", "step_count"].reshape(batch.shape)[done].float().mean()
+        )
     if ("next", "is_success") in batch.keys(True):
-        out["charts/success_rate"] = float(batch["next", "is_success"].reshape(batch.shape)[done].float().mean())
+        out["charts/success_rate"] = float(
+            batch["next", "is_success"].reshape(batch.shape)[done].float().mean()
+        )
     out["charts/episodes"] = float(done.sum())
     return out

@@ -130,9 +130,7 @@ def build_actor(
         distribution_class=TanhNormal,
         distribution_kwargs={"low": low, "high": high, "tanh_loc": False},
         return_log_prob=True,
-        default_interaction_type=(
-            InteractionType.DETERMINISTIC if deterministic else InteractionType.RANDOM
-        ),
+        default_interaction_type=(InteractionType.DETERMINISTIC if deterministic else InteractionType.RANDOM),
     )
 
 
