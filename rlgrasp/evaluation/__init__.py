@@ -1,0 +1,10 @@
+"""Policy evaluation: seeded episodes in worker processes, metrics with intervals, plots, videos, reports.
+
+Modules, one job each: ``source`` (checkpoint -> validated policy + env config), ``episodes``
+(running seeded episodes), ``metrics`` (rates, intervals, tables), ``plots``, ``video``, ``report``
+(comparison across runs) and ``cli`` (the Hydra entry point).
+"""
+
+from rlgrasp.evaluation.source import EvaluationError
+
+__all__ = ["EvaluationError"]

@@ -1,0 +1,209 @@
+"""Console entry point ``rlgrasp-eval`` (same as ``python scripts/evaluate.py``).
+
+Order matters for "nothing written on bad input": resolve and validate the checkpoint, the env and
+the output location first; create the output directory only once episodes have run.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+from dataclasses import dataclass, field
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import hydra
+from hydra.core.config_store import ConfigStore
+from omegaconf import DictConfig, OmegaConf
+
+from rlgrasp.evaluation.source import EvaluationError
+
+CONFIG_DIR = os.environ.get("RLGRASP_CONFIG_DIR", str(Path(__file__).resolve().parents[2] / "configs"))
+log = logging.getLogger("rlgrasp.eval")
+
+
+@dataclass
+class EvalConfig:
+    """Schema of ``configs/eval.yaml`` (see the comments there)."""
+
+    policy: str = "checkpoint"
+    ckpt: str | None = None
+    ckpt_kind: str = "best"
+    episodes: int = 100
+    seed: int = 0
+    randomization: Any = None
+    env: dict[str, Any] = field(default_factory=dict)
+    workers: int = 2
+    deterministic: bool = True
+    video: bool = True
+    video_episodes: int = 3
+    video_format: str = "auto"
+    plots: bool = True
+    tensorboard: bool = True
+    name: str | None = None
+    out_dir: str | None = None
+    outputs_root: str = "outputs"
+
+
+def register_configs() -> None:
+    ConfigStore.instance().store(name="eval_schema", node=EvalConfig)
+
+
+register_configs()
+
+
+def _plain(value: Any) -> Any:
+    return OmegaConf.to_container(value, resolve=True) if OmegaConf.is_config(value) else value
+
+
+def output_dir(cfg: DictConfig, source: Any) -> Path:
+    """``<run dir>/eval/<name>`` for a run's checkpoint, ``<outputs_root>/eval/<what>/<name>`` otherwise."""
+    name = cfg.name or datetime.now().strftime("%Y-%m-%d_%H-%M-%S")
+    if cfg.out_dir:
+        return Path(cfg.out_dir)
+    if source.run_dir:
+        return Path(source.run_dir) / "eval" / name
+    what = source.kind if source.kind != "checkpoint" else Path(source.ckpt_path).stem
+    return Path(cfg.outputs_root) / "eval" / what / name
+
+
+def _randomization_ranges(spec: Any) -> dict[str, Any]:
+    from rlgrasp.envs import Randomizer
+
+    return {k: {"low": r.low, "high": r.high, "log": r.log} for k, r in Randomizer(spec).ranges.items()}
+
+
+def evaluate(cfg: DictConfig) -> dict[str, Any]:
+    """Validate, run the episodes, write every artefact; return ``metrics.json``'s content."""
+    from rlgrasp.evaluation import metrics as M
+    from rlgrasp.evaluation.episodes import episode_seeds, timed_run
+    from rlgrasp.evaluation.source import prepare
+
+    for key, minimum in (("episodes", 1), ("workers", 1), ("video_episodes", 0)):
+        if cfg[key] < minimum:
+            raise EvaluationError(f"{key} must be at least {minimum}, got {cfg[key]}")
+    source = prepare(cfg.policy, cfg.ckpt, cfg.ckpt_kind, _plain(cfg.randomization), _plain(cfg.env))
+    fmt = None
+    if cfg.video and cfg.video_episodes > 0:
+        from rlgrasp.evaluation.video import video_format
+
+        try:
+            fmt = video_format(cfg.video_format)
+        except ValueError as exc:
+            raise EvaluationError(str(exc)) from exc
+    out = output_dir(cfg, source)
+    if (out / "metrics.json").exists():
+        raise EvaluationError(f"{out} already holds an evaluation; pick another name=")
+    randomization = source.env_kwargs.get("randomization")
+    try:
+        ranges = _randomization_ranges(randomization)
+    except ValueError as exc:
+        raise EvaluationError(f"randomization: {exc}") from exc
+    label = source.ckpt_path or source.kind
+    log.info(
+        "evaluating %s: %d episodes, seeds %d.., randomization %s, %d worker(s), %s actions",
+        label,
+        cfg.episodes,
+        cfg.seed,
+        randomization,
+        cfg.workers,
+        "deterministic" if cfg.deterministic else "stochastic",
+    )
+
+    def progress(done: int, total: int) -> None:
+        if done == total or done % max(1, total // 5) < max(1, total // (cfg.workers * 4)):
+            log.info("  %d/%d episodes", done, total)
+
+    k = cfg.video_episodes if fmt else 0
+    results, seconds = timed_run(
+        source=source,
+        episodes=cfg.episodes,
+        base_seed=cfg.seed,
+        workers=cfg.workers,
+        deterministic=cfg.deterministic,
+        video_episodes=k,
+        progress=progress,
+    )
+    metrics = {
+        "policy": source.kind,
+        "policy_label": label,
+        "randomization_label": str(randomization),
+        **M.summarize(results),
+        "seeds": episode_seeds(cfg.seed, cfg.episodes),
+        "deterministic": bool(cfg.deterministic),
+        "randomization": {"spec": randomization, "ranges": ranges},
+        "checkpoint": source.info or None,
+        "config": {
+            "eval": OmegaConf.to_container(cfg, resolve=True),
+            "env_kwargs": source.env_kwargs,
+            "gym_factory": source.gym_factory,
+        },
+        "timing": {
+            "seconds": round(seconds, 2),
+            "workers": cfg.workers,
+            "episodes_per_second": round(cfg.episodes / seconds, 2),
+        },
+    }
+    if source.kind == "checkpoint":
+        from rlgrasp.evaluation.source import load_checked_checkpoint
+
+        metrics["config"]["train"] = load_checked_checkpoint(Path(source.ckpt_path))["config"]
+    table = M.summary_table(metrics)
+    metrics["summary_markdown"] = table
+
+    out.mkdir(parents=True, exist_ok=True)
+    M.write_episodes_csv(out / "episodes.csv", results)
+    files = ["metrics.json", "episodes.csv", "summary.md"]
+    if cfg.plots:
+        from rlgrasp.evaluation.plots import return_histogram, success_by_parameter
+
+        metrics["success_by_parameter"] = success_by_parameter(results, out / "success_by_parameter.png")
+        return_histogram(results, out / "return_histogram.png")
+        files += ["success_by_parameter.png", "return_histogram.png"]
+    videos = [r for r in results if r.frames]
+    if fmt:
+        from rlgrasp.evaluation.video import write_video
+
+        fps = int(
+            round(1.0 / (source.env_kwargs.get("time_step", 1 / 240) * source.env_kwargs.get("substeps", 12)))
+        )
+        for r in videos:
+            files.append(
+                str(write_video(r, out / f"episode_{r.index:03d}_seed_{r.seed}", fps=fps, fmt=fmt).name)
+            )
+    metrics["files"] = files
+    M.write_json(out / "metrics.json", metrics)
+    (out / "summary.md").write_text(
+        f"# Evaluation {out.name}\n\n{table}\n\nWall time {seconds:.1f} s "
+        f"on {cfg.workers} worker(s). Files: {', '.join(files)}\n"
+    )
+    if cfg.tensorboard and source.run_dir:
+        from rlgrasp.evaluation.tb_log import log_to_tensorboard
+
+        step = int((source.info or {}).get("frames") or 0)
+        tb = log_to_tensorboard(source.run_dir, out.name, metrics, videos, step)
+        log.info("logged to TensorBoard %s (tags posthoc_eval/%s/*, eval_video/%s/*)", tb, out.name, out.name)
+    print(table)
+    log.info("wrote %s in %.1f s", out, seconds)
+    metrics["output_dir"] = str(out)
+    return metrics
+
+
+def run(cfg: DictConfig) -> float:
+    """Evaluate; a bad input exits with code 2 and one clear line (no traceback)."""
+    try:
+        return float(evaluate(cfg)["success_at_end"]["rate"])
+    except EvaluationError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        sys.exit(2)
+
+
+@hydra.main(config_path=CONFIG_DIR, config_name="eval", version_base="1.3")
+def main(cfg: DictConfig) -> float:
+    return run(cfg)
+
+
+if __name__ == "__main__":
+    main()

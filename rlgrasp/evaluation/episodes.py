@@ -1,0 +1,243 @@
+"""Seeded episodes in N worker processes, with results independent of the number of workers.
+
+Why the results do not depend on the worker count:
+
+- every episode ``i`` is reset with its own seed (``base_seed + i``) and the env restores a saved
+  physics state on reset, so an episode does not depend on which episodes its worker ran before;
+- stochastic actions and the random baseline draw from RNGs re-seeded from the episode's seed;
+- the policy sees one observation at a time (no batch-size-dependent kernels) with one torch thread.
+
+Workers are spawned (TorchRL sets ``spawn``) and run the top-level functions below; PyBullet is
+connected inside each worker, never inherited.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing as mp
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from rlgrasp.evaluation.source import PolicySource, make_gym_env
+
+
+@dataclass
+class EpisodeResult:
+    """One episode: its seed, what was drawn, what happened, and (for video episodes) its frames."""
+
+    index: int
+    seed: int
+    randomization: dict[str, float]
+    episode_return: float
+    length: int
+    success_at_end: bool
+    success_once: bool
+    first_success_step: int | None
+    grasped_at_end: bool
+    max_lift_height: float
+    frames: list[np.ndarray] | None = None
+    step_success: list[bool] = field(default_factory=list)
+
+
+class _Actor:
+    """``reset(seed)`` before an episode, ``__call__(obs) -> action``: one interface for all policies."""
+
+    def reset(self, seed: int) -> None:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:  # pragma: no cover - interface
+        raise NotImplementedError
+
+
+class CheckpointActor(_Actor):
+    """The trained policy (normalizer inside), fed one observation at a time."""
+
+    def __init__(self, ckpt: dict[str, Any], deterministic: bool) -> None:
+        import torch
+        from torchrl.envs import ExplorationType
+
+        from rlgrasp.train.checkpoint import policy_from_checkpoint
+
+        self.torch = torch
+        self.policy = policy_from_checkpoint(ckpt, "cpu")
+        self.mode = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
+        self.generator_seed = 0
+
+    def reset(self, seed: int) -> None:
+        # Stochastic actions: the episode's own torch RNG stream, whatever ran before it.
+        self.torch.manual_seed(seed)
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        from tensordict import TensorDict
+        from torchrl.envs import set_exploration_type
+
+        torch = self.torch
+        td = TensorDict(
+            {"observation": torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0)}, batch_size=[1]
+        )
+        with torch.no_grad(), set_exploration_type(self.mode):
+            return self.policy(td)["action"][0].numpy()
+
+
+class ScriptedActor(_Actor):
+    """The env package's scripted expert (deterministic)."""
+
+    def __init__(self, env: Any) -> None:
+        from rlgrasp.envs import ScriptedExpert
+
+        self.expert = ScriptedExpert(env.obs_slices, action_dim=env.action_space.shape[0])
+
+    def reset(self, seed: int) -> None:
+        self.expert.reset()
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        return np.asarray(self.expert(obs), dtype=np.float32)
+
+
+class RandomActor(_Actor):
+    """Uniform actions in the action box, from an RNG seeded per episode."""
+
+    def __init__(self, env: Any) -> None:
+        self.low, self.high = env.action_space.low, env.action_space.high
+        self.rng = np.random.default_rng(0)
+
+    def reset(self, seed: int) -> None:
+        self.rng = np.random.default_rng([seed, 0x5EED])
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        return self.rng.uniform(self.low, self.high).astype(np.float32)
+
+
+def build_policy(source: PolicySource, env: Any, deterministic: bool) -> _Actor:
+    """The actor for ``source.kind`` (``checkpoint``, ``scripted`` or ``random``)."""
+    if source.kind == "checkpoint":
+        return CheckpointActor(source.ckpt, deterministic)
+    if source.kind == "scripted":
+        return ScriptedActor(env)
+    if source.kind == "random":
+        return RandomActor(env)
+    raise ValueError(f"unknown policy kind {source.kind!r}")
+
+
+def run_episode(env: Any, actor: _Actor, index: int, seed: int, render: bool) -> EpisodeResult:
+    """One full episode from ``env.reset(seed=seed)`` to termination or the time limit."""
+    obs, info = env.reset(seed=seed)
+    actor.reset(seed)
+    frames = [env.render()] if render else None
+    total, steps, first, success, max_lift = 0.0, 0, None, False, 0.0
+    step_success = []
+    while True:
+        obs, reward, terminated, truncated, info = env.step(actor(obs))
+        steps += 1
+        total += float(reward)
+        success = bool(info.get("is_success", False))
+        step_success.append(success)
+        if success and first is None:
+            first = steps
+        max_lift = max(max_lift, float(info.get("lift_height", 0.0)))
+        if render:
+            frames.append(env.render())
+        if terminated or truncated:
+            break
+    return EpisodeResult(
+        index=index,
+        seed=seed,
+        randomization={k: float(v) for k, v in (info.get("randomization") or {}).items()},
+        episode_return=total,
+        length=steps,
+        success_at_end=success,
+        success_once=first is not None,
+        first_success_step=first,
+        grasped_at_end=bool(info.get("grasped", False)),
+        max_lift_height=max_lift,
+        frames=frames,
+        step_success=step_success,
+    )
+
+
+# --- worker processes -------------------------------------------------------------------------
+_WORKER: dict[str, Any] = {}
+
+
+def _init_worker(source: PolicySource, deterministic: bool, video_episodes: int) -> None:
+    """Per-process set-up: one torch thread, one env (own PyBullet client), one policy."""
+    import torch
+
+    torch.set_num_threads(1)
+    env = make_gym_env(source.gym_factory, source.env_kwargs)
+    _WORKER.update(env=env, actor=build_policy(source, env, deterministic), video_episodes=video_episodes)
+
+
+def _run_chunk(jobs: Sequence[tuple[int, int]]) -> list[EpisodeResult]:
+    env, actor, k = _WORKER["env"], _WORKER["actor"], _WORKER["video_episodes"]
+    return [run_episode(env, actor, i, seed, render=i < k) for i, seed in jobs]
+
+
+def _close_worker() -> None:
+    env = _WORKER.pop("env", None)
+    if env is not None:
+        env.close()
+    _WORKER.clear()
+
+
+def episode_seeds(base_seed: int, episodes: int) -> list[int]:
+    """Episode ``i`` is reset with ``base_seed + i``."""
+    return [int(base_seed) + i for i in range(int(episodes))]
+
+
+def run_episodes(
+    source: PolicySource,
+    episodes: int,
+    base_seed: int,
+    workers: int = 1,
+    deterministic: bool = True,
+    video_episodes: int = 0,
+    progress: Callable[[int, int], None] | None = None,
+) -> list[EpisodeResult]:
+    """Run ``episodes`` seeded episodes on ``workers`` processes (1 = in this process), in order."""
+    if episodes < 1:
+        raise ValueError(f"episodes must be at least 1, got {episodes}")
+    if workers < 1:
+        raise ValueError(f"workers must be at least 1, got {workers}")
+    jobs = list(enumerate(episode_seeds(base_seed, episodes)))
+    workers = min(workers, episodes)
+    # Small chunks balance the load (episodes with many IK steps cost more) at low overhead.
+    size = max(1, math.ceil(episodes / (workers * 4)))
+    chunks = [jobs[i : i + size] for i in range(0, len(jobs), size)]
+    results: list[EpisodeResult] = []
+    if workers == 1:
+        import torch
+
+        threads = torch.get_num_threads()
+        try:
+            with torch.random.fork_rng():
+                _init_worker(source, deterministic, video_episodes)
+                for chunk in chunks:
+                    results.extend(_run_chunk(chunk))
+                    if progress:
+                        progress(len(results), episodes)
+        finally:
+            _close_worker()
+            torch.set_num_threads(threads)
+    else:
+        ctx = mp.get_context("spawn")
+        with ctx.Pool(
+            workers, initializer=_init_worker, initargs=(source, deterministic, video_episodes)
+        ) as pool:
+            for chunk_result in pool.imap_unordered(_run_chunk, chunks):
+                results.extend(chunk_result)
+                if progress:
+                    progress(len(results), episodes)
+    results.sort(key=lambda r: r.index)
+    return results
+
+
+def timed_run(**kwargs: Any) -> tuple[list[EpisodeResult], float]:
+    """``run_episodes`` and its wall-clock seconds."""
+    start = time.perf_counter()
+    results = run_episodes(**kwargs)
+    return results, time.perf_counter() - start

@@ -1,0 +1,140 @@
+"""Episode results -> rates with Wilson intervals, aggregates, ``episodes.csv`` and the summary table."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rlgrasp.evaluation.episodes import EpisodeResult
+from rlgrasp.stats import wilson_interval
+
+EPISODE_FIELDS = (
+    "episode",
+    "seed",
+    "return",
+    "length",
+    "success_at_end",
+    "success_once",
+    "first_success_step",
+    "grasped_at_end",
+    "max_lift_height",
+)
+
+
+def rate(flags: Sequence[bool]) -> dict[str, Any]:
+    """Successes, rate and its 95% Wilson interval (sane at 0/n and n/n, unlike mean +- 2 se)."""
+    n, k = len(flags), int(sum(bool(f) for f in flags))
+    low, high = wilson_interval(k, n)
+    return {"rate": k / n, "successes": k, "episodes": n, "ci95": [low, high]}
+
+
+def _mean(xs: Sequence[float]) -> float | None:
+    return float(np.mean(xs)) if len(xs) else None
+
+
+def summarize(results: Sequence[EpisodeResult]) -> dict[str, Any]:
+    """The numbers of ``metrics.json`` that depend on the episodes only (identical for any worker count)."""
+    if not results:
+        raise ValueError("no episodes to summarize")
+    returns = np.array([r.episode_return for r in results], dtype=float)
+    firsts = [r.first_success_step for r in results if r.first_success_step is not None]
+    return {
+        "episodes": len(results),
+        "success_at_end": rate([r.success_at_end for r in results]),
+        "success_once": rate([r.success_once for r in results]),
+        "grasped_at_end": rate([r.grasped_at_end for r in results]),
+        "return": {
+            "mean": float(returns.mean()),
+            "std": float(returns.std(ddof=1)) if len(returns) > 1 else 0.0,
+            "min": float(returns.min()),
+            "max": float(returns.max()),
+        },
+        "mean_length": float(np.mean([r.length for r in results])),
+        # Over the episodes that succeeded at least once (null when none did).
+        "mean_steps_to_first_success": _mean(firsts),
+    }
+
+
+def episode_rows(results: Sequence[EpisodeResult]) -> tuple[list[str], list[dict[str, Any]]]:
+    """CSV columns (fixed fields, then every randomization parameter) and one row per episode."""
+    params: list[str] = []
+    for r in results:
+        params += [k for k in r.randomization if k not in params]
+    rows = []
+    for r in results:
+        row = {
+            "episode": r.index,
+            "seed": r.seed,
+            "return": round(r.episode_return, 6),
+            "length": r.length,
+            "success_at_end": int(r.success_at_end),
+            "success_once": int(r.success_once),
+            "first_success_step": "" if r.first_success_step is None else r.first_success_step,
+            "grasped_at_end": int(r.grasped_at_end),
+            "max_lift_height": round(r.max_lift_height, 6),
+        }
+        row.update({k: r.randomization.get(k, "") for k in params})
+        rows.append(row)
+    return list(EPISODE_FIELDS) + params, rows
+
+
+def write_episodes_csv(path: Path, results: Sequence[EpisodeResult]) -> Path:
+    fields, rows = episode_rows(results)
+    with open(path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=fields)
+        writer.writeheader()
+        writer.writerows(rows)
+    return path
+
+
+def _fmt_rate(r: dict[str, Any]) -> str:
+    lo, hi = r["ci95"]
+    return f"{r['rate']:.1%} ({r['successes']}/{r['episodes']}) [{lo:.1%}, {hi:.1%}]"
+
+
+def _fmt(x: float | None, spec: str = ".2f") -> str:
+    return "n/a" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, spec)
+
+
+def summary_table(metrics: dict[str, Any]) -> str:
+    """A Markdown table (also what the console shows)."""
+    m = metrics
+    rows = [
+        ("policy", m.get("policy_label", m.get("policy", ""))),
+        ("randomization", m.get("randomization_label", "")),
+        (
+            "episodes (seeds)",
+            f"{m['episodes']} ({m['seeds'][0]}..{m['seeds'][-1]})" if m.get("seeds") else m["episodes"],
+        ),
+        ("success at end [95% Wilson]", _fmt_rate(m["success_at_end"])),
+        ("success at any step [95% Wilson]", _fmt_rate(m["success_once"])),
+        ("grasped at end", _fmt_rate(m["grasped_at_end"])),
+        ("return mean +- std", f"{_fmt(m['return']['mean'])} +- {_fmt(m['return']['std'])}"),
+        ("mean episode length", _fmt(m["mean_length"], ".1f")),
+        ("mean steps to first success", _fmt(m["mean_steps_to_first_success"], ".1f")),
+    ]
+    width = max(len(k) for k, _ in rows)
+    lines = [f"| {'metric':<{width}} | value |", f"|{'-' * (width + 2)}|-------|"]
+    lines += [f"| {k:<{width}} | {v} |" for k, v in rows]
+    return "\n".join(lines)
+
+
+def write_json(path: Path, data: Any) -> Path:
+    path.write_text(json.dumps(data, indent=2, sort_keys=False, default=_json_default) + "\n")
+    return path
+
+
+def _json_default(o: Any) -> Any:
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"not JSON serializable: {type(o).__name__}")

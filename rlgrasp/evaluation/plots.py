@@ -1,0 +1,132 @@
+"""Plots a user reads at a glance: success against each randomization parameter, return distribution."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rlgrasp.evaluation.episodes import EpisodeResult
+from rlgrasp.stats import wilson_interval
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")  # files only; no display on workers or CI
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def binned_success(values: np.ndarray, success: np.ndarray, max_bins: int = 5) -> list[dict[str, Any]]:
+    """Success rate with a Wilson interval per bin of ``values``.
+
+    Few distinct values (an integer parameter such as ``action_delay``): one bin per value.
+    Otherwise equal-count (quantile) bins, so every bin has enough episodes for an interval.
+    """
+    values, success = np.asarray(values, float), np.asarray(success, bool)
+    distinct = np.unique(values)
+    if distinct.size <= max_bins:
+        groups = [(v, v, values == v) for v in distinct]
+    else:
+        n_bins = int(min(max_bins, max(2, values.size // 10)))
+        edges = np.unique(np.quantile(values, np.linspace(0, 1, n_bins + 1)))
+        idx = np.clip(np.searchsorted(edges, values, side="right") - 1, 0, len(edges) - 2)
+        groups = [(edges[b], edges[b + 1], idx == b) for b in range(len(edges) - 1)]
+    out = []
+    for low, high, mask in groups:
+        n = int(mask.sum())
+        if n == 0:
+            continue
+        k = int(success[mask].sum())
+        lo, hi = wilson_interval(k, n)
+        out.append(
+            {
+                "low": float(low),
+                "high": float(high),
+                "centre": float(values[mask].mean()),
+                "n": n,
+                "successes": k,
+                "rate": k / n,
+                "ci95": [lo, hi],
+            }
+        )
+    return out
+
+
+def varying_parameters(results: Sequence[EpisodeResult]) -> list[str]:
+    """Parameters that actually vary across the episodes (a constant one explains nothing)."""
+    names: list[str] = []
+    for r in results:
+        names += [k for k in r.randomization if k not in names]
+    return [k for k in names if len({r.randomization.get(k) for r in results}) > 1]
+
+
+def success_by_parameter(results: Sequence[EpisodeResult], path: Path, max_bins: int = 5) -> dict[str, Any]:
+    """One panel per varying parameter, the most influential first (largest spread between bins)."""
+    plt = _pyplot()
+    success = np.array([r.success_at_end for r in results])
+    overall = success.mean()
+    table = {
+        name: binned_success(np.array([r.randomization[name] for r in results]), success, max_bins)
+        for name in varying_parameters(results)
+    }
+    order = sorted(
+        table, key=lambda k: -(max(b["rate"] for b in table[k]) - min(b["rate"] for b in table[k]))
+    )
+    cols = 4
+    rows = max(1, math.ceil(len(order) / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 2.7 * rows), squeeze=False)
+    for ax, name in zip(axes.flat, order):
+        bins = table[name]
+        x = [b["centre"] for b in bins]
+        y = [b["rate"] for b in bins]
+        err = [[b["rate"] - b["ci95"][0] for b in bins], [b["ci95"][1] - b["rate"] for b in bins]]
+        ax.errorbar(x, y, yerr=err, fmt="o-", capsize=3, color="tab:blue")
+        for b in bins:
+            if b["low"] != b["high"]:
+                ax.axvspan(b["low"], b["high"], color="0.9" if bins.index(b) % 2 else "0.96", zorder=0)
+        ax.axhline(overall, ls="--", color="tab:gray", lw=1)
+        ax.set_ylim(-0.05, 1.05)
+        ax.set_title(name, fontsize=9)
+        ax.tick_params(labelsize=7)
+    for ax in list(axes.flat)[len(order) :]:
+        ax.axis("off")
+    if not order:
+        axes.flat[0].text(0.5, 0.5, "no randomization parameter varies", ha="center", va="center")
+    fig.suptitle(
+        f"success at end vs randomization (bins with 95% Wilson intervals; dashed: overall {overall:.0%})",
+        fontsize=10,
+    )
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return {name: table[name] for name in order}
+
+
+def return_histogram(results: Sequence[EpisodeResult], path: Path) -> Path:
+    """Returns of successful and failed episodes stacked: a bimodal policy shows as two humps."""
+    plt = _pyplot()
+    returns = np.array([r.episode_return for r in results])
+    ok = np.array([r.success_at_end for r in results])
+    bins = np.histogram_bin_edges(returns, bins=min(30, max(5, len(returns) // 4)))
+    fig, ax = plt.subplots(figsize=(6, 3.6))
+    ax.hist(
+        [returns[ok], returns[~ok]],
+        bins=bins,
+        stacked=True,
+        color=["tab:green", "tab:red"],
+        label=[f"success at end ({ok.sum()})", f"failure ({(~ok).sum()})"],
+    )
+    ax.axvline(returns.mean(), color="k", ls="--", lw=1, label=f"mean {returns.mean():.2f}")
+    ax.set_xlabel("episode return")
+    ax.set_ylabel("episodes")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

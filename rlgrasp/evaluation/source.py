@@ -1,0 +1,238 @@
+"""Where the policy and the env come from: a checkpoint alone, or a baseline with no checkpoint.
+
+Everything is validated here, before anything is written: a missing or corrupt file, a file that
+is not an rlgrasp checkpoint, or a checkpoint whose observation/action layout does not match the
+env being built each raise ``EvaluationError`` with a message saying which.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+POLICIES = ("checkpoint", "scripted", "random")
+CKPT_KINDS = ("best", "last")
+# What a checkpoint must hold for evaluation (see rlgrasp.train.checkpoint's docstring).
+REQUIRED_KEYS = ("actor", "config", "spec")
+REQUIRED_SPEC = ("obs_dim", "action_dim", "action_low", "action_high")
+DEFAULT_GYM_FACTORY = "rlgrasp.envs:PandaGraspEnv"
+
+
+class EvaluationError(RuntimeError):
+    """A user-facing problem with the evaluation's input (printed without a traceback)."""
+
+
+@dataclass
+class PolicySource:
+    """What the workers need to rebuild the policy and the env, all picklable.
+
+    ``ckpt`` is trimmed to the entries the policy needs (weights, model config, spec), so that each
+    spawned worker receives a few hundred kB rather than the optimizer state.
+    """
+
+    kind: str
+    env_kwargs: dict[str, Any]
+    gym_factory: str = DEFAULT_GYM_FACTORY
+    ckpt: dict[str, Any] | None = None
+    ckpt_path: str | None = None
+    run_dir: str | None = None
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+def resolve_checkpoint_path(ckpt: str | os.PathLike, kind: str = "best") -> Path:
+    """A checkpoint file, or ``<run dir>/checkpoints/<kind>.pt`` for a run directory."""
+    if kind not in CKPT_KINDS:
+        raise EvaluationError(f"ckpt_kind must be one of {', '.join(CKPT_KINDS)}, got {kind!r}")
+    path = Path(ckpt).expanduser()
+    if path.is_dir():
+        ckpt_dir = path / "checkpoints"
+        candidate = ckpt_dir / f"{kind}.pt"
+        if not candidate.is_file():
+            found = sorted(p.name for p in ckpt_dir.glob("*.pt")) if ckpt_dir.is_dir() else []
+            hint = f"; it has {', '.join(found)}" if found else "; it has no checkpoints"
+            other = "last" if kind == "best" else "best"
+            if f"{other}.pt" in found:
+                hint += f" (use ckpt_kind={other})"
+            raise EvaluationError(
+                f"missing checkpoint: run directory {path} has no checkpoints/{kind}.pt{hint}"
+            )
+        return candidate
+    if not path.exists():
+        raise EvaluationError(f"missing checkpoint: {path} does not exist")
+    return path
+
+
+def load_checked_checkpoint(path: Path) -> dict[str, Any]:
+    """Load and check the structure; a truncated or foreign file gets a message, not a traceback."""
+    import torch
+
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=False)
+    except (RuntimeError, EOFError, pickle.UnpicklingError, zipfile.BadZipFile, ValueError, OSError) as exc:
+        raise EvaluationError(
+            f"corrupt checkpoint: {path} could not be loaded ({type(exc).__name__}: {exc})"
+        ) from exc
+    if not isinstance(ckpt, dict):
+        raise EvaluationError(
+            f"corrupt checkpoint: {path} holds a {type(ckpt).__name__}, not a checkpoint dict"
+        )
+    missing = [k for k in REQUIRED_KEYS if k not in ckpt]
+    missing += [f"spec.{k}" for k in REQUIRED_SPEC if k not in (ckpt.get("spec") or {})]
+    if missing:
+        raise EvaluationError(
+            f"corrupt checkpoint: {path} is not an rlgrasp training checkpoint (missing {', '.join(missing)})"
+        )
+    return ckpt
+
+
+def _base_env_config() -> dict[str, Any]:
+    """The training defaults (for baselines, which have no checkpoint to read them from)."""
+    from dataclasses import asdict
+
+    from rlgrasp.train.config import EnvConfig
+
+    return asdict(EnvConfig())
+
+
+def build_env_kwargs(
+    env_cfg: dict[str, Any], randomization: Any = None, overrides: dict[str, Any] | None = None
+) -> tuple[str, dict[str, Any]]:
+    """``(gym_factory, kwargs)`` from a training ``env`` config, with evaluation's overrides on top."""
+    from rlgrasp.train.collect import env_kwargs
+
+    cfg = dict(env_cfg)
+    gym_factory = cfg.get("gym_factory") or DEFAULT_GYM_FACTORY
+    kwargs = env_kwargs(cfg)
+    kwargs.update(overrides or {})
+    if randomization is not None:
+        kwargs["randomization"] = randomization
+    kwargs["render_mode"] = "rgb_array"
+    return gym_factory, kwargs
+
+
+def make_gym_env(gym_factory: str, kwargs: dict[str, Any]) -> Any:
+    """The plain gymnasium env (evaluation steps it directly: no TorchRL wrapper cost per step)."""
+    import importlib
+
+    module_name, _, attr = gym_factory.partition(":")
+    if not attr:
+        raise ValueError(f"env.gym_factory must look like 'package.module:Class', got {gym_factory!r}")
+    return getattr(importlib.import_module(module_name), attr)(**kwargs)
+
+
+def check_layout(spec: dict[str, Any], env: Any, where: str) -> None:
+    """The checkpoint's observation and action layout must match the env being built."""
+    obs_shape = tuple(env.observation_space.shape)
+    act_space = env.action_space
+    problems = []
+    if obs_shape != (int(spec["obs_dim"]),):
+        problems.append(
+            f"observation layout mismatch: checkpoint obs_dim={spec['obs_dim']}, "
+            f"env observation shape {obs_shape}"
+        )
+    if tuple(act_space.shape) != (int(spec["action_dim"]),):
+        problems.append(
+            f"action layout mismatch: checkpoint action_dim={spec['action_dim']}, "
+            f"env action shape {tuple(act_space.shape)}"
+        )
+    else:
+        low, high = np.asarray(spec["action_low"], float), np.asarray(spec["action_high"], float)
+        if not (np.allclose(low, act_space.low) and np.allclose(high, act_space.high)):
+            problems.append(
+                f"action bounds mismatch: checkpoint [{low.tolist()}, {high.tolist()}], "
+                f"env [{act_space.low.tolist()}, {act_space.high.tolist()}]"
+            )
+    if problems:
+        raise EvaluationError(f"{where}: " + "; ".join(problems))
+
+
+def prepare(
+    policy: str,
+    ckpt: str | None = None,
+    ckpt_kind: str = "best",
+    randomization: Any = None,
+    env_overrides: dict[str, Any] | None = None,
+) -> PolicySource:
+    """Resolve, load and validate everything; build one env and one policy call as a dry run."""
+    if policy not in POLICIES:
+        raise EvaluationError(f"policy must be one of {', '.join(POLICIES)}, got {policy!r}")
+    if policy == "checkpoint":
+        if not ckpt:
+            raise EvaluationError(
+                "ckpt=<run dir or checkpoint file> is required (or policy=scripted / policy=random)"
+            )
+        path = resolve_checkpoint_path(ckpt, ckpt_kind)
+        full = load_checked_checkpoint(path)
+        env_cfg = dict(full["config"].get("env") or {})
+        if not env_cfg:
+            raise EvaluationError(f"corrupt checkpoint: {path} has no config['env'] to rebuild the env from")
+        trimmed = {k: full[k] for k in REQUIRED_KEYS}
+        info = {
+            "path": str(path.resolve()),
+            "kind": ckpt_kind if Path(ckpt).is_dir() else "file",
+            "frames": full.get("frames"),
+            "updates": full.get("updates"),
+            "best_eval_success": full.get("best_eval_success"),
+            "last_eval": full.get("last_eval"),
+            "run_dir": full.get("run_dir"),
+            "versions": full.get("versions"),
+            "experiment_name": full["config"].get("experiment_name"),
+            "train_seed": full["config"].get("seed"),
+        }
+        # The run this checkpoint belongs to: checkpoints/<file>.pt sits in <run dir>/checkpoints.
+        run_dir = path.resolve().parent.parent if path.parent.name == "checkpoints" else None
+    else:
+        if ckpt:
+            raise EvaluationError(
+                f"policy={policy} takes no checkpoint; drop ckpt={ckpt} (or use policy=checkpoint)"
+            )
+        env_cfg, trimmed, path, run_dir = _base_env_config(), None, None, None
+        info = {}
+    gym_factory, kwargs = build_env_kwargs(env_cfg, randomization, env_overrides)
+    source = PolicySource(
+        kind=policy,
+        env_kwargs=kwargs,
+        gym_factory=gym_factory,
+        ckpt=trimmed,
+        ckpt_path=str(path.resolve()) if path else None,
+        run_dir=str(run_dir) if run_dir else None,
+        info=info,
+    )
+    _dry_run(source)
+    return source
+
+
+def _dry_run(source: PolicySource) -> None:
+    """Build the env and the policy once and act on the first observation: fail here, not in a worker."""
+    from rlgrasp.evaluation.episodes import build_policy
+
+    where = f"checkpoint {source.ckpt_path}" if source.ckpt_path else f"policy={source.kind}"
+    try:
+        env = make_gym_env(source.gym_factory, source.env_kwargs)
+    except (ValueError, TypeError, ImportError, AttributeError) as exc:
+        raise EvaluationError(f"cannot build the env for {where}: {exc}") from exc
+    try:
+        if source.ckpt is not None:
+            check_layout(source.ckpt["spec"], env, where)
+        try:
+            act = build_policy(source, env, deterministic=True)
+        except (RuntimeError, KeyError, TypeError, ValueError) as exc:
+            raise EvaluationError(
+                f"corrupt checkpoint: {where}: the policy cannot be rebuilt ({exc})"
+            ) from exc
+        obs, _ = env.reset(seed=0)
+        act.reset(0)
+        action = np.asarray(act(obs))
+        if action.shape != env.action_space.shape:
+            raise EvaluationError(
+                f"{where}: action layout mismatch: the policy returns shape {action.shape}, "
+                f"the env expects {env.action_space.shape}"
+            )
+    finally:
+        env.close()
