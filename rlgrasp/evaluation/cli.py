@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import logging
 import os
+import shutil
 import sys
+import tempfile
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
@@ -153,7 +155,43 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
     table = M.summary_table(metrics)
     metrics["summary_markdown"] = table
 
-    out.mkdir(parents=True, exist_ok=True)
+    # Written into a hidden staging folder renamed at the end: an evaluation is complete or absent.
+    out.parent.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
+    try:
+        files = _write_artefacts(stage, cfg, source, results, metrics, table, seconds, fmt)
+        if out.exists():  # an empty folder made in the meantime
+            out.rmdir()
+        os.replace(stage, out)
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
+    if cfg.tensorboard and source.run_dir:
+        from rlgrasp.evaluation.tb_log import log_to_tensorboard
+
+        step = int((source.info or {}).get("frames") or 0)
+        tb = log_to_tensorboard(source.run_dir, out.name, metrics, [r for r in results if r.frames], step)
+        log.info("logged to TensorBoard %s (tags posthoc_eval/%s/*, eval_video/%s/*)", tb, out.name, out.name)
+    log.info("files: %s", ", ".join(files))
+    print(table)
+    log.info("wrote %s in %.1f s", out, seconds)
+    metrics["output_dir"] = str(out)
+    return metrics
+
+
+def _write_artefacts(
+    out: Path,
+    cfg: DictConfig,
+    source: Any,
+    results: list,
+    metrics: dict,
+    table: str,
+    seconds: float,
+    fmt: str | None,
+) -> list[str]:
+    """metrics.json, episodes.csv, summary.md, plots and videos into ``out``."""
+    from rlgrasp.evaluation import metrics as M
+
     M.write_episodes_csv(out / "episodes.csv", results)
     files = ["metrics.json", "episodes.csv", "summary.md"]
     if cfg.plots:
@@ -162,33 +200,23 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
         metrics["success_by_parameter"] = success_by_parameter(results, out / "success_by_parameter.png")
         return_histogram(results, out / "return_histogram.png")
         files += ["success_by_parameter.png", "return_histogram.png"]
-    videos = [r for r in results if r.frames]
     if fmt:
         from rlgrasp.evaluation.video import write_video
 
-        fps = int(
-            round(1.0 / (source.env_kwargs.get("time_step", 1 / 240) * source.env_kwargs.get("substeps", 12)))
-        )
-        for r in videos:
-            files.append(
-                str(write_video(r, out / f"episode_{r.index:03d}_seed_{r.seed}", fps=fps, fmt=fmt).name)
-            )
+        step_s = source.env_kwargs.get("time_step", 1 / 240) * source.env_kwargs.get("substeps", 12)
+        for r in results:
+            if r.frames:
+                path = write_video(
+                    r, out / f"episode_{r.index:03d}_seed_{r.seed}", fps=round(1 / step_s), fmt=fmt
+                )
+                files.append(path.name)
     metrics["files"] = files
     M.write_json(out / "metrics.json", metrics)
     (out / "summary.md").write_text(
-        f"# Evaluation {out.name}\n\n{table}\n\nWall time {seconds:.1f} s "
-        f"on {cfg.workers} worker(s). Files: {', '.join(files)}\n"
+        f"# Evaluation {out.name}\n\n{table}\n\nWall time {seconds:.1f} s on {cfg.workers} worker(s). "
+        f"Files: {', '.join(files)}\n"
     )
-    if cfg.tensorboard and source.run_dir:
-        from rlgrasp.evaluation.tb_log import log_to_tensorboard
-
-        step = int((source.info or {}).get("frames") or 0)
-        tb = log_to_tensorboard(source.run_dir, out.name, metrics, videos, step)
-        log.info("logged to TensorBoard %s (tags posthoc_eval/%s/*, eval_video/%s/*)", tb, out.name, out.name)
-    print(table)
-    log.info("wrote %s in %.1f s", out, seconds)
-    metrics["output_dir"] = str(out)
-    return metrics
+    return files
 
 
 def run(cfg: DictConfig) -> float:

@@ -85,7 +85,11 @@ def success_by_parameter(results: Sequence[EpisodeResult], path: Path, max_bins:
         bins = table[name]
         x = [b["centre"] for b in bins]
         y = [b["rate"] for b in bins]
-        err = [[b["rate"] - b["ci95"][0] for b in bins], [b["ci95"][1] - b["rate"] for b in bins]]
+        # max(0, ...): at 0/n and n/n the Wilson bound equals the rate up to rounding.
+        err = [
+            [max(0.0, b["rate"] - b["ci95"][0]) for b in bins],
+            [max(0.0, b["ci95"][1] - b["rate"]) for b in bins],
+        ]
         ax.errorbar(x, y, yerr=err, fmt="o-", capsize=3, color="tab:blue")
         for b in bins:
             if b["low"] != b["high"]:

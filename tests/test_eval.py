@@ -1,0 +1,268 @@
+"""Evaluation harness: artefacts from a checkpoint alone, baselines, worker-count invariance, bad input."""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
+
+from rlgrasp.evaluation import EvaluationError
+from rlgrasp.evaluation.cli import evaluate, register_configs
+from rlgrasp.evaluation.episodes import run_episodes
+from rlgrasp.evaluation.metrics import summarize
+from rlgrasp.evaluation.plots import binned_success
+from rlgrasp.evaluation.source import prepare
+from rlgrasp.train.config import EnvConfig, MLPConfig
+from rlgrasp.train.models import build_models
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIG_DIR = str(ROOT / "configs")
+
+
+def _cfg(*overrides: str):
+    register_configs()
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        return compose(config_name="eval", overrides=list(overrides))
+
+
+def make_run(tmp: Path, obs_dim: int = 42, action_dim: int = 4, frames: int = 4096) -> Path:
+    """A run directory with a checkpoint in the training layout (random weights, fitted normalizer)."""
+    from dataclasses import asdict
+
+    torch.manual_seed(0)
+    model = asdict(MLPConfig(hidden_sizes=[16, 16]))
+    actor, critic, norm = build_models(
+        obs_dim, -torch.ones(action_dim), torch.ones(action_dim), OmegaConf.create(model)
+    )
+    norm.update(torch.randn(64, obs_dim) * 0.3)
+    run = tmp / "run"
+    ckpt = {
+        "format": 1,
+        "actor": actor.state_dict(),
+        "critic": critic.state_dict(),
+        "obs_norm": norm.state_dict(),
+        "frames": frames,
+        "updates": 2,
+        "config": {"env": asdict(EnvConfig()), "model": model, "experiment_name": "unit", "seed": 3},
+        "spec": {
+            "obs_key": "observation",
+            "obs_dim": obs_dim,
+            "action_dim": action_dim,
+            "action_low": [-1.0] * action_dim,
+            "action_high": [1.0] * action_dim,
+        },
+        "versions": {},
+        "run_dir": str(run),
+    }
+    (run / "checkpoints").mkdir(parents=True)
+    torch.save(ckpt, run / "checkpoints" / "best.pt")
+    torch.save(ckpt, run / "checkpoints" / "last.pt")
+    return run
+
+
+def test_checkpoint_evaluation_writes_every_artefact(tmp_path: Path) -> None:
+    run = make_run(tmp_path)
+    m = evaluate(_cfg(f"ckpt={run}", "episodes=4", "workers=1", "video_episodes=1", "name=t"))
+    out = run / "eval" / "t"
+    assert Path(m["output_dir"]) == out
+    for f in (
+        "metrics.json",
+        "episodes.csv",
+        "summary.md",
+        "success_by_parameter.png",
+        "return_histogram.png",
+    ):
+        assert (out / f).is_file(), f
+    assert len(list(out.glob("episode_000_seed_0.*"))) == 1  # gif (mp4 if ffmpeg)
+    saved = json.loads((out / "metrics.json").read_text())
+    for key in ("success_at_end", "success_once"):
+        assert set(saved[key]) == {"rate", "successes", "episodes", "ci95"}
+    assert saved["seeds"] == [0, 1, 2, 3]
+    assert (
+        saved["checkpoint"]["path"].endswith("checkpoints/best.pt") and saved["checkpoint"]["frames"] == 4096
+    )
+    assert saved["config"]["train"]["experiment_name"] == "unit"
+    assert saved["config"]["env_kwargs"]["randomization"] == "default"  # from the checkpoint
+    assert {"mean", "std"} <= set(saved["return"]) and saved["mean_length"] == 50.0
+    rows = list(csv.DictReader(open(out / "episodes.csv")))
+    assert [int(r["seed"]) for r in rows] == [0, 1, 2, 3]
+    assert {"cube_mass", "finger_force", "cube_x", "return", "success_at_end", "success_once"} <= set(rows[0])
+    assert "success at end" in (out / "summary.md").read_text()
+    assert list((run / "tensorboard").glob("events.out.tfevents.*"))  # logged to the run
+    # ckpt_kind=last and explicit randomization ranges (conditions never trained on).
+    m2 = evaluate(
+        _cfg(
+            f"ckpt={run}",
+            "ckpt_kind=last",
+            "episodes=2",
+            "workers=1",
+            "video=false",
+            "plots=false",
+            "tensorboard=false",
+            "name=t2",
+            "randomization={preset:none,cube_mass:[0.8,1.0]}",
+        )
+    )
+    assert m2["checkpoint"]["path"].endswith("last.pt")
+    masses = [float(r["cube_mass"]) for r in csv.DictReader(open(run / "eval" / "t2" / "episodes.csv"))]
+    assert all(0.8 <= x <= 1.0 for x in masses)
+
+
+def test_scripted_baseline_within_known_bounds(tmp_path: Path) -> None:
+    """scripts/bench_expert.py: default preset 98/100 on seeds 0-99, so >= 18/20 on seeds 0-19."""
+    m = evaluate(
+        _cfg(
+            "policy=scripted",
+            "episodes=20",
+            "workers=1",
+            "video=false",
+            "plots=false",
+            f"outputs_root={tmp_path}",
+            "name=s",
+        )
+    )
+    assert m["success_at_end"]["successes"] >= 18
+    assert m["success_at_end"]["ci95"][1] == 1.0 or m["success_at_end"]["ci95"][1] > 0.95
+    assert (tmp_path / "eval" / "scripted" / "s" / "metrics.json").is_file()
+    assert m["checkpoint"] is None and m["config"]["env_kwargs"]["randomization"] == "default"
+
+
+def test_random_baseline_rarely_succeeds(tmp_path: Path) -> None:
+    m = evaluate(
+        _cfg(
+            "policy=random",
+            "episodes=4",
+            "workers=1",
+            "video=false",
+            "plots=false",
+            f"outputs_root={tmp_path}",
+            "name=r",
+        )
+    )
+    assert m["success_at_end"]["successes"] == 0
+
+
+def test_one_and_two_workers_identical_stochastic_policy(tmp_path: Path) -> None:
+    """Episodes are seeded one by one: the split across processes must not change anything."""
+    source = prepare("checkpoint", str(make_run(tmp_path)))
+    one = run_episodes(source, episodes=5, base_seed=7, workers=1, deterministic=False)
+    two = run_episodes(source, episodes=5, base_seed=7, workers=2, deterministic=False)
+    assert summarize(one) == summarize(two)
+    assert [(r.seed, r.episode_return, r.randomization) for r in one] == [
+        (r.seed, r.episode_return, r.randomization) for r in two
+    ]
+    # Stochastic actions really differ from deterministic ones (the seeding is not a no-op).
+    det = run_episodes(source, episodes=1, base_seed=7, workers=1, deterministic=True)
+    assert det[0].episode_return != one[0].episode_return
+
+
+# --- bad input: a clear error naming the problem, nothing written -----------------------------
+def _assert_fails(tmp: Path, match: str, *overrides: str) -> None:
+    before = sorted(p for p in tmp.rglob("*"))
+    with pytest.raises(EvaluationError, match=match):
+        evaluate(_cfg(*overrides, "episodes=1", "workers=1", f"outputs_root={tmp / 'outputs'}"))
+    assert sorted(p for p in tmp.rglob("*")) == before
+
+
+def test_missing_checkpoint(tmp_path: Path) -> None:
+    _assert_fails(tmp_path, "missing checkpoint: .* does not exist", f"ckpt={tmp_path / 'nope.pt'}")
+    run = make_run(tmp_path)
+    (run / "checkpoints" / "best.pt").unlink()
+    _assert_fails(tmp_path, r"no checkpoints/best.pt.*ckpt_kind=last", f"ckpt={run}")
+    _assert_fails(tmp_path, "ckpt=<run dir", "policy=checkpoint")
+
+
+def test_corrupt_checkpoint(tmp_path: Path) -> None:
+    garbage = tmp_path / "garbage.pt"
+    garbage.write_bytes(b"\x00not a checkpoint" * 50)
+    _assert_fails(tmp_path, "corrupt checkpoint", f"ckpt={garbage}")
+    run = make_run(tmp_path)
+    best = run / "checkpoints" / "best.pt"
+    best.write_bytes(best.read_bytes()[:2000])  # truncated mid-write
+    _assert_fails(tmp_path, "corrupt checkpoint", f"ckpt={run}")
+    torch.save({"weights": 1}, best)
+    _assert_fails(
+        tmp_path, r"not an rlgrasp training checkpoint \(missing actor, config, spec", f"ckpt={run}"
+    )
+
+
+def test_layout_mismatch(tmp_path: Path) -> None:
+    run = make_run(tmp_path, obs_dim=40)
+    _assert_fails(tmp_path, "observation layout mismatch: checkpoint obs_dim=40", f"ckpt={run}")
+    run2 = make_run(tmp_path / "b")
+    # joint_delta: 7 joint deltas + gripper = 8 actions, and a longer prev_action in the observation.
+    _assert_fails(
+        tmp_path,
+        "action layout mismatch: checkpoint action_dim=4",
+        f"ckpt={run2}",
+        "+env.control_mode=joint_delta",
+    )
+
+
+def test_cli_errors_exit_cleanly(tmp_path: Path) -> None:
+    """Bad input: one line on stderr and exit code 2; an unknown key: Hydra's own error."""
+    script = str(ROOT / "scripts" / "evaluate.py")
+    bad = subprocess.run(
+        [sys.executable, script, f"ckpt={tmp_path / 'missing'}"], capture_output=True, text=True, cwd=tmp_path
+    )
+    assert bad.returncode == 2 and "error: missing checkpoint" in bad.stderr and "Traceback" not in bad.stderr
+    unknown = subprocess.run(
+        [sys.executable, script, "episdoes=5"], capture_output=True, text=True, cwd=tmp_path
+    )
+    assert unknown.returncode == 1 and "episdoes" in unknown.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_binned_success_intervals() -> None:
+    values = np.arange(40, dtype=float)
+    bins = binned_success(values, values >= 20, max_bins=4)
+    assert [b["n"] for b in bins] == [10, 10, 10, 10]
+    assert [b["rate"] for b in bins] == [0.0, 0.0, 1.0, 1.0]
+    assert all(b["ci95"][0] <= b["rate"] <= b["ci95"][1] for b in bins)
+    ints = binned_success(np.array([0, 1, 1, 0, 1]), np.array([1, 0, 0, 1, 1], bool))
+    assert [(b["low"], b["n"], b["successes"]) for b in ints] == [(0.0, 2, 2), (1.0, 3, 1)]
+
+
+@pytest.mark.slow
+def test_evaluate_a_short_training_run(tmp_path: Path) -> None:
+    """A real smoke training run, then its evaluation from the run directory alone."""
+    from rlgrasp.train.config import register_configs as register_train
+    from rlgrasp.train.loop import train
+
+    register_train()
+    run = tmp_path / "run"
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        train(compose(config_name="train", overrides=["experiment=smoke", f"paths.output_dir={run}"]))
+    m = evaluate(_cfg(f"ckpt={run}", "episodes=6", "workers=2", "video_episodes=1", "name=e"))
+    assert m["episodes"] == 6 and (run / "eval" / "e" / "metrics.json").is_file()
+    assert m["checkpoint"]["frames"] > 0
+
+
+@pytest.mark.slow
+def test_cli_metrics_identical_with_one_and_two_workers(tmp_path: Path) -> None:
+    out = {}
+    for w in (1, 2):
+        m = evaluate(
+            _cfg(
+                "policy=scripted",
+                "episodes=12",
+                f"workers={w}",
+                "video_episodes=1",
+                f"outputs_root={tmp_path}",
+                f"name=w{w}",
+            )
+        )
+        out[w] = {
+            k: v
+            for k, v in m.items()
+            if k not in ("timing", "config", "output_dir", "summary_markdown", "files")
+        }
+    assert out[1] == out[2]
