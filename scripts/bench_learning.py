@@ -1,0 +1,116 @@
+"""Learning benchmark: eval success against wall-clock minutes and env frames, several seeds.
+
+Runs ``scripts/train.py experiment=<experiment>`` once per seed, one after the other (each run has
+the whole machine), under a wall-clock budget, then reads each run's ``eval/success_rate`` from
+TensorBoard and writes a CSV and a PNG. Minutes count from the launch of the training process, so
+start-up time is charged to the run.
+
+    python scripts/bench_learning.py --seeds 0 1 2 --minutes 5 --out outputs/bench_learning
+    python scripts/bench_learning.py --minutes 30 --tag joint_delta -- env.control_mode=joint_delta
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run_seed(out: Path, tag: str, seed: int, minutes: float, experiment: str, overrides: list[str]) -> dict:
+    run_dir = out / f"{tag}_seed{seed}"
+    cmd = [
+        sys.executable,
+        str(ROOT / "scripts" / "train.py"),
+        f"experiment={experiment}",
+        f"seed={seed}",
+        f"time_budget_min={minutes}",
+        f"hydra.run.dir={run_dir}",
+        *overrides,
+    ]
+    print("$", " ".join(cmd[1:]), flush=True)
+    start = time.time()
+    with open(out / f"{tag}_seed{seed}.log", "w") as log:
+        code = subprocess.call(cmd, stdout=log, stderr=subprocess.STDOUT, cwd=ROOT)
+    if code != 0:
+        raise SystemExit(f"training run for seed {seed} failed (exit {code}); see {log.name}")
+    return {"run_dir": run_dir, "start": start, "wall_s": time.time() - start}
+
+
+def eval_curve(run_dir: Path, start: float) -> list[tuple[float, int, float]]:
+    """(minutes since launch, frames, eval success) for every periodic evaluation."""
+    acc = EventAccumulator(str(run_dir / "tensorboard"), size_guidance={"scalars": 0})
+    acc.Reload()
+    return [((e.wall_time - start) / 60, e.step, e.value) for e in acc.Scalars("eval/success_rate")]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--minutes", type=float, default=5.0)
+    parser.add_argument("--experiment", default="grasp_ppo")
+    parser.add_argument("--tag", default="grasp_ppo")
+    parser.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_learning")
+    parser.add_argument("overrides", nargs="*", help="extra training overrides, after --")
+    args = parser.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+
+    rows, finals = [], []
+    for seed in args.seeds:
+        run = run_seed(args.out, args.tag, seed, args.minutes, args.experiment, args.overrides)
+        curve = eval_curve(run["run_dir"], run["start"])
+        rows += [(args.tag, seed, round(m, 3), f, v) for m, f, v in curve]
+        minutes, frames, success = curve[-1]
+        first_90 = next((m for m, _, v in curve if v >= 0.9), None)
+        finals.append((seed, minutes, frames, success, first_90))
+        print(f"seed {seed}: final eval success {success:.3f} at {frames:,} frames, {minutes:.1f} min; "
+              f"first >= 0.9 at {'-' if first_90 is None else f'{first_90:.1f} min'}", flush=True)
+
+    csv_path = args.out / f"{args.tag}.csv"
+    with open(csv_path, "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["tag", "seed", "minutes", "frames", "eval_success_rate"])
+        writer.writerows(rows)
+    plot(rows, args.out / f"{args.tag}.png", args.tag)
+
+    print(f"\n{args.tag}: budget {args.minutes} min per seed")
+    print(f"{'seed':>4}{'final success':>15}{'frames':>10}{'minutes':>9}{'first >= 0.9':>14}")
+    for seed, minutes, frames, success, first_90 in finals:
+        print(f"{seed:>4}{success:>15.3f}{frames:>10,}{minutes:>9.1f}"
+              f"{'-' if first_90 is None else f'{first_90:.1f} min':>14}")
+    hits = sum(s >= 0.9 for _, _, _, s, _ in finals)
+    print(f"seeds with final eval success >= 0.9: {hits}/{len(finals)}")
+    print(f"wrote {csv_path} and {csv_path.with_suffix('.png')}")
+
+
+def plot(rows: list[tuple], path: Path, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.5))
+    for seed in sorted({r[1] for r in rows}):
+        pts = [r for r in rows if r[1] == seed]
+        axes[0].plot([r[2] for r in pts], [r[4] for r in pts], marker=".", label=f"seed {seed}")
+        axes[1].plot([r[3] for r in pts], [r[4] for r in pts], marker=".", label=f"seed {seed}")
+    for ax, xlabel in zip(axes, ("wall-clock minutes (from launch)", "env frames")):
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("eval success rate")
+        ax.set_ylim(-0.02, 1.02)
+        ax.axhline(0.9, color="grey", lw=0.8, ls="--")
+        ax.grid(alpha=0.3)
+    axes[0].legend()
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+
+
+if __name__ == "__main__":
+    main()
