@@ -205,9 +205,11 @@ def run_episodes(
         raise ValueError(f"workers must be at least 1, got {workers}")
     jobs = list(enumerate(episode_seeds(base_seed, episodes)))
     workers = min(workers, episodes)
-    # Small chunks balance the load (episodes with many IK steps cost more) at low overhead.
-    size = max(1, math.ceil(episodes / (workers * 4)))
-    chunks = [jobs[i : i + size] for i in range(0, len(jobs), size)]
+    # Rendered episodes cost ~30x more: one chunk each, first, so that workers share them. Small
+    # chunks of the rest balance the load at low overhead.
+    k = min(video_episodes, episodes)
+    size = max(1, math.ceil((episodes - k) / (workers * 4)))
+    chunks = [[j] for j in jobs[:k]] + [jobs[i : i + size] for i in range(k, len(jobs), size)]
     results: list[EpisodeResult] = []
     if workers == 1:
         import torch
