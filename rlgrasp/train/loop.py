@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import random
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -74,11 +75,19 @@ class _Due:
         return True
 
 
-def train(cfg: DictConfig) -> float:
+#: Called after each evaluation with (frames, metrics); see ``train``.
+EvalCallback = Callable[[int, dict[str, float]], None]
+
+
+def train(cfg: DictConfig, on_eval: EvalCallback | None = None) -> float:
     """Train PPO as configured; returns the final evaluation success rate (NaN if the env has none).
 
     Raises ``TrainingError`` on an env crash (after saving a checkpoint) or a NaN/inf (keeping the
     last good checkpoint). Ctrl-C saves a checkpoint and returns normally.
+
+    ``on_eval(frames, metrics)`` runs after every evaluation (periodic and final); a sweep uses it to
+    report to its pruner. An exception it raises (e.g. ``optuna.TrialPruned``) stops training: a
+    checkpoint is saved, workers are shut down, and the exception propagates unchanged.
     """
     run_dir = Path(cfg.paths.output_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -166,6 +175,13 @@ def train(cfg: DictConfig) -> float:
         if is_best:
             best_success = score
         log.info("eval at %s frames: %s", f"{frames:,}", {k: round(v, 3) for k, v in result.items()})
+        if on_eval is not None:
+            try:
+                on_eval(frames, dict(result))
+            except BaseException as exc:
+                log.warning("stopped by the eval callback at %s frames: %r", f"{frames:,}", exc)
+                save(is_best)
+                raise
         return {"is_best": is_best}
 
     fpb = frames_per_batch(cfg)
@@ -270,10 +286,15 @@ def train(cfg: DictConfig) -> float:
 
     if status == "interrupted":
         return float((last_eval or {}).get("success_rate", float("nan")))
-    if last_eval is None or last_eval["frames"] != frames:
-        save(evaluate()["is_best"])
-    elif not (ckpt_dir / "last.pt").exists() or ckpt_lib.load_checkpoint(run_dir)["frames"] != frames:
-        save()
+    try:
+        if last_eval is None or last_eval["frames"] != frames:
+            save(evaluate()["is_best"])
+        elif not (ckpt_dir / "last.pt").exists() or ckpt_lib.load_checkpoint(run_dir)["frames"] != frames:
+            save()
+    except BaseException:  # the eval callback stopped the run (it saved a checkpoint)
+        evaluator.close()
+        logger.close()
+        raise
     evaluator.close()
     result = last_eval or {}
     success = float(result.get("success_rate", float("nan")))
