@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import importlib
+import multiprocessing
 import os
 import re
 import traceback
@@ -160,7 +161,7 @@ def worker_seed(seed: int, worker: int, generation: int = 0) -> int:
 def build_collector(
     cfg: Any, policy: torch.nn.Module, frames_per_batch: int, generation: int, error_dir: str
 ) -> BaseCollector:
-    """A synchronous TorchRL collector over ``num_workers`` processes (or in-process)."""
+    """A synchronous TorchRL collector over ``num_workers`` processes, Ray actors, or in-process."""
     c = cfg.collector
     env_cfg = dict(cfg.env)
     in_process = c.backend == "single" or c.num_workers == 0
@@ -180,8 +181,8 @@ def build_collector(
             vector=c.vector,
         )
         return Collector(env, policy, **common)
-    if c.backend != "process":
-        raise ValueError(f"collector.backend must be 'process' or 'single', got {c.backend!r}")
+    if c.backend not in ("process", "ray"):
+        raise ValueError(f"collector.backend must be 'process', 'ray' or 'single', got {c.backend!r}")
     fns = [
         functools.partial(
             make_batched_env,
@@ -195,7 +196,53 @@ def build_collector(
         )
         for w in range(c.num_workers)
     ]
+    if c.backend == "ray":
+        return _ray_collector(c, fns, policy, common)
+    # Inside a joblib (loky) multirun job the start method is not spawn; the workers need it
+    # (RESEARCH.md section 4).
+    multiprocessing.set_start_method("spawn", force=True)
     return Collector(fns, policy, num_collectors=c.num_workers, sync=True, backend="process", **common)
+
+
+def ray_init_kwargs(ray_cfg: Any) -> dict[str, Any]:
+    """``ray.init`` keywords: join ``address`` if set, else a private local Ray on ``node_ip_address``.
+
+    RESEARCH.md section 4: a local Ray binds to the machine's network address unless it is given one.
+    """
+    if ray_cfg.address:
+        return {"address": ray_cfg.address, "ignore_reinit_error": True, "log_to_driver": False}
+    os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
+    return {
+        "num_cpus": ray_cfg.num_cpus,
+        "_node_ip_address": ray_cfg.node_ip_address,
+        "include_dashboard": ray_cfg.include_dashboard,
+        "ignore_reinit_error": True,
+        "log_to_driver": False,
+    }
+
+
+def _ray_collector(c: Any, fns: list, policy: torch.nn.Module, common: dict[str, Any]) -> BaseCollector:
+    """One TorchRL ``Collector`` actor per worker on Ray; a Ray already initialised is reused."""
+    remote = {
+        "num_cpus": c.ray.cpus_per_worker,
+        "memory": int(c.ray.memory_per_worker_gb * 1024**3),
+    }
+    common = dict(common)
+    inner = {"auto_register_policy_transforms": common.pop("auto_register_policy_transforms")}
+    common["total_frames"] = 2**62  # RayCollector stops at once on -1 (endless elsewhere)
+    collector = Collector(
+        fns,
+        policy,
+        num_collectors=c.num_workers,
+        sync=True,
+        backend="ray",
+        ray_init_config=ray_init_kwargs(c.ray),
+        remote_configs=remote,
+        collector_kwargs=[dict(inner) for _ in fns],
+        **common,
+    )
+    collector.update_policy_weights_()  # initialise the weight sync before the first batch
+    return collector
 
 
 def read_env_errors(error_dir: str | os.PathLike) -> list[str]:

@@ -74,8 +74,22 @@ class MLPConfig:
 
 
 @dataclass
+class RayConfig:
+    """Where ``collector.backend=ray`` runs its collector actors (one per worker)."""
+
+    # null: start a private local Ray bound to node_ip_address; "auto" or "host:6379": join a cluster.
+    address: str | None = None
+    node_ip_address: str = "127.0.0.1"
+    num_cpus: int | None = None  # local Ray only (null: all cores)
+    cpus_per_worker: float = 1.0
+    memory_per_worker_gb: float = 1.0
+    include_dashboard: bool = False
+
+
+@dataclass
 class CollectorConfig:
-    """How frames are collected: ``backend=process`` (TorchRL Collector) or ``single`` (in-process)."""
+    """How frames are collected: ``backend=process`` (TorchRL Collector), ``ray`` (collector actors on a
+    Ray cluster) or ``single`` (in-process)."""
 
     backend: str = "process"
     num_workers: int = 2
@@ -85,6 +99,7 @@ class CollectorConfig:
     # conversion per batch step, measured faster); "serial": TorchRL SerialEnv of per-env wrappers.
     vector: str = "gym_sync"
     torch_threads: int = 1
+    ray: RayConfig = field(default_factory=RayConfig)
 
 
 @dataclass
