@@ -37,7 +37,7 @@ class EvalConfig:
     seed: int = 0
     randomization: Any = None
     env: dict[str, Any] = field(default_factory=dict)
-    workers: int = 2
+    workers: int = 1
     deterministic: bool = True
     video: bool = True
     video_episodes: int = 3
@@ -114,8 +114,12 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
         "deterministic" if cfg.deterministic else "stochastic",
     )
 
+    logged = [0]
+
     def progress(done: int, total: int) -> None:
-        if done == total or done % max(1, total // 5) < max(1, total // (cfg.workers * 4)):
+        fifth = 5 * done // total  # log at each fifth of the way
+        if fifth > logged[0] or done == total:
+            logged[0] = fifth
             log.info("  %d/%d episodes", done, total)
 
     k = cfg.video_episodes if fmt else 0

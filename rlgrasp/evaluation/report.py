@@ -168,12 +168,15 @@ def plot_learning_curves(groups: dict[str, list[RunRecord]], path: Path) -> Path
     drawn = 0
     for ax, (label, tags) in zip(axes, panels):
         for name, runs in groups.items():
-            # The first tag every run of the group has (eval/ before charts/).
-            tag = next((t for t in tags if all(t in r.curves for r in runs)), None)
+            # The first tag (eval/ before charts/) that some run of the group logged; the runs
+            # without it (crashed early, another env) are left out and the legend counts the rest.
+            tag = next((t for t in tags if any(len(r.curves.get(t, ((),))[0]) for r in runs)), None)
             if tag is None:
                 continue
-            b = band([r.curves[tag] for r in runs])
-            line = ax.plot(b["x"], b["mean"], label=f"{name} ({len(runs)} run{'s' * (len(runs) > 1)}, {tag})")
+            have = [r.curves[tag] for r in runs if tag in r.curves and len(r.curves[tag][0])]
+            b = band(have)
+            n = len(have)
+            line = ax.plot(b["x"], b["mean"], label=f"{name} ({n} run{'s' * (n > 1)}, {tag})")
             ax.fill_between(b["x"], b["low"], b["high"], color=line[0].get_color(), alpha=0.25)
             drawn += 1
         ax.set_xlabel("env frames")
