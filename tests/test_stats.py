@@ -67,3 +67,8 @@ def test_stratified_bootstrap_ci_brackets_and_reproduces():
     assert stratified_bootstrap_ci([0.5, 0.5, 0.5], iqm) == (0.5, 0.5, 0.5)
     two = np.array([[0.0, 1.0], [0.0, 1.0], [0.0, 1.0]])
     assert stratified_bootstrap_ci(two, np.mean, reps=200) == (0.5, 0.5, 0.5)
+
+
+def test_wilson_bounds_are_exact_at_the_extremes():
+    assert wilson_interval(10, 10)[1] == 1.0
+    assert wilson_interval(0, 10)[0] == 0.0

@@ -27,20 +27,10 @@ EPISODE_FIELDS = (
 )
 
 
-def wilson(k: int, n: int) -> tuple[float, float]:
-    """95% Wilson interval, made to contain the rate itself.
-
-    ``rlgrasp.stats.wilson_interval`` returns e.g. 0.9999999999999999 as the upper bound at n/n
-    (floating-point rounding); a reader should see 1.0 there.
-    """
-    low, high = wilson_interval(k, n)
-    return min(low, k / n), max(high, k / n)
-
-
 def rate(flags: Sequence[bool]) -> dict[str, Any]:
     """Successes, rate and its 95% Wilson interval (sane at 0/n and n/n, unlike mean +- 2 se)."""
     n, k = len(flags), int(sum(bool(f) for f in flags))
-    low, high = wilson(k, n)
+    low, high = wilson_interval(k, n)
     return {"rate": k / n, "successes": k, "episodes": n, "ci95": [low, high]}
 
 

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from rlgrasp.evaluation.episodes import EpisodeResult
-from rlgrasp.evaluation.metrics import wilson
+from rlgrasp.stats import wilson_interval
 
 
 def _pyplot():
@@ -43,7 +43,7 @@ def binned_success(values: np.ndarray, success: np.ndarray, max_bins: int = 5) -
         if n == 0:
             continue
         k = int(success[mask].sum())
-        lo, hi = wilson(k, n)
+        lo, hi = wilson_interval(k, n)
         out.append(
             {
                 "low": float(low),
