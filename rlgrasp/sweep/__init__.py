@@ -1,0 +1,7 @@
+"""Hyperparameter sweeps with Optuna: search space from config, shared study storage, pruning on the
+periodic evaluation, summaries. Entry point: ``rlgrasp-sweep`` / ``python scripts/sweep.py``.
+
+Modules: ``config`` (the sweep schema and composing it), ``space`` (distributions from config),
+``study`` (storage, sampler, pruner, resume bookkeeping), ``objective`` (one trial = one training
+run composed by Hydra), ``summary`` (tables, best config, plots), ``cli``.
+"""
