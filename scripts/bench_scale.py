@@ -1,0 +1,91 @@
+"""Frames/s of the collector backends side by side: process vs Ray (local, and a two-node Ray
+cluster on loopback). Same env, MLP actor, batch layout (grasp_ppo: 2 workers x 4 envs x 128 steps).
+
+    python scripts/bench_scale.py [--batches 8] [--warmup 2] [--setups process ray ray_2nodes]
+
+Prints one markdown row per setup: median and IQR of frames/s over the timed batches (each batch
+also pays the weight broadcast that training does after every update).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def bench(setup: str, batches: int, warmup: int, extra: list[str]) -> list[float]:
+    import torch
+
+    from rlgrasp.sweep.config import compose_train
+    from rlgrasp.train.collect import build_collector
+    from rlgrasp.train.loop import _env_spec, frames_per_batch
+    from rlgrasp.train.models import build_models
+
+    tmp = tempfile.mkdtemp()
+    overrides = ["experiment=grasp_ppo", f"paths.output_dir={tmp}", *extra]
+    cluster = None
+    if setup == "process":
+        overrides.append("collector=process")
+    else:
+        os.environ["RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"] = "0"
+        overrides += ["collector=ray", "collector.ray.memory_per_worker_gb=0.5"]
+        if setup == "ray_2nodes":
+            from ray.cluster_utils import Cluster
+
+            node = {"num_cpus": 1, "node_ip_address": "127.0.0.1"}
+            cluster = Cluster(initialize_head=True, head_node_args={**node, "include_dashboard": False})
+            cluster.add_node(**node)
+            cluster.wait_for_nodes()
+            overrides.append(f"collector.ray.address={cluster.address}")
+    cfg = compose_train(Path(__file__).resolve().parents[1] / "configs", overrides)
+    spec = _env_spec(dict(cfg.env))
+    actor, _, _ = build_models(
+        spec["obs_dim"], torch.tensor(spec["action_low"]), torch.tensor(spec["action_high"]), cfg.model
+    )
+    fpb = frames_per_batch(cfg)
+    collector = build_collector(cfg, actor, fpb, 0, os.path.join(tmp, "errors"))
+    rates = []
+    try:
+        it = iter(collector)
+        for i in range(warmup + batches):
+            t0 = time.perf_counter()
+            batch = next(it)
+            collector.update_policy_weights_()
+            if i >= warmup:
+                rates.append(batch.numel() / (time.perf_counter() - t0))
+    finally:
+        collector.shutdown()
+        if setup != "process":
+            import ray
+
+            ray.shutdown()
+        if cluster is not None:
+            cluster.shutdown()
+    return rates
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--batches", type=int, default=8)
+    parser.add_argument("--warmup", type=int, default=2)
+    parser.add_argument("--setups", nargs="+", default=["process", "ray", "ray_2nodes"])
+    parser.add_argument("overrides", nargs="*", help="training overrides, e.g. collector.num_workers=4")
+    args = parser.parse_args()
+    print("| backend | frames/s median | IQR | batches |")
+    print("|---|---|---|---|")
+    for setup in args.setups:
+        rates = bench(setup, args.batches, args.warmup, args.overrides)
+        q = statistics.quantiles(rates, n=4)
+        med = statistics.median(rates)
+        print(f"| {setup} | {med:,.0f} | {q[0]:,.0f}-{q[2]:,.0f} | {len(rates)} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
