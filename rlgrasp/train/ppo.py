@@ -61,7 +61,6 @@ class PPOLearner:
         """One PPO round on a ``[envs, time]`` batch; returns averaged metrics."""
         cfg = self.cfg
         batch = batch.to(self.device)
-        self.norm.update(batch["observation"])
         n = batch.numel()
         mb = min(cfg.minibatch_size, n)
         buffer = self._buffer(n, mb)
@@ -105,6 +104,9 @@ class PPOLearner:
             if stopped_early:
                 break
         self.check_params()
+        # The statistics move only after the update: the batch's log-probs were computed with the
+        # old ones, and updating first would make the ratio differ from 1 before any step is taken.
+        self.norm.update(batch["observation"])
         metrics = {k: v / max(count, 1) for k, v in sums.items()}
         metrics["explained_variance"] = explained_variance(batch)
         metrics["epochs"] = float(_epoch + 1)
