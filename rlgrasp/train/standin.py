@@ -34,16 +34,7 @@ def make_crashing_env(
 
     kwargs.pop("gym_factory", None)
     env = resolve_factory(factory)(**kwargs)
-    step = env._step
-    count = {"n": 0}
-
-    def crashing_step(tensordict):
-        count["n"] += 1
-        if count["n"] > crash_after:
-            raise EnvCrash(f"deliberate crash after {crash_after} steps")
-        return step(tensordict)
-
-    env._step = crashing_step
+    env._step = _crash_after(env._step, crash_after)
     return env
 
 
@@ -57,51 +48,19 @@ def make_crashing_gym(
 
     kwargs.pop("factory", None)
     env = resolve_factory(gym_factory)(**kwargs)
-    step = env.step
-    count = {"n": 0}
-
-    def crashing_step(action):
-        count["n"] += 1
-        if count["n"] > crash_after:
-            raise EnvCrash(f"deliberate crash after {crash_after} steps")
-        return step(action)
-
-    env.step = crashing_step
+    env.step = _crash_after(env.step, crash_after)
     return env
 
 
-def make_grasp_env_numpy_info(**kwargs: Any) -> EnvBase:
-    """The grasp env with its info values as numpy scalars.
+def _crash_after(step, crash_after: int):
+    """``step`` that raises ``EnvCrash`` from its ``crash_after + 1``-th call on."""
+    calls = 0
 
-    Works around ``default_info_dict_reader`` failing on plain Python bools in TorchRL 0.14.1
-    (``'bool' object has no attribute 'dtype'``) until ``rlgrasp.envs.make_torchrl_env`` does this.
-    """
-    import gymnasium as gym
-    import numpy as np
-    import torch
-    from torchrl.data import Composite, Unbounded
-    from torchrl.envs import GymWrapper, default_info_dict_reader
+    def crashing_step(*args, **kwargs):
+        nonlocal calls
+        calls += 1
+        if calls > crash_after:
+            raise EnvCrash(f"deliberate crash after {crash_after} steps")
+        return step(*args, **kwargs)
 
-    from rlgrasp.envs import PandaGraspEnv
-
-    class NumpyInfo(gym.Wrapper):
-        def _fix(self, info):
-            return {k: np.asarray(v) if isinstance(v, (bool, int, float)) else v for k, v in info.items()}
-
-        def reset(self, **kw):
-            obs, info = self.env.reset(**kw)
-            return obs, self._fix(info)
-
-        def step(self, action):
-            obs, r, term, trunc, info = self.env.step(action)
-            return obs, r, term, trunc, self._fix(info)
-
-    env = GymWrapper(NumpyInfo(PandaGraspEnv(**kwargs)))
-    spec = Composite(
-        is_success=Unbounded((), dtype=torch.bool),
-        grasped=Unbounded((), dtype=torch.bool),
-        lift_height=Unbounded((), dtype=torch.float32),
-    )
-    return env.set_info_dict_reader(
-        default_info_dict_reader(["is_success", "grasped", "lift_height"], spec=spec)
-    )
+    return crashing_step
