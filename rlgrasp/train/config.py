@@ -57,6 +57,7 @@ class PPOConfig:
     # Stop the epochs of one update once the approximate KL exceeds this (null disables).
     target_kl: float | None = 0.05
     adam_eps: float = 1e-5
+    gae_every_epoch: bool = True
 
 
 @dataclass

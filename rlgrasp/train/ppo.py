@@ -1,4 +1,4 @@
-"""The PPO update: GAE recomputed each epoch, clipped loss over shuffled minibatches.
+"""The PPO update: GAE (each epoch by default), clipped loss over shuffled minibatches.
 
 TorchRL provides the pieces (``GAE``, ``ClipPPOLoss``, ``SamplerWithoutReplacement``); this module
 only adds what it lacks: the learning-rate schedule, the target-KL stop, finiteness checks and the
@@ -67,11 +67,12 @@ class PPOLearner:
         sums: dict[str, float] = {}
         count = 0
         stopped_early = False
-        for _epoch in range(cfg.epochs):
-            with torch.no_grad():
-                self.gae(batch)
-            buffer.empty()
-            buffer.extend(batch.reshape(-1))
+        for epoch in range(cfg.epochs):
+            if epoch == 0 or cfg.gae_every_epoch:
+                with torch.no_grad():
+                    self.gae(batch)
+                buffer.empty()
+                buffer.extend(batch.reshape(-1))
             for _ in range(n // mb):
                 minibatch = buffer.sample()
                 losses = self.loss(minibatch)
@@ -109,7 +110,7 @@ class PPOLearner:
         self.norm.update(batch["observation"])
         metrics = {k: v / max(count, 1) for k, v in sums.items()}
         metrics["explained_variance"] = explained_variance(batch)
-        metrics["epochs"] = float(_epoch + 1)
+        metrics["epochs"] = float(epoch + 1)
         metrics["minibatches"] = float(count)
         return metrics
 
