@@ -55,7 +55,9 @@ def test_grasp_ppo_defaults() -> None:
     assert cfg.env.randomization == "default"
     assert cfg.env.control_mode == "ee_delta"
     assert cfg.algo.gamma == pytest.approx(0.9)
-    assert list(cfg.model.hidden_sizes) == [256, 256, 256]
+    assert list(cfg.model.hidden_sizes) == [256, 256]
+    assert cfg.algo.gae_every_epoch is False
+    assert cfg.eval.final_episodes == 100
 
 
 @pytest.mark.parametrize(

@@ -115,6 +115,9 @@ class EvalConfig:
 
     interval_frames: int = 20_000
     episodes: int = 16
+    # The evaluation at the end of training (the number train() returns): more episodes than the
+    # periodic ones, for a tighter interval on the figure users quote. null: same as ``episodes``.
+    final_episodes: int | None = None
     num_envs: int = 8
     seed_offset: int = 1_000_000
 

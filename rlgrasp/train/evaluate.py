@@ -49,7 +49,10 @@ class Evaluator:
         self._env: EnvBase | None = None
 
     @torch.no_grad()
-    def run(self, policy) -> dict[str, float]:
+    def run(self, policy, episodes: int | None = None) -> dict[str, float]:
+        """Mean return and success over ``episodes`` (default: the constructor's); the first
+        episodes are the same whatever the count, so a longer evaluation extends a shorter one."""
+        episodes = episodes or self.episodes
         if self._env is None:
             self._env = make_batched_env(
                 self.env_cfg,
@@ -60,7 +63,7 @@ class Evaluator:
                 seed_torch=False,
             )
         returns, successes = [], []
-        rounds = math.ceil(self.episodes / self.num_envs)
+        rounds = math.ceil(episodes / self.num_envs)
         with set_exploration_type(ExplorationType.DETERMINISTIC):
             for r in range(rounds):
                 self._env.set_seed(self.seed + r * self.num_envs)
@@ -69,9 +72,9 @@ class Evaluator:
                 returns.append(stats["return"])
                 if "success" in stats:
                     successes.append(stats["success"])
-        out = {"mean_reward": float(torch.cat(returns)[: self.episodes].mean())}
+        out = {"mean_reward": float(torch.cat(returns)[:episodes].mean())}
         if successes:
-            out["success_rate"] = float(torch.cat(successes)[: self.episodes].mean())
+            out["success_rate"] = float(torch.cat(successes)[:episodes].mean())
         return out
 
     def close(self) -> None:

@@ -13,6 +13,7 @@ import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
 
+from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.collect import build_collector, make_batched_env, read_env_errors
 from rlgrasp.train.evaluate import Evaluator
@@ -160,11 +161,12 @@ def train(cfg: DictConfig, on_eval: EvalCallback | None = None) -> float:
         env_cfg, cfg.eval.episodes, cfg.eval.num_envs, cfg.seed * 1_000_003 + cfg.eval.seed_offset
     )
 
-    def evaluate() -> dict[str, float]:
+    def evaluate(final: bool = False) -> dict[str, float]:
         nonlocal best_success, last_eval
         t0 = time.perf_counter()
+        episodes = (cfg.eval.final_episodes or cfg.eval.episodes) if final else cfg.eval.episodes
         actor.eval()
-        result = evaluator.run(actor)
+        result = evaluator.run(actor, episodes)
         actor.train()
         result["frames"] = frames
         last_eval = result
@@ -175,6 +177,10 @@ def train(cfg: DictConfig, on_eval: EvalCallback | None = None) -> float:
         if is_best:
             best_success = score
         log.info("eval at %s frames: %s", f"{frames:,}", {k: round(v, 3) for k, v in result.items()})
+        if final and "success_rate" in result:
+            wins = round(result["success_rate"] * episodes)
+            low, high = wilson_interval(wins, episodes)
+            log.info("final eval: success %d/%d [95%% Wilson %.3f, %.3f]", wins, episodes, low, high)
         if on_eval is not None:
             try:
                 on_eval(frames, dict(result))
@@ -253,7 +259,7 @@ def train(cfg: DictConfig, on_eval: EvalCallback | None = None) -> float:
             logger.scalars(metrics, frames)
 
             is_best = False
-            if eval_due(frames):
+            if eval_due(frames) and frames < total:  # at the end the final evaluation runs
                 is_best = evaluate()["is_best"]
             if ckpt_due(frames) or is_best:
                 save(is_best)
@@ -287,8 +293,9 @@ def train(cfg: DictConfig, on_eval: EvalCallback | None = None) -> float:
     if status == "interrupted":
         return float((last_eval or {}).get("success_rate", float("nan")))
     try:
-        if last_eval is None or last_eval["frames"] != frames:
-            save(evaluate()["is_best"])
+        final_is_longer = (cfg.eval.final_episodes or 0) > cfg.eval.episodes
+        if last_eval is None or last_eval["frames"] != frames or final_is_longer:
+            save(evaluate(final=True)["is_best"])
         elif not (ckpt_dir / "last.pt").exists() or ckpt_lib.load_checkpoint(run_dir)["frames"] != frames:
             save()
     except BaseException:  # the eval callback stopped the run (it saved a checkpoint)
