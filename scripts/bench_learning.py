@@ -18,9 +18,13 @@ import sys
 import time
 from pathlib import Path
 
+from omegaconf import OmegaConf
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # run from a checkout, uninstalled
+
+from rlgrasp.stats import wilson_interval  # noqa: E402
 
 
 def run_seed(out: Path, tag: str, seed: int, minutes: float, experiment: str, overrides: list[str]) -> dict:
@@ -41,6 +45,12 @@ def run_seed(out: Path, tag: str, seed: int, minutes: float, experiment: str, ov
     if code != 0:
         raise SystemExit(f"training run for seed {seed} failed (exit {code}); see {log.name}")
     return {"run_dir": run_dir, "start": start, "wall_s": time.time() - start}
+
+
+def final_episodes(run_dir: Path) -> int:
+    """Episodes behind a run's last eval point: the final evaluation's count."""
+    cfg = OmegaConf.load(run_dir / ".hydra" / "config.yaml").eval
+    return int(cfg.get("final_episodes") or cfg.episodes)
 
 
 def eval_curve(run_dir: Path, start: float) -> list[tuple[float, int, float]]:
@@ -68,8 +78,11 @@ def main() -> None:
         rows += [(args.tag, seed, round(m, 3), f, v) for m, f, v in curve]
         minutes, frames, success = curve[-1]
         first_90 = next((m for m, _, v in curve if v >= 0.9), None)
-        finals.append((seed, minutes, frames, success, first_90))
-        print(f"seed {seed}: final eval success {success:.3f} at {frames:,} frames, {minutes:.1f} min; "
+        episodes = final_episodes(run["run_dir"])
+        low, high = wilson_interval(round(success * episodes), episodes)
+        finals.append((seed, minutes, frames, success, first_90, episodes, low, high))
+        print(f"seed {seed}: final eval success {success:.3f} over {episodes} episodes "
+              f"[{low:.3f}, {high:.3f}] at {frames:,} frames, {minutes:.1f} min; "
               f"first >= 0.9 at {'-' if first_90 is None else f'{first_90:.1f} min'}", flush=True)
 
     csv_path = args.out / f"{args.tag}.csv"
@@ -80,11 +93,12 @@ def main() -> None:
     plot(rows, args.out / f"{args.tag}.png", args.tag)
 
     print(f"\n{args.tag}: budget {args.minutes} min per seed")
-    print(f"{'seed':>4}{'final success':>15}{'frames':>10}{'minutes':>9}{'first >= 0.9':>14}")
-    for seed, minutes, frames, success, first_90 in finals:
-        print(f"{seed:>4}{success:>15.3f}{frames:>10,}{minutes:>9.1f}"
-              f"{'-' if first_90 is None else f'{first_90:.1f} min':>14}")
-    hits = sum(s >= 0.9 for _, _, _, s, _ in finals)
+    print(f"{'seed':>4}{'final success':>15}{'episodes':>9}{'95% Wilson':>16}{'frames':>10}{'minutes':>9}"
+          f"{'first >= 0.9':>14}")
+    for seed, minutes, frames, success, first_90, episodes, low, high in finals:
+        print(f"{seed:>4}{success:>15.3f}{episodes:>9}{f'[{low:.2f}, {high:.2f}]':>16}{frames:>10,}"
+              f"{minutes:>9.1f}{'-' if first_90 is None else f'{first_90:.1f} min':>14}")
+    hits = sum(f[3] >= 0.9 for f in finals)
     print(f"seeds with final eval success >= 0.9: {hits}/{len(finals)}")
     print(f"wrote {csv_path} and {csv_path.with_suffix('.png')}")
 
