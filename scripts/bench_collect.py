@@ -126,6 +126,7 @@ def bench_train(overrides: list[str], frames: int) -> float:
                 "eval.interval_frames=0",
                 "checkpoint.interval_frames=0",
                 "eval.episodes=1",
+                "eval.final_episodes=1",
                 "eval.num_envs=1",
             ],
         )
