@@ -77,7 +77,7 @@ def main() -> None:
         curve = eval_curve(run["run_dir"], run["start"])
         rows += [(args.tag, seed, round(m, 3), f, v) for m, f, v in curve]
         minutes, frames, success = curve[-1]
-        first_90 = next((m for m, _, v in curve if v >= 0.9), None)
+        first_90 = next((m for m, _, v in curve if v >= 0.9 - 1e-6), None)
         episodes = final_episodes(run["run_dir"])
         low, high = wilson_interval(round(success * episodes), episodes)
         finals.append((seed, minutes, frames, success, first_90, episodes, low, high))
@@ -98,7 +98,7 @@ def main() -> None:
     for seed, minutes, frames, success, first_90, episodes, low, high in finals:
         print(f"{seed:>4}{success:>15.3f}{episodes:>9}{f'[{low:.2f}, {high:.2f}]':>16}{frames:>10,}"
               f"{minutes:>9.1f}{'-' if first_90 is None else f'{first_90:.1f} min':>14}")
-    hits = sum(f[3] >= 0.9 for f in finals)
+    hits = sum(round(f[3] * f[5]) >= 0.9 * f[5] for f in finals)  # counts: 0.9 is 0.8999... in float32
     print(f"seeds with final eval success >= 0.9: {hits}/{len(finals)}")
     print(f"wrote {csv_path} and {csv_path.with_suffix('.png')}")
 

@@ -53,7 +53,7 @@ def test_group_options_compose(group: str) -> None:
 def test_grasp_ppo_defaults() -> None:
     cfg = _compose(["experiment=grasp_ppo"])
     assert cfg.env.randomization == "default"
-    assert cfg.env.control_mode == "ee_delta"
+    assert cfg.env.control_mode == "joint_delta"
     assert cfg.algo.gamma == pytest.approx(0.9)
     assert list(cfg.model.hidden_sizes) == [256, 256]
     assert cfg.algo.gae_every_epoch is False
