@@ -1,5 +1,5 @@
 """Frames/s of the collector backends side by side: process vs Ray (local, and a two-node Ray
-cluster on loopback). Same env, MLP actor, batch layout (grasp_ppo: 2 workers x 4 envs x 128 steps).
+cluster on loopback). Same env, MLP actor, batch layout (grasp_ppo: 2 workers x 8 envs x 64 steps).
 
     python scripts/bench_scale.py [--batches 8] [--warmup 2] [--setups process ray ray_2nodes]
 
@@ -18,6 +18,9 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+# Ray reads this when first imported (torchrl imports it with the collectors): without it a cluster
+# started on 127.0.0.1 advertises the machine's network address and the driver hangs connecting.
+os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
 
 
 def bench(setup: str, batches: int, warmup: int, extra: list[str]) -> list[float]:
@@ -34,7 +37,6 @@ def bench(setup: str, batches: int, warmup: int, extra: list[str]) -> list[float
     if setup == "process":
         overrides.append("collector=process")
     else:
-        os.environ["RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"] = "0"
         overrides += ["collector=ray", "collector.ray.memory_per_worker_gb=0.5"]
         if setup == "ray_2nodes":
             from ray.cluster_utils import Cluster
