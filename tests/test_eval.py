@@ -266,3 +266,11 @@ def test_cli_metrics_identical_with_one_and_two_workers(tmp_path: Path) -> None:
             if k not in ("timing", "config", "output_dir", "summary_markdown", "files")
         }
     assert out[1] == out[2]
+
+
+@pytest.mark.parametrize("preset", ["none", "wide"])
+def test_randomization_preset_by_name_reaches_the_env(tmp_path: Path, preset: str) -> None:
+    """`randomization=wide` names a config group too; it must still set the evaluated env's preset."""
+    cfg = _cfg(f"ckpt={make_run(tmp_path)}", f"randomization={preset}")
+    source = prepare(cfg.policy, cfg.ckpt, cfg.ckpt_kind, None, OmegaConf.to_container(cfg.env))
+    assert source.env_kwargs["randomization"] == preset
