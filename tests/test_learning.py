@@ -1,4 +1,4 @@
-"""Learning quality: the default experiment lifts the cube. Slow (~8 min on 2 cores): run with
+"""Learning quality: the default experiment lifts the cube. Slow (~3 min on 2 cores): run with
 ``python -m pytest -m slow tests/test_learning.py``."""
 
 from __future__ import annotations
