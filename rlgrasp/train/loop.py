@@ -161,10 +161,12 @@ def train(cfg: DictConfig, on_eval: EvalCallback | None = None) -> float:
         env_cfg, cfg.eval.episodes, cfg.eval.num_envs, cfg.seed * 1_000_003 + cfg.eval.seed_offset
     )
 
+    final_episodes = cfg.eval.final_episodes or cfg.eval.episodes
+
     def evaluate(final: bool = False) -> dict[str, float]:
         nonlocal best_success, last_eval
         t0 = time.perf_counter()
-        episodes = (cfg.eval.final_episodes or cfg.eval.episodes) if final else cfg.eval.episodes
+        episodes = final_episodes if final else cfg.eval.episodes
         actor.eval()
         result = evaluator.run(actor, episodes)
         actor.train()
@@ -293,8 +295,7 @@ def train(cfg: DictConfig, on_eval: EvalCallback | None = None) -> float:
     if status == "interrupted":
         return float((last_eval or {}).get("success_rate", float("nan")))
     try:
-        final_is_longer = (cfg.eval.final_episodes or 0) > cfg.eval.episodes
-        if last_eval is None or last_eval["frames"] != frames or final_is_longer:
+        if last_eval is None or last_eval["frames"] != frames or final_episodes > cfg.eval.episodes:
             save(evaluate(final=True)["is_best"])
         elif not (ckpt_dir / "last.pt").exists() or ckpt_lib.load_checkpoint(run_dir)["frames"] != frames:
             save()
