@@ -37,6 +37,32 @@ REQUIRED_TAGS = {
 }
 SUCCESS_TAGS = {"charts/success_rate", "eval/success_rate"}
 
+# Pinned results, measured with the code before the Trainer/`_target_` refactor (commit e36396d)
+# and bit-identical over repeated runs: the first update's losses (as logged to TensorBoard) and the
+# final evaluation. A change here means the same seed no longer gives the same run.
+SMOKE_PINNED = {  # experiment=smoke: seed 0, two process workers, 2,048 frames
+    "first_losses": {
+        "policy_loss": -0.0016267967876046896,
+        "value_loss": 0.07025547325611115,
+        "entropy": 2.3941688537597656,
+        "approx_kl": 0.0004087546840310097,
+        "grad_norm": 1.5107287168502808,
+        "explained_variance": -2.2885026931762695,
+    },
+    "last_eval": {"mean_reward": 2.1927731037139893, "success_rate": 0.0, "frames": 2048},
+}
+ONE_WORKER_PINNED = {  # experiment=smoke collector.num_workers=1 seed=3 total_frames=512
+    "first_losses": {
+        "policy_loss": 7.206108421087265e-08,
+        "value_loss": 0.13390886783599854,
+        "entropy": 2.3811373710632324,
+        "approx_kl": -7.683411240577698e-09,
+        "grad_norm": 2.861948251724243,
+        "explained_variance": -0.5760371685028076,
+    },
+    "last_eval": {"mean_reward": 2.1678431034088135, "success_rate": 0.0, "frames": 512},
+}
+
 
 def _cfg(run_dir: Path, *overrides: str):
     register_configs()
@@ -53,10 +79,19 @@ def _scalars(run_dir: Path) -> EventAccumulator:
     return acc
 
 
+def _assert_pinned(run_dir: Path, pinned: dict) -> None:
+    acc = _scalars(run_dir)
+    first = {k: acc.Scalars(f"losses/{k}")[0].value for k in pinned["first_losses"]}
+    assert first == pytest.approx(pinned["first_losses"], rel=1e-6, abs=1e-12)
+    assert load_checkpoint(run_dir)["last_eval"] == pytest.approx(pinned["last_eval"], rel=1e-6)
+
+
 def test_smoke_end_to_end_then_resume(tmp_path: Path) -> None:
     run_dir = tmp_path / "run"
     success = train(_cfg(run_dir))
     assert isinstance(success, float)
+    if ENV == "grasp":
+        _assert_pinned(run_dir, SMOKE_PINNED)
     tags = set(_scalars(run_dir).Tags()["scalars"])
     required = REQUIRED_TAGS | (SUCCESS_TAGS if ENV == "grasp" else set())
     assert required <= tags, required - tags
@@ -88,16 +123,10 @@ def test_smoke_end_to_end_then_resume(tmp_path: Path) -> None:
     assert steps == sorted(steps) and steps[-1] == 4096 and 2048 in steps
 
 
-def _first_losses(run_dir: Path) -> list[float]:
-    acc = _scalars(run_dir)
-    return [acc.Scalars(t)[0].value for t in ("losses/policy_loss", "losses/value_loss")]
-
-
-def test_same_seed_same_first_losses_one_worker(tmp_path: Path) -> None:
-    over = ["collector.num_workers=1", "total_frames=512", "seed=3"]
-    train(_cfg(tmp_path / "a", *over))
-    train(_cfg(tmp_path / "b", *over))
-    assert _first_losses(tmp_path / "a") == _first_losses(tmp_path / "b")
+@pytest.mark.skipif(ENV != "grasp", reason="pinned on the grasp env")
+def test_one_worker_run_is_pinned(tmp_path: Path) -> None:
+    train(_cfg(tmp_path, "collector.num_workers=1", "total_frames=512", "seed=3"))
+    _assert_pinned(tmp_path, ONE_WORKER_PINNED)
 
 
 @pytest.mark.parametrize("collector", ["process", "single"])
