@@ -23,18 +23,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout, uninstalled
 
-CONFIG_DIR = str(Path(__file__).resolve().parents[1] / "configs")
 
-
-def _gym_env(env_cfg: dict):
-    from rlgrasp.envs.panda_grasp import PandaGraspEnv
-    from rlgrasp.train.collect import env_kwargs
-
-    return PandaGraspEnv(**env_kwargs(env_cfg))
-
-
-def _raw_worker(env_cfg: dict, seconds: float, seed: int, out: mp.Queue) -> None:
-    env = _gym_env(env_cfg)
+def _raw_worker(make_env, seconds: float, seed: int, out: mp.Queue) -> None:
+    env = make_env()
     env.reset(seed=seed)
     env.action_space.seed(seed)
     for _ in range(50):  # warm-up
@@ -48,10 +39,10 @@ def _raw_worker(env_cfg: dict, seconds: float, seed: int, out: mp.Queue) -> None
     out.put(n / (time.perf_counter() - t0))
 
 
-def bench_raw(env_cfg: dict, seconds: float, procs: int) -> float:
+def bench_raw(make_env, seconds: float, procs: int) -> float:
     ctx = mp.get_context("spawn")
     q = ctx.Queue()
-    ps = [ctx.Process(target=_raw_worker, args=(env_cfg, seconds, i, q)) for i in range(procs)]
+    ps = [ctx.Process(target=_raw_worker, args=(make_env, seconds, i, q)) for i in range(procs)]
     for p in ps:
         p.start()
     rates = [q.get() for _ in ps]
@@ -60,18 +51,10 @@ def bench_raw(env_cfg: dict, seconds: float, procs: int) -> float:
     return sum(rates)
 
 
-def _make_gym_env(env_cfg: dict):
-    return _gym_env(env_cfg)
-
-
-def bench_async(env_cfg: dict, seconds: float, num_envs: int) -> float:
-    import functools
-
+def bench_async(make_env, seconds: float, num_envs: int) -> float:
     import gymnasium as gym
 
-    envs = gym.vector.AsyncVectorEnv(
-        [functools.partial(_make_gym_env, env_cfg) for _ in range(num_envs)], context="spawn"
-    )
+    envs = gym.vector.AsyncVectorEnv([make_env] * num_envs, context="spawn")
     envs.reset(seed=0)
     for _ in range(20):
         envs.step(envs.action_space.sample())
@@ -87,39 +70,31 @@ def bench_async(env_cfg: dict, seconds: float, num_envs: int) -> float:
 def bench_collector(cfg, seconds: float) -> float:
     import torch
 
-    from rlgrasp.train.collect import build_collector
-    from rlgrasp.train.loop import _env_spec, frames_per_batch
-    from rlgrasp.train.models import build_models
+    from rlgrasp.train.parts import build_parts
 
     torch.set_num_threads(cfg.collector.torch_threads)
-    spec = _env_spec(dict(cfg.env), cfg.collector.vector)
-    actor, _, _ = build_models(
-        spec["obs_dim"], torch.tensor(spec["action_low"]), torch.tensor(spec["action_high"]), cfg.model
-    )
-    fpb = frames_per_batch(cfg)
-    with tempfile.TemporaryDirectory() as tmp:
-        collector = build_collector(cfg, actor, fpb, 0, tmp)
-        it = iter(collector)
-        next(it)  # start-up and warm-up
-        n, t0 = 0, time.perf_counter()
-        while time.perf_counter() - t0 < seconds:
-            n += next(it).numel()
-            collector.update_policy_weights_()
-        rate = n / (time.perf_counter() - t0)
-        collector.shutdown()
+    parts = build_parts(cfg)
+    collector = parts.make_collector()
+    it = iter(collector)
+    next(it)  # start-up and warm-up
+    n, t0 = 0, time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        n += next(it).numel()
+        collector.update_policy_weights_()
+    rate = n / (time.perf_counter() - t0)
+    collector.shutdown()
     return rate
 
 
 def bench_train(overrides: list[str], frames: int) -> float:
-    from hydra import compose, initialize_config_dir
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
+    from rlgrasp.config import compose_train
     from rlgrasp.train.loop import train
 
-    with tempfile.TemporaryDirectory() as tmp, initialize_config_dir(CONFIG_DIR, version_base="1.3"):
-        cfg = compose(
-            "train",
-            overrides=[
+    with tempfile.TemporaryDirectory() as tmp:
+        cfg = compose_train(
+            [
                 *overrides,
                 f"paths.output_dir={tmp}",
                 f"total_frames={frames}",
@@ -128,7 +103,7 @@ def bench_train(overrides: list[str], frames: int) -> float:
                 "eval.episodes=1",
                 "eval.final_episodes=1",
                 "eval.num_envs=1",
-            ],
+            ]
         )
         train(cfg)
         acc = EventAccumulator(str(Path(tmp) / "tensorboard"), size_guidance={"scalars": 0})
@@ -146,30 +121,27 @@ def main() -> None:
     parser.add_argument("overrides", nargs="*", help="Hydra overrides, e.g. experiment=grasp_ppo")
     args = parser.parse_args()
 
-    from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
-    from rlgrasp.train.config import register_configs
+    from rlgrasp.config import compose_train, env_factory
 
-    register_configs()
     overrides = args.overrides or ["experiment=grasp_ppo"]
-    with initialize_config_dir(CONFIG_DIR, version_base="1.3"):
-        cfg = compose("train", overrides=[*overrides, "paths.output_dir=/tmp/unused"])
-    env_cfg = OmegaConf.to_container(cfg.env, resolve=True)
+    cfg = compose_train([*overrides, "paths.output_dir=/tmp/unused"])
+    make_env = env_factory(cfg.env)
     c = cfg.collector
     num_envs = max(c.num_workers, 1) * c.envs_per_worker
 
-    print(f"env: {env_cfg}")
+    print(f"env: {OmegaConf.to_container(cfg.env, resolve=True)}")
     print(f"collector: {dict(c)}  ({num_envs} envs)")
 
     def row(label: str, rate: float) -> None:
         print(f"{label:<52} {rate:9,.0f} frames/s  ({rate / raw:.2f} of raw)")
 
-    raw = bench_raw(env_cfg, args.seconds, args.procs)
+    raw = bench_raw(make_env, args.seconds, args.procs)
     row(f"raw env, {args.procs} processes x 1 env, random actions", raw)
-    row(f"gymnasium AsyncVectorEnv, {num_envs} envs", bench_async(env_cfg, args.seconds, num_envs))
+    row(f"gymnasium AsyncVectorEnv, {num_envs} envs", bench_async(make_env, args.seconds, num_envs))
     col = bench_collector(cfg, args.seconds)
-    row(f"rlgrasp collector ({c.vector}) + PPO actor", col)
+    row("rlgrasp collector + PPO actor", col)
     print(f"ratio collector/raw = {col / raw:.2f} (target >= 0.8)")
     if args.train_frames:
         sps = bench_train(overrides, args.train_frames)

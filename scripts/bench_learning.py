@@ -104,11 +104,9 @@ def main() -> None:
 
 
 def plot(rows: list[tuple], path: Path, title: str) -> None:
-    import matplotlib
+    from rlgrasp.utils import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.5))
     for seed in sorted({r[1] for r in rows}):
         pts = [r for r in rows if r[1] == seed]

@@ -24,12 +24,8 @@ os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
 
 
 def bench(setup: str, batches: int, warmup: int, extra: list[str]) -> list[float]:
-    import torch
-
-    from rlgrasp.sweep.config import compose_train
-    from rlgrasp.train.collect import build_collector
-    from rlgrasp.train.loop import _env_spec, frames_per_batch
-    from rlgrasp.train.models import build_models
+    from rlgrasp.config import compose_train
+    from rlgrasp.train.parts import build_parts
 
     tmp = tempfile.mkdtemp()
     overrides = ["experiment=grasp_ppo", f"paths.output_dir={tmp}", *extra]
@@ -46,13 +42,8 @@ def bench(setup: str, batches: int, warmup: int, extra: list[str]) -> list[float
             cluster.add_node(**node)
             cluster.wait_for_nodes()
             overrides.append(f"collector.ray.address={cluster.address}")
-    cfg = compose_train(Path(__file__).resolve().parents[1] / "configs", overrides)
-    spec = _env_spec(dict(cfg.env))
-    actor, _, _ = build_models(
-        spec["obs_dim"], torch.tensor(spec["action_low"]), torch.tensor(spec["action_high"]), cfg.model
-    )
-    fpb = frames_per_batch(cfg)
-    collector = build_collector(cfg, actor, fpb, 0, os.path.join(tmp, "errors"))
+    cfg = compose_train(overrides)
+    collector = build_parts(cfg).make_collector(0, os.path.join(tmp, "errors"))
     rates = []
     try:
         it = iter(collector)

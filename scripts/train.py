@@ -7,8 +7,8 @@ import hydra
 from omegaconf import DictConfig
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout, uninstalled
+from rlgrasp.config import register_configs
 from rlgrasp.train.cli import run
-from rlgrasp.train.config import register_configs
 
 register_configs()
 

@@ -1,9 +1,34 @@
-"""Session-wide test settings."""
+"""Session-wide test settings and the config fixtures: compose the train and eval configs the way
+their scripts do, once, here."""
 
 import os
 
+import pytest
+
 # Ray reads this once, when it is first imported (ray_private.ray_constants), and torchrl imports
 # Ray as soon as any test module imports the collectors. Unset, Ray advertises the machine's network
-# address for a cluster started on 127.0.0.1 and the driver never reaches it (the hang the Ray tests
-# used to show). The tests only ever start Ray on loopback, so keep it there for the whole session.
+# address for a cluster started on 127.0.0.1 and the driver never reaches it: the tests hang. The
+# tests only ever start Ray on loopback, so keep it there for the whole session.
 os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
+
+from rlgrasp.config import compose_eval, compose_train  # noqa: E402
+
+
+@pytest.fixture
+def train_cfg(tmp_path):
+    """``train_cfg(*overrides, run_dir=None)``: the training config, writing into ``tmp_path``."""
+
+    def make(*overrides: str, run_dir=None):
+        return compose_train([f"paths.output_dir={run_dir or tmp_path}", *overrides])
+
+    return make
+
+
+@pytest.fixture
+def eval_cfg():
+    """``eval_cfg(*overrides)``: the ``rlgrasp-eval`` config."""
+
+    def make(*overrides: str):
+        return compose_eval(list(overrides))
+
+    return make

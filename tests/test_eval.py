@@ -11,60 +11,37 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
+from rlgrasp.config import compose_eval, compose_train
 from rlgrasp.evaluation import EvaluationError
-from rlgrasp.evaluation.cli import evaluate, register_configs
+from rlgrasp.evaluation.cli import evaluate
 from rlgrasp.evaluation.episodes import run_episodes
 from rlgrasp.evaluation.metrics import summarize
 from rlgrasp.evaluation.plots import binned_success
 from rlgrasp.evaluation.source import prepare
-from rlgrasp.train.config import EnvConfig, MLPConfig
-from rlgrasp.train.models import build_models
+from rlgrasp.train.loop import Trainer
 
 ROOT = Path(__file__).resolve().parents[1]
-CONFIG_DIR = str(ROOT / "configs")
 
 
 def _cfg(*overrides: str):
-    register_configs()
-    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
-        return compose(config_name="eval", overrides=list(overrides))
+    return compose_eval(list(overrides))
 
 
-def make_run(tmp: Path, obs_dim: int = 42, action_dim: int = 4, frames: int = 4096) -> Path:
-    """A run directory with a checkpoint in the training layout (random weights, fitted normalizer)."""
-    from dataclasses import asdict
-
-    torch.manual_seed(0)
-    model = asdict(MLPConfig(hidden_sizes=[16, 16]))
-    actor, critic, norm = build_models(
-        obs_dim, -torch.ones(action_dim), torch.ones(action_dim), OmegaConf.create(model)
-    )
-    norm.update(torch.randn(64, obs_dim) * 0.3)
+def make_run(tmp: Path, frames: int = 4096, obs_dim: int | None = None) -> Path:
+    """A run directory whose checkpoints the training code wrote (random weights, fitted normalizer,
+    ``frames`` frames); ``obs_dim`` replaces the recorded observation size (a mismatched checkpoint)."""
     run = tmp / "run"
-    ckpt = {
-        "format": 1,
-        "actor": actor.state_dict(),
-        "critic": critic.state_dict(),
-        "obs_norm": norm.state_dict(),
-        "frames": frames,
-        "updates": 2,
-        "config": {"env": asdict(EnvConfig()), "model": model, "experiment_name": "unit", "seed": 3},
-        "spec": {
-            "obs_key": "observation",
-            "obs_dim": obs_dim,
-            "action_dim": action_dim,
-            "action_low": [-1.0] * action_dim,
-            "action_high": [1.0] * action_dim,
-        },
-        "versions": {},
-        "run_dir": str(run),
-    }
-    (run / "checkpoints").mkdir(parents=True)
-    torch.save(ckpt, run / "checkpoints" / "best.pt")
-    torch.save(ckpt, run / "checkpoints" / "last.pt")
+    over = ["model.hidden_sizes=[16,16]", "logger=none", "experiment_name=unit", "seed=3"]
+    cfg = compose_train([f"paths.output_dir={run}", *over])
+    trainer = Trainer(cfg)
+    trainer.parts.norm.update(torch.randn(64, trainer.parts.spec["obs_dim"]) * 0.3)
+    trainer.frames, trainer.updates = frames, 2
+    if obs_dim is not None:
+        trainer.parts.spec["obs_dim"] = obs_dim
+    trainer.save(is_best=True)
+    trainer.logger.close()
     return run
 
 
@@ -90,7 +67,8 @@ def test_checkpoint_evaluation_writes_every_artefact(tmp_path: Path) -> None:
         saved["checkpoint"]["path"].endswith("checkpoints/best.pt") and saved["checkpoint"]["frames"] == 4096
     )
     assert saved["config"]["train"]["experiment_name"] == "unit"
-    assert saved["config"]["env_kwargs"]["randomization"] == "default"  # from the checkpoint
+    assert saved["config"]["env"]["randomization"] == "default"  # from the checkpoint
+    assert saved["config"]["env"]["_target_"] == "rlgrasp.envs.PandaGraspEnv"
     assert {"mean", "std"} <= set(saved["return"]) and saved["mean_length"] == 50.0
     rows = list(csv.DictReader(open(out / "episodes.csv")))
     assert [int(r["seed"]) for r in rows] == [0, 1, 2, 3]
@@ -132,7 +110,7 @@ def test_scripted_baseline_within_known_bounds(tmp_path: Path) -> None:
     assert m["success_at_end"]["successes"] >= 18
     assert m["success_at_end"]["ci95"][1] == 1.0 or m["success_at_end"]["ci95"][1] > 0.95
     assert (tmp_path / "eval" / "scripted" / "s" / "metrics.json").is_file()
-    assert m["checkpoint"] is None and m["config"]["env_kwargs"]["randomization"] == "default"
+    assert m["checkpoint"] is None and m["config"]["env"]["randomization"] == "default"
 
 
 def test_random_baseline_rarely_succeeds(tmp_path: Path) -> None:
@@ -195,7 +173,7 @@ def test_corrupt_checkpoint(tmp_path: Path) -> None:
 
 
 def test_layout_mismatch(tmp_path: Path) -> None:
-    run = make_run(tmp_path, obs_dim=40)
+    run = make_run(tmp_path, obs_dim=40)  # the env has 42
     _assert_fails(tmp_path, "observation layout mismatch: checkpoint obs_dim=40", f"ckpt={run}")
     run2 = make_run(tmp_path / "b")
     # joint_delta: 7 joint deltas + gripper = 8 actions, and a longer prev_action in the observation.
@@ -234,13 +212,10 @@ def test_binned_success_intervals() -> None:
 @pytest.mark.slow
 def test_evaluate_a_short_training_run(tmp_path: Path) -> None:
     """A real smoke training run, then its evaluation from the run directory alone."""
-    from rlgrasp.train.config import register_configs as register_train
     from rlgrasp.train.loop import train
 
-    register_train()
     run = tmp_path / "run"
-    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
-        train(compose(config_name="train", overrides=["experiment=smoke", f"paths.output_dir={run}"]))
+    train(compose_train(["experiment=smoke", f"paths.output_dir={run}"]))
     m = evaluate(_cfg(f"ckpt={run}", "episodes=6", "workers=2", "video_episodes=1", "name=e"))
     assert m["episodes"] == 6 and (run / "eval" / "e" / "metrics.json").is_file()
     assert m["checkpoint"]["frames"] > 0
@@ -273,4 +248,4 @@ def test_randomization_preset_by_name_reaches_the_env(tmp_path: Path, preset: st
     """`randomization=wide` names a config group too; it must still set the evaluated env's preset."""
     cfg = _cfg(f"ckpt={make_run(tmp_path)}", f"randomization={preset}")
     source = prepare(cfg.policy, cfg.ckpt, cfg.ckpt_kind, None, OmegaConf.to_container(cfg.env))
-    assert source.env_kwargs["randomization"] == preset
+    assert source.env_cfg["randomization"] == preset

@@ -3,30 +3,13 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
-from hydra import compose, initialize_config_dir
 
-from rlgrasp.train.config import register_configs
 from rlgrasp.train.loop import train
-
-CONFIG_DIR = str(Path(__file__).resolve().parents[1] / "configs")
 
 
 @pytest.mark.slow
-def test_grasp_ppo_learns_to_lift(tmp_path: Path) -> None:
-    register_configs()
-    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
-        cfg = compose(
-            config_name="train",
-            overrides=[
-                "experiment=grasp_ppo",
-                "seed=0",
-                "total_frames=150000",
-                "logger=none",
-                f"paths.output_dir={tmp_path}",
-            ],
-        )
+def test_grasp_ppo_learns_to_lift(train_cfg) -> None:
+    cfg = train_cfg("experiment=grasp_ppo", "seed=0", "total_frames=150000", "logger=none")
     # A random or reach-only policy scores 0 here; the scripted expert 0.98.
     assert train(cfg) >= 0.75

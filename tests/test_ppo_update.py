@@ -7,7 +7,7 @@ import torch
 from omegaconf import OmegaConf
 from tensordict import TensorDict
 
-from rlgrasp.train.config import MLPConfig, PPOConfig
+from rlgrasp.config import MLPConfig, PPOConfig
 from rlgrasp.train.models import build_models
 from rlgrasp.train.ppo import PPOLearner
 

@@ -11,10 +11,9 @@ from pathlib import Path
 import pytest
 import torch
 
-from rlgrasp.sweep.config import compose_train
+from rlgrasp.config import compose_train
 
 ROOT = Path(__file__).resolve().parents[1]
-CONFIG_DIR = ROOT / "configs"
 TINY = ["collector=single", "collector.envs_per_worker=4", "total_frames=1024", "logger=none"]
 
 
@@ -63,10 +62,10 @@ def test_two_seed_multirun_sequential(tmp_path: Path) -> None:
 def test_slurm_launcher_config_composes() -> None:
     from hydra import compose, initialize_config_dir
 
-    from rlgrasp.train.config import register_configs
+    from rlgrasp.config import CONFIG_DIR, register_configs
 
     register_configs()
-    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
         cfg = compose("train", overrides=["hydra/launcher=slurm"], return_hydra_config=True)
     assert cfg.hydra.launcher._target_.endswith("SlurmLauncher")
     assert cfg.hydra.launcher.cpus_per_task == 9
@@ -96,7 +95,7 @@ def ray_cluster():
 
 
 def _cfg(tmp_path: Path, *overrides: str):
-    return compose_train(CONFIG_DIR, ["experiment=smoke", f"paths.output_dir={tmp_path}", *overrides])
+    return compose_train(["experiment=smoke", f"paths.output_dir={tmp_path}", *overrides])
 
 
 def test_ray_collector_runs_on_both_nodes(ray_cluster, tmp_path: Path) -> None:
@@ -104,19 +103,14 @@ def test_ray_collector_runs_on_both_nodes(ray_cluster, tmp_path: Path) -> None:
     (same env seeds and worker RNG seeds, same initial policy)."""
     import ray
 
-    from rlgrasp.train.collect import build_collector
-    from rlgrasp.train.loop import _env_spec
-    from rlgrasp.train.models import build_models
+    from rlgrasp.train.parts import build_parts
 
     batches = {}
     for backend in ("ray", "process"):
         cfg = _cfg(tmp_path, f"collector={backend}", f"collector.ray.address={ray_cluster.address}",
                    "collector.ray.memory_per_worker_gb=0.25") if backend == "ray" else _cfg(tmp_path)
         torch.manual_seed(0)
-        spec = _env_spec(dict(cfg.env))
-        actor, _, _ = build_models(spec["obs_dim"], torch.tensor(spec["action_low"]),
-                                   torch.tensor(spec["action_high"]), cfg.model)
-        collector = build_collector(cfg, actor, 1024, 0, str(tmp_path / "errors"))
+        collector = build_parts(cfg).make_collector(0, str(tmp_path / "errors"))
         try:
             batch = next(iter(collector))
             if backend == "ray":

@@ -1,27 +1,23 @@
-"""End-to-end runs of the training pipeline on small budgets (real env, process collector)."""
+"""End-to-end runs of the training pipeline on small budgets (real env, process collector), and
+the numbers a refactor must not change."""
 
 from __future__ import annotations
 
-import os
 import re
 from pathlib import Path
 
 import pytest
 import torch
-from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from rlgrasp.train.checkpoint import load_checkpoint, policy_from_checkpoint
-from rlgrasp.train.config import register_configs
 from rlgrasp.train.loop import TrainingError, train
-
-CONFIG_DIR = str(Path(__file__).resolve().parents[1] / "configs")
-# Developing without the grasp env: RLGRASP_TEST_ENV=pendulum (no success signal then).
-ENV = os.environ.get("RLGRASP_TEST_ENV", "grasp")
 
 REQUIRED_TAGS = {
     "charts/episodic_return",
     "charts/episodic_length",
+    "charts/success_rate",
     "charts/SPS",
     "charts/learning_rate",
     "losses/policy_loss",
@@ -32,10 +28,10 @@ REQUIRED_TAGS = {
     "losses/explained_variance",
     "losses/grad_norm",
     "eval/mean_reward",
+    "eval/success_rate",
     "time/collect_s",
     "time/train_s",
 }
-SUCCESS_TAGS = {"charts/success_rate", "eval/success_rate"}
 
 # Pinned results, measured with the code before the Trainer/`_target_` refactor (commit e36396d)
 # and bit-identical over repeated runs: the first update's losses (as logged to TensorBoard) and the
@@ -64,15 +60,6 @@ ONE_WORKER_PINNED = {  # experiment=smoke collector.num_workers=1 seed=3 total_f
 }
 
 
-def _cfg(run_dir: Path, *overrides: str):
-    register_configs()
-    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
-        return compose(
-            config_name="train",
-            overrides=[f"env={ENV}", "experiment=smoke", f"paths.output_dir={run_dir}", *overrides],
-        )
-
-
 def _scalars(run_dir: Path) -> EventAccumulator:
     acc = EventAccumulator(str(run_dir / "tensorboard"), size_guidance={"scalars": 0})
     acc.Reload()
@@ -86,27 +73,27 @@ def _assert_pinned(run_dir: Path, pinned: dict) -> None:
     assert load_checkpoint(run_dir)["last_eval"] == pytest.approx(pinned["last_eval"], rel=1e-6)
 
 
-def test_smoke_end_to_end_then_resume(tmp_path: Path) -> None:
+def test_smoke_end_to_end_then_resume(tmp_path: Path, train_cfg) -> None:
     run_dir = tmp_path / "run"
-    success = train(_cfg(run_dir))
+    success = train(train_cfg("experiment=smoke", run_dir=run_dir))
     assert isinstance(success, float)
-    if ENV == "grasp":
-        _assert_pinned(run_dir, SMOKE_PINNED)
+    _assert_pinned(run_dir, SMOKE_PINNED)
     tags = set(_scalars(run_dir).Tags()["scalars"])
-    required = REQUIRED_TAGS | (SUCCESS_TAGS if ENV == "grasp" else set())
-    assert required <= tags, required - tags
+    assert REQUIRED_TAGS <= tags, REQUIRED_TAGS - tags
     ckpts = run_dir / "checkpoints"
     assert (ckpts / "last.pt").is_file() and (ckpts / "best.pt").is_file()
     assert len(list(ckpts.glob("ckpt_*.pt"))) <= 2  # keep_last
     log_text = (run_dir / "train.log").read_text()
     assert log_text.count("frames") > 0
-    if ENV == "grasp":  # the final evaluation runs eval.final_episodes (8 in smoke), not 4
-        assert re.search(r"final eval: success \d/8 \[95% Wilson", log_text), log_text[-800:]
+    # the final evaluation runs eval.final_episodes (8 in smoke), not 4
+    assert re.search(r"final eval: success \d/8 \[95% Wilson", log_text), log_text[-800:]
 
     ckpt = load_checkpoint(run_dir)
     assert ckpt["frames"] == 2048
-    assert {"actor", "critic", "optimizer", "obs_norm", "rng", "config", "versions", "spec"} <= set(ckpt)
-    assert float(ckpt["obs_norm"]["count"]) > 0
+    assert {"actor", "critic", "optimizer", "rng", "config", "versions", "spec"} <= set(ckpt)
+    assert ckpt["config"]["env"]["_target_"] == "rlgrasp.envs.PandaGraspEnv"
+    norm_count = [v for k, v in ckpt["actor"].items() if k.endswith("norm.count")]
+    assert len(norm_count) == 1 and float(norm_count[0]) > 0
     policy = policy_from_checkpoint(ckpt)
     obs = torch.zeros(3, ckpt["spec"]["obs_dim"])
     from tensordict import TensorDict
@@ -117,31 +104,41 @@ def test_smoke_end_to_end_then_resume(tmp_path: Path) -> None:
     assert torch.equal(a1, a2)  # deterministic
 
     # resume: same run dir, frames and curves continue
-    train(_cfg(run_dir, f"resume={run_dir}", "total_frames=4096"))
+    train(train_cfg("experiment=smoke", f"resume={run_dir}", "total_frames=4096", run_dir=run_dir))
     assert load_checkpoint(run_dir)["frames"] == 4096
     steps = [e.step for e in _scalars(run_dir).Scalars("losses/policy_loss")]
     assert steps == sorted(steps) and steps[-1] == 4096 and 2048 in steps
 
 
-@pytest.mark.skipif(ENV != "grasp", reason="pinned on the grasp env")
-def test_one_worker_run_is_pinned(tmp_path: Path) -> None:
-    train(_cfg(tmp_path, "collector.num_workers=1", "total_frames=512", "seed=3"))
+def test_one_worker_run_is_pinned(tmp_path: Path, train_cfg) -> None:
+    train(train_cfg("experiment=smoke", "collector.num_workers=1", "total_frames=512", "seed=3"))
     _assert_pinned(tmp_path, ONE_WORKER_PINNED)
 
 
 @pytest.mark.parametrize("collector", ["process", "single"])
-def test_crashing_env_stops_with_a_clear_error(tmp_path: Path, collector: str) -> None:
-    inner = "rlgrasp.envs:PandaGraspEnv" if ENV == "grasp" else "rlgrasp.train.standin:make_pendulum_gym"
-    cfg = _cfg(
-        tmp_path,
-        f"collector={collector}",
-        "env.gym_factory=rlgrasp.train.standin:make_crashing_gym",
-        "+env.kwargs.crash_after=300",
-        f"+env.kwargs.gym_factory={inner}",
-        "total_frames=100000",
+def test_crashing_env_stops_with_a_clear_error(tmp_path: Path, collector: str, train_cfg) -> None:
+    cfg = train_cfg("experiment=smoke", f"collector={collector}", "total_frames=100000")
+    cfg.env = OmegaConf.merge(
+        OmegaConf.to_container(cfg.env), {"_target_": "tests.standins.crashing_grasp_env", "crash_after": 300}
     )
     with pytest.raises(TrainingError) as info:
         train(cfg)
     message = str(info.value)
     assert "worker 0 env" in message and "deliberate crash after 300 steps" in message, message
     assert (tmp_path / "checkpoints" / "last.pt").is_file()
+
+
+def test_stand_in_env_from_tests_reaches_spawned_workers(tmp_path: Path, train_cfg) -> None:
+    """A `_target_` inside tests/ is importable in the collector's spawned workers too."""
+    from rlgrasp.train.parts import build_parts
+
+    cfg = train_cfg("experiment=smoke", "collector.num_workers=1", "collector.envs_per_worker=2")
+    cfg.env = {"_target_": "tests.standins.pendulum", "max_episode_steps": 20}
+    parts = build_parts(cfg)
+    assert parts.spec["obs_dim"] == 3 and parts.spec["action_dim"] == 1
+    collector = parts.make_collector(0, str(tmp_path / "errors"))
+    try:
+        batch = next(iter(collector))
+    finally:
+        collector.shutdown()
+    assert batch.numel() == parts.frames_per_batch == 512

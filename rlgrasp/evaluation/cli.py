@@ -11,47 +11,17 @@ import os
 import shutil
 import sys
 import tempfile
-from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
 from typing import Any
 
 import hydra
-from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, OmegaConf
 
+from rlgrasp.config import CONFIG_DIR, register_configs
 from rlgrasp.evaluation.source import EvaluationError
 
-CONFIG_DIR = os.environ.get("RLGRASP_CONFIG_DIR", str(Path(__file__).resolve().parents[2] / "configs"))
 log = logging.getLogger("rlgrasp.eval")
-
-
-@dataclass
-class EvalConfig:
-    """Schema of ``configs/eval.yaml`` (see the comments there)."""
-
-    policy: str = "checkpoint"
-    ckpt: str | None = None
-    ckpt_kind: str = "best"
-    episodes: int = 100
-    seed: int = 0
-    randomization: Any = None
-    env: dict[str, Any] = field(default_factory=dict)
-    workers: int = 1
-    deterministic: bool = True
-    video: bool = True
-    video_episodes: int = 3
-    video_format: str = "auto"
-    plots: bool = True
-    tensorboard: bool = True
-    name: str | None = None
-    out_dir: str | None = None
-    outputs_root: str = "outputs"
-
-
-def register_configs() -> None:
-    ConfigStore.instance().store(name="eval_schema", node=EvalConfig)
-
 
 register_configs()
 
@@ -79,34 +49,19 @@ def _randomization_ranges(spec: Any) -> dict[str, Any]:
 
 def evaluate(cfg: DictConfig) -> dict[str, Any]:
     """Validate, run the episodes, write every artefact; return ``metrics.json``'s content."""
-    from rlgrasp.evaluation import metrics as M
-    from rlgrasp.evaluation.episodes import episode_seeds, timed_run
-    from rlgrasp.evaluation.source import prepare
+    from rlgrasp.evaluation.episodes import timed_run
+    from rlgrasp.evaluation.metrics import summary_table
 
-    for key, minimum in (("episodes", 1), ("workers", 1), ("video_episodes", 0)):
-        if cfg[key] < minimum:
-            raise EvaluationError(f"{key} must be at least {minimum}, got {cfg[key]}")
-    source = prepare(cfg.policy, cfg.ckpt, cfg.ckpt_kind, _plain(cfg.randomization), _plain(cfg.env))
-    fmt = None
-    if cfg.video and cfg.video_episodes > 0:
-        from rlgrasp.evaluation.video import video_format
-
-        try:
-            fmt = video_format(cfg.video_format)
-        except ValueError as exc:
-            raise EvaluationError(str(exc)) from exc
-    out = output_dir(cfg, source)
-    if (out / "metrics.json").exists():
-        raise EvaluationError(f"{out} already holds an evaluation; pick another name=")
-    randomization = source.env_kwargs.get("randomization")
+    # --- validate everything before anything is written
+    source, fmt, out = _validate(cfg)
+    randomization = source.env_cfg.get("randomization")
     try:
         ranges = _randomization_ranges(randomization)
     except ValueError as exc:
         raise EvaluationError(f"randomization: {exc}") from exc
-    label = source.ckpt_path or source.kind
     log.info(
         "evaluating %s: %d episodes, seeds %d.., randomization %s, %d worker(s), %s actions",
-        label,
+        source.ckpt_path or source.kind,
         cfg.episodes,
         cfg.seed,
         randomization,
@@ -114,52 +69,20 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
         "deterministic" if cfg.deterministic else "stochastic",
     )
 
-    logged = [0]
-
-    def progress(done: int, total: int) -> None:
-        fifth = 5 * done // total  # log at each fifth of the way
-        if fifth > logged[0] or done == total:
-            logged[0] = fifth
-            log.info("  %d/%d episodes", done, total)
-
-    k = cfg.video_episodes if fmt else 0
+    # --- run the episodes
     results, seconds = timed_run(
         source=source,
         episodes=cfg.episodes,
         base_seed=cfg.seed,
         workers=cfg.workers,
         deterministic=cfg.deterministic,
-        video_episodes=k,
-        progress=progress,
+        video_episodes=cfg.video_episodes if fmt else 0,
+        progress=_Progress(),
     )
-    metrics = {
-        "policy": source.kind,
-        "policy_label": label,
-        "randomization_label": str(randomization),
-        **M.summarize(results),
-        "seeds": episode_seeds(cfg.seed, cfg.episodes),
-        "deterministic": bool(cfg.deterministic),
-        "randomization": {"spec": randomization, "ranges": ranges},
-        "checkpoint": source.info or None,
-        "config": {
-            "eval": OmegaConf.to_container(cfg, resolve=True),
-            "env_kwargs": source.env_kwargs,
-            "gym_factory": source.gym_factory,
-        },
-        "timing": {
-            "seconds": round(seconds, 2),
-            "workers": cfg.workers,
-            "episodes_per_second": round(cfg.episodes / seconds, 2),
-        },
-    }
-    if source.kind == "checkpoint":
-        from rlgrasp.evaluation.source import load_checked_checkpoint
+    metrics = _metrics(cfg, source, results, seconds, ranges)
+    table = metrics["summary_markdown"] = summary_table(metrics)
 
-        metrics["config"]["train"] = load_checked_checkpoint(Path(source.ckpt_path))["config"]
-    table = M.summary_table(metrics)
-    metrics["summary_markdown"] = table
-
-    # Written into a hidden staging folder renamed at the end: an evaluation is complete or absent.
+    # --- write: into a hidden staging folder renamed at the end, so an evaluation is complete or absent
     out.parent.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
     try:
@@ -180,6 +103,70 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
     print(table)
     log.info("wrote %s in %.1f s", out, seconds)
     metrics["output_dir"] = str(out)
+    return metrics
+
+
+def _validate(cfg: DictConfig) -> tuple[Any, str | None, Path]:
+    """The policy source (checkpoint, env and policy checked), the video format, the output folder."""
+    from rlgrasp.evaluation.source import prepare
+
+    for key, minimum in (("episodes", 1), ("workers", 1), ("video_episodes", 0)):
+        if cfg[key] < minimum:
+            raise EvaluationError(f"{key} must be at least {minimum}, got {cfg[key]}")
+    source = prepare(cfg.policy, cfg.ckpt, cfg.ckpt_kind, _plain(cfg.randomization), _plain(cfg.env))
+    fmt = None
+    if cfg.video and cfg.video_episodes > 0:
+        from rlgrasp.evaluation.video import video_format
+
+        try:
+            fmt = video_format(cfg.video_format)
+        except ValueError as exc:
+            raise EvaluationError(str(exc)) from exc
+    out = output_dir(cfg, source)
+    if (out / "metrics.json").exists():
+        raise EvaluationError(f"{out} already holds an evaluation; pick another name=")
+    return source, fmt, out
+
+
+class _Progress:
+    """Logs ``done/total episodes`` at each fifth of the way."""
+
+    def __init__(self) -> None:
+        self.logged = 0
+
+    def __call__(self, done: int, total: int) -> None:
+        fifth = 5 * done // total
+        if fifth > self.logged or done == total:
+            self.logged = fifth
+            log.info("  %d/%d episodes", done, total)
+
+
+def _metrics(cfg: DictConfig, source: Any, results: list, seconds: float, ranges: dict) -> dict[str, Any]:
+    """``metrics.json``: the summary, what was evaluated and how, the timing."""
+    from rlgrasp.evaluation.episodes import episode_seeds
+    from rlgrasp.evaluation.metrics import summarize
+
+    randomization = source.env_cfg.get("randomization")
+    metrics = {
+        "policy": source.kind,
+        "policy_label": source.ckpt_path or source.kind,
+        "randomization_label": str(randomization),
+        **summarize(results),
+        "seeds": episode_seeds(cfg.seed, cfg.episodes),
+        "deterministic": bool(cfg.deterministic),
+        "randomization": {"spec": randomization, "ranges": ranges},
+        "checkpoint": source.info or None,
+        "config": {"eval": OmegaConf.to_container(cfg, resolve=True), "env": source.env_cfg},
+        "timing": {
+            "seconds": round(seconds, 2),
+            "workers": cfg.workers,
+            "episodes_per_second": round(cfg.episodes / seconds, 2),
+        },
+    }
+    if source.kind == "checkpoint":
+        from rlgrasp.evaluation.source import load_checked_checkpoint
+
+        metrics["config"]["train"] = load_checked_checkpoint(Path(source.ckpt_path))["config"]
     return metrics
 
 
@@ -207,7 +194,7 @@ def _write_artefacts(
     if fmt:
         from rlgrasp.evaluation.video import write_video
 
-        step_s = source.env_kwargs.get("time_step", 1 / 240) * source.env_kwargs.get("substeps", 12)
+        step_s = source.env_cfg.get("time_step", 1 / 240) * source.env_cfg.get("substeps", 12)
         for r in results:
             if r.frames:
                 path = write_video(

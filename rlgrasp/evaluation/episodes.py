@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from rlgrasp.evaluation.source import PolicySource, make_gym_env
+from rlgrasp.evaluation.policies import Actor, PolicySource, build_policy
 
 
 @dataclass
@@ -43,87 +43,7 @@ class EpisodeResult:
     step_success: list[bool] = field(default_factory=list)
 
 
-class _Actor:
-    """``reset(seed)`` before an episode, ``__call__(obs) -> action``: one interface for all policies."""
-
-    def reset(self, seed: int) -> None:  # pragma: no cover - interface
-        raise NotImplementedError
-
-    def __call__(self, obs: np.ndarray) -> np.ndarray:  # pragma: no cover - interface
-        raise NotImplementedError
-
-
-class CheckpointActor(_Actor):
-    """The trained policy (normalizer inside), fed one observation at a time."""
-
-    def __init__(self, ckpt: dict[str, Any], deterministic: bool) -> None:
-        import torch
-        from torchrl.envs import ExplorationType
-
-        from rlgrasp.train.checkpoint import policy_from_checkpoint
-
-        self.torch = torch
-        self.policy = policy_from_checkpoint(ckpt, "cpu")
-        self.mode = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
-        self.generator_seed = 0
-
-    def reset(self, seed: int) -> None:
-        # Stochastic actions: the episode's own torch RNG stream, whatever ran before it.
-        self.torch.manual_seed(seed)
-
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
-        from tensordict import TensorDict
-        from torchrl.envs import set_exploration_type
-
-        torch = self.torch
-        td = TensorDict(
-            {"observation": torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0)}, batch_size=[1]
-        )
-        with torch.no_grad(), set_exploration_type(self.mode):
-            return self.policy(td)["action"][0].numpy()
-
-
-class ScriptedActor(_Actor):
-    """The env package's scripted expert (deterministic)."""
-
-    def __init__(self, env: Any) -> None:
-        from rlgrasp.envs import ScriptedExpert
-
-        self.expert = ScriptedExpert(env.obs_slices, action_dim=env.action_space.shape[0])
-
-    def reset(self, seed: int) -> None:
-        self.expert.reset()
-
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
-        return np.asarray(self.expert(obs), dtype=np.float32)
-
-
-class RandomActor(_Actor):
-    """Uniform actions in the action box, from an RNG seeded per episode."""
-
-    def __init__(self, env: Any) -> None:
-        self.low, self.high = env.action_space.low, env.action_space.high
-        self.rng = np.random.default_rng(0)
-
-    def reset(self, seed: int) -> None:
-        self.rng = np.random.default_rng([seed, 0x5EED])
-
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
-        return self.rng.uniform(self.low, self.high).astype(np.float32)
-
-
-def build_policy(source: PolicySource, env: Any, deterministic: bool) -> _Actor:
-    """The actor for ``source.kind`` (``checkpoint``, ``scripted`` or ``random``)."""
-    if source.kind == "checkpoint":
-        return CheckpointActor(source.ckpt, deterministic)
-    if source.kind == "scripted":
-        return ScriptedActor(env)
-    if source.kind == "random":
-        return RandomActor(env)
-    raise ValueError(f"unknown policy kind {source.kind!r}")
-
-
-def run_episode(env: Any, actor: _Actor, index: int, seed: int, render: bool) -> EpisodeResult:
+def run_episode(env: Any, actor: Actor, index: int, seed: int, render: bool) -> EpisodeResult:
     """One full episode from ``env.reset(seed=seed)`` to termination or the time limit."""
     obs, info = env.reset(seed=seed)
     actor.reset(seed)
@@ -168,7 +88,7 @@ def _init_worker(source: PolicySource, deterministic: bool, video_episodes: int)
     import torch
 
     torch.set_num_threads(1)
-    env = make_gym_env(source.gym_factory, source.env_kwargs)
+    env = source.make_env()
     _WORKER.update(env=env, actor=build_policy(source, env, deterministic), video_episodes=video_episodes)
 
 

@@ -13,6 +13,7 @@ import numpy as np
 
 from rlgrasp.evaluation.episodes import EpisodeResult
 from rlgrasp.stats import wilson_interval
+from rlgrasp.utils import markdown_table
 
 EPISODE_FIELDS = (
     "episode",
@@ -119,10 +120,7 @@ def summary_table(metrics: dict[str, Any]) -> str:
         ("mean episode length", _fmt(m["mean_length"], ".1f")),
         ("mean steps to first success", _fmt(m["mean_steps_to_first_success"], ".1f")),
     ]
-    width = max(len(k) for k, _ in rows)
-    lines = [f"| {'metric':<{width}} | value |", f"|{'-' * (width + 2)}|-------|"]
-    lines += [f"| {k:<{width}} | {v} |" for k, v in rows]
-    return "\n".join(lines)
+    return markdown_table(("metric", "value"), rows)
 
 
 def write_json(path: Path, data: Any) -> Path:

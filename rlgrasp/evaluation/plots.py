@@ -11,15 +11,7 @@ import numpy as np
 
 from rlgrasp.evaluation.episodes import EpisodeResult
 from rlgrasp.stats import wilson_interval
-
-
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")  # files only; no display on workers or CI
-    import matplotlib.pyplot as plt
-
-    return plt
+from rlgrasp.utils import pyplot
 
 
 def binned_success(values: np.ndarray, success: np.ndarray, max_bins: int = 5) -> list[dict[str, Any]]:
@@ -68,7 +60,7 @@ def varying_parameters(results: Sequence[EpisodeResult]) -> list[str]:
 
 def success_by_parameter(results: Sequence[EpisodeResult], path: Path, max_bins: int = 5) -> dict[str, Any]:
     """One panel per varying parameter, the most influential first (largest spread between bins)."""
-    plt = _pyplot()
+    plt = pyplot()
     success = np.array([r.success_at_end for r in results])
     overall = success.mean()
     table = {
@@ -114,7 +106,7 @@ def success_by_parameter(results: Sequence[EpisodeResult], path: Path, max_bins:
 
 def return_histogram(results: Sequence[EpisodeResult], path: Path) -> Path:
     """Returns of successful and failed episodes stacked: a bimodal policy shows as two humps."""
-    plt = _pyplot()
+    plt = pyplot()
     returns = np.array([r.episode_return for r in results])
     ok = np.array([r.success_at_end for r in results])
     bins = np.histogram_bin_edges(returns, bins=min(30, max(5, len(returns) // 4)))

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from rlgrasp.stats import iqm, stratified_bootstrap_ci
+from rlgrasp.utils import markdown_table, pyplot
 
 SUCCESS_TAGS = ("eval/success_rate", "charts/success_rate")
 RETURN_TAGS = ("charts/episodic_return", "eval/mean_reward")
@@ -158,11 +159,7 @@ def band(
 
 def plot_learning_curves(groups: dict[str, list[RunRecord]], path: Path) -> Path | None:
     """Success rate and return against env frames, one line (and band) per group."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     panels = (("success rate", SUCCESS_TAGS), ("episodic return", RETURN_TAGS))
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     drawn = 0
@@ -233,12 +230,6 @@ def runs_table(records: Sequence[RunRecord], root: Path | None = None) -> tuple[
     return head, rows
 
 
-def markdown(head: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    widths = [max(len(str(x)) for x in col) for col in zip(head, *rows)]
-    line = lambda cells: "| " + " | ".join(str(c).ljust(w) for c, w in zip(cells, widths)) + " |"  # noqa: E731
-    return "\n".join([line(head), "|" + "|".join("-" * (w + 2) for w in widths) + "|", *map(line, rows)])
-
-
 def build_report(
     patterns: Sequence[str],
     out: Path,
@@ -280,9 +271,13 @@ def build_report(
         csv.writer(f).writerows([head, *rows])
     (out / "aggregate.json").write_text(json.dumps(agg, indent=2) + "\n")
     text = (
-        f"# Run comparison\n\n## Runs (final evaluation)\n\n{markdown(head, rows)}\n\n"
+        f"# Run comparison\n\n## Runs (final evaluation)\n\n{markdown_table(head, rows)}\n\n"
         f"## Aggregate across seeds (stratified bootstrap, {reps} resamples)\n\n"
-        + (markdown(agg_head, agg_rows) if agg_rows else "(no run has an evaluation yet: run rlgrasp-eval)")
+        + (
+            markdown_table(agg_head, agg_rows)
+            if agg_rows
+            else "(no run has an evaluation yet: run rlgrasp-eval)"
+        )
         + (
             "\n\n![learning curves](learning_curves.png)\n"
             if curves

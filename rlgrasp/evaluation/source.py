@@ -10,39 +10,21 @@ from __future__ import annotations
 import os
 import pickle
 import zipfile
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-POLICIES = ("checkpoint", "scripted", "random")
+from rlgrasp.evaluation.policies import POLICIES, PolicySource, build_policy
+
 CKPT_KINDS = ("best", "last")
 # What a checkpoint must hold for evaluation (see rlgrasp.train.checkpoint's docstring).
 REQUIRED_KEYS = ("actor", "config", "spec")
 REQUIRED_SPEC = ("obs_dim", "action_dim", "action_low", "action_high")
-DEFAULT_GYM_FACTORY = "rlgrasp.envs:PandaGraspEnv"
 
 
 class EvaluationError(RuntimeError):
     """A user-facing problem with the evaluation's input (printed without a traceback)."""
-
-
-@dataclass
-class PolicySource:
-    """What the workers need to rebuild the policy and the env, all picklable.
-
-    ``ckpt`` is trimmed to the entries the policy needs (weights, model config, spec), so that each
-    spawned worker receives a few hundred kB rather than the optimizer state.
-    """
-
-    kind: str
-    env_kwargs: dict[str, Any]
-    gym_factory: str = DEFAULT_GYM_FACTORY
-    ckpt: dict[str, Any] | None = None
-    ckpt_path: str | None = None
-    run_dir: str | None = None
-    info: dict[str, Any] = field(default_factory=dict)
 
 
 def resolve_checkpoint_path(ckpt: str | os.PathLike, kind: str = "best") -> Path:
@@ -91,39 +73,40 @@ def load_checked_checkpoint(path: Path) -> dict[str, Any]:
     return ckpt
 
 
-def _base_env_config() -> dict[str, Any]:
-    """The training defaults (for baselines, which have no checkpoint to read them from)."""
+def build_env_cfg(
+    env_cfg: dict[str, Any] | None, randomization: Any = None, overrides: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """The env's ``_target_`` node: a training ``env`` config (``None``: the env's defaults), with
+    evaluation's overrides on top and rendering on. Keys of the grasp env are type-checked."""
     from dataclasses import asdict
 
-    from rlgrasp.train.config import EnvConfig
+    from omegaconf import OmegaConf
+    from omegaconf.errors import OmegaConfBaseException
 
-    return asdict(EnvConfig())
+    from rlgrasp.config import EnvConfig
 
-
-def build_env_kwargs(
-    env_cfg: dict[str, Any], randomization: Any = None, overrides: dict[str, Any] | None = None
-) -> tuple[str, dict[str, Any]]:
-    """``(gym_factory, kwargs)`` from a training ``env`` config, with evaluation's overrides on top."""
-    from rlgrasp.train.collect import env_kwargs
-
-    cfg = dict(env_cfg)
-    gym_factory = cfg.get("gym_factory") or DEFAULT_GYM_FACTORY
-    kwargs = env_kwargs(cfg)
-    kwargs.update(overrides or {})
+    cfg = _upgrade_env_cfg(dict(env_cfg or asdict(EnvConfig())))
+    cfg.update(overrides or {})
     if randomization is not None:
-        kwargs["randomization"] = randomization
-    kwargs["render_mode"] = "rgb_array"
-    return gym_factory, kwargs
+        cfg["randomization"] = randomization
+    cfg["render_mode"] = "rgb_array"
+    if cfg.get("_target_") == EnvConfig._target_:
+        try:
+            cfg = OmegaConf.to_container(OmegaConf.merge(OmegaConf.structured(EnvConfig), cfg))
+        except OmegaConfBaseException as exc:
+            raise EvaluationError(f"env config: {exc}".splitlines()[0]) from exc
+    return cfg
 
 
-def make_gym_env(gym_factory: str, kwargs: dict[str, Any]) -> Any:
-    """The plain gymnasium env (evaluation steps it directly: no TorchRL wrapper cost per step)."""
-    import importlib
-
-    module_name, _, attr = gym_factory.partition(":")
-    if not attr:
-        raise ValueError(f"env.gym_factory must look like 'package.module:Class', got {gym_factory!r}")
-    return getattr(importlib.import_module(module_name), attr)(**kwargs)
+def _upgrade_env_cfg(cfg: dict[str, Any]) -> dict[str, Any]:
+    """Checkpoints written before the env config was a ``_target_`` node: ``gym_factory`` named the
+    env, ``kwargs`` held further keywords and ``factory`` the TorchRL wrapper."""
+    if "_target_" in cfg:
+        return cfg
+    module, _, name = str(cfg.pop("gym_factory", "rlgrasp.envs:PandaGraspEnv")).partition(":")
+    cfg.pop("factory", None)
+    extra = cfg.pop("kwargs", None) or {}
+    return {"_target_": f"{module}.{name}", **cfg, **extra}
 
 
 def check_layout(spec: dict[str, Any], env: Any, where: str) -> None:
@@ -169,7 +152,7 @@ def prepare(
             )
         path = resolve_checkpoint_path(ckpt, ckpt_kind)
         full = load_checked_checkpoint(path)
-        env_cfg = dict(full["config"].get("env") or {})
+        env_cfg = full["config"].get("env") or {}
         if not env_cfg:
             raise EvaluationError(f"corrupt checkpoint: {path} has no config['env'] to rebuild the env from")
         trimmed = {k: full[k] for k in REQUIRED_KEYS}
@@ -192,13 +175,11 @@ def prepare(
             raise EvaluationError(
                 f"policy={policy} takes no checkpoint; drop ckpt={ckpt} (or use policy=checkpoint)"
             )
-        env_cfg, trimmed, path, run_dir = _base_env_config(), None, None, None
+        env_cfg, trimmed, path, run_dir = None, None, None, None
         info = {}
-    gym_factory, kwargs = build_env_kwargs(env_cfg, randomization, env_overrides)
     source = PolicySource(
         kind=policy,
-        env_kwargs=kwargs,
-        gym_factory=gym_factory,
+        env_cfg=build_env_cfg(env_cfg, randomization, env_overrides),
         ckpt=trimmed,
         ckpt_path=str(path.resolve()) if path else None,
         run_dir=str(run_dir) if run_dir else None,
@@ -210,12 +191,12 @@ def prepare(
 
 def _dry_run(source: PolicySource) -> None:
     """Build the env and the policy once and act on the first observation: fail here, not in a worker."""
-    from rlgrasp.evaluation.episodes import build_policy
+    from hydra.errors import InstantiationException
 
     where = f"checkpoint {source.ckpt_path}" if source.ckpt_path else f"policy={source.kind}"
     try:
-        env = make_gym_env(source.gym_factory, source.env_kwargs)
-    except (ValueError, TypeError, ImportError, AttributeError) as exc:
+        env = source.make_env()
+    except (ValueError, TypeError, ImportError, AttributeError, InstantiationException) as exc:
         raise EvaluationError(f"cannot build the env for {where}: {exc}") from exc
     try:
         if source.ckpt is not None:

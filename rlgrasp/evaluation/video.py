@@ -37,11 +37,11 @@ def video_format(requested: str = "auto") -> str:
 
 def write_video(r: EpisodeResult, path: Path, fps: int = 20, fmt: str = "gif") -> Path:
     """Render ``r.frames`` with a caption: the outcome (coloured) on top, step and flag below."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     from matplotlib.animation import FFMpegWriter, PillowWriter
+
+    from rlgrasp.utils import pyplot
+
+    plt = pyplot()
 
     if not r.frames:
         raise ValueError(f"episode {r.index} has no frames (was it rendered?)")

@@ -12,14 +12,14 @@ from __future__ import annotations
 
 import argparse
 import logging
-import os
 import sys
 import time
 from pathlib import Path
 
 from omegaconf import OmegaConf
 
-CONFIG_DIR = os.environ.get("RLGRASP_CONFIG_DIR", str(Path(__file__).resolve().parents[2] / "configs"))
+from rlgrasp.config import CONFIG_DIR
+
 log = logging.getLogger("rlgrasp.sweep")
 
 
@@ -37,8 +37,8 @@ def run_sweep(
     """Run (or resume, or join) the study until it holds ``n_trials`` finished trials; summarize."""
     import optuna
 
-    from rlgrasp.sweep.config import compose_sweep, compose_train
-    from rlgrasp.sweep.objective import Interrupted, Objective, catch_signals, stop_requested
+    from rlgrasp.config import compose_sweep, compose_train
+    from rlgrasp.sweep.objective import Objective
     from rlgrasp.sweep.space import parse_space
     from rlgrasp.sweep.study import (
         enqueue_initial,
@@ -50,7 +50,7 @@ def run_sweep(
     )
     from rlgrasp.sweep.summary import write_summary
 
-    cfg = compose_sweep(config_dir, sweep_overrides)
+    cfg = compose_sweep(sweep_overrides, config_dir)
     out_dir = study_dir(cfg)
     if summary_only or cfg.summary_only:
         study = open_study(cfg, create=False)
@@ -58,7 +58,7 @@ def run_sweep(
 
     space = parse_space(OmegaConf.to_container(cfg.params, resolve=True))
     # Fail now, not in trial 0, on a bad training override.
-    compose_train(config_dir, [*train_overrides, *cfg.overrides, "paths.output_dir=/tmp/unused"])
+    compose_train([*train_overrides, *cfg.overrides, "paths.output_dir=/tmp/unused"], config_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "sweep.yaml").write_text(OmegaConf.to_yaml(cfg))
     study = open_study(cfg)
@@ -74,9 +74,21 @@ def run_sweep(
         f"; trials {dead} of dead processes marked interrupted" if dead else "",
         f"; retrying interrupted trials {retried}" if retried else "",
     )
-    objective = Objective(cfg, config_dir, train_overrides, space)
+    interrupted = _optimize(study, Objective(cfg, config_dir, train_overrides, space), cfg)
+    study = optuna.load_study(study_name=cfg.study_name, storage=study._storage)
+    result = write_summary(study, out_dir, config_dir, cfg.plots)
+    result["interrupted"] = interrupted
+    result["finished"] = n_finished(study)
+    return result
+
+
+def _optimize(study, objective, cfg) -> bool:
+    """One trial at a time until ``n_trials`` are finished or ``timeout_min`` is spent; returns True
+    if a signal stopped the sweep."""
+    from rlgrasp.sweep.objective import Interrupted, catch_signals, stop_requested
+    from rlgrasp.sweep.study import n_finished
+
     deadline = time.monotonic() + cfg.timeout_min * 60 if cfg.timeout_min else float("inf")
-    interrupted = False
     with catch_signals():
         try:
             while n_finished(study) < cfg.n_trials and time.monotonic() < deadline:
@@ -84,16 +96,12 @@ def run_sweep(
                 if stop_requested():
                     raise KeyboardInterrupt
         except Interrupted as exc:
-            interrupted = True
             log.warning("%s: the sweep stops; run the same command again to resume", exc)
+            return True
         except KeyboardInterrupt:
-            interrupted = True
             log.warning("interrupted between trials; run the same command again to resume")
-    study = optuna.load_study(study_name=cfg.study_name, storage=study._storage)
-    result = write_summary(study, out_dir, config_dir, cfg.plots)
-    result["interrupted"] = interrupted
-    result["finished"] = n_finished(study)
-    return result
+            return True
+    return False
 
 
 def main(argv: list[str] | None = None) -> int:

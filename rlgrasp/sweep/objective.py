@@ -15,7 +15,7 @@ from typing import Any
 import optuna
 from omegaconf import DictConfig
 
-from rlgrasp.sweep.config import compose_train
+from rlgrasp.config import compose_train
 from rlgrasp.sweep.space import suggest, to_overrides
 from rlgrasp.sweep.study import ATTR_HOST, ATTR_INTERRUPTED, ATTR_OVERRIDES, ATTR_PID, study_dir
 
@@ -62,7 +62,7 @@ class Objective:
         overrides = trial_overrides(self.cfg, self.train_overrides, params, run_dir) + extra
         trial.set_user_attr("run_dir", str(run_dir))
         trial.set_user_attr("overrides", overrides)
-        return compose_train(self.config_dir, overrides)
+        return compose_train(overrides, self.config_dir)
 
     def __call__(self, trial: optuna.Trial) -> float:
         from rlgrasp.train.loop import train
@@ -70,22 +70,11 @@ class Objective:
         trial.set_user_attr(ATTR_HOST, socket.gethostname())
         trial.set_user_attr(ATTR_PID, os.getpid())
         train_cfg = self.compose(trial)
-        metric = self.cfg.metric
-        last: dict[str, float] = {}
-
-        def on_eval(frames: int, metrics: dict[str, float]) -> None:
-            if metric not in metrics:
-                raise KeyError(f"sweep.metric={metric!r} is not an eval metric; have {sorted(metrics)}")
-            last.clear()
-            last.update(metrics)
-            trial.report(float(metrics[metric]), step=int(frames))
-            if frames < train_cfg.total_frames and trial.should_prune():
-                raise optuna.TrialPruned(f"{metric}={metrics[metric]:.3f} at {frames:,} frames")
-
-        before = list(logging.getLogger("rlgrasp.train").handlers)
+        report = _Report(trial, self.cfg.metric, train_cfg.total_frames)
         interrupted = False
         try:
-            train(train_cfg, on_eval=on_eval)
+            with _closing_new_log_handlers():
+                train(train_cfg, on_eval=report)
         except KeyboardInterrupt:  # arrived outside the loop that turns it into a clean stop
             interrupted = True
         except optuna.TrialPruned:
@@ -93,20 +82,45 @@ class Objective:
         except Exception as exc:
             trial.set_user_attr("error", f"{type(exc).__name__}: {exc}")
             raise
-        finally:
-            for h in logging.getLogger("rlgrasp.train").handlers:
-                if h not in before:  # the run's train.log handler: do not let the next trial write to it
-                    logging.getLogger("rlgrasp.train").removeHandler(h)
-                    h.close()
         if _caught or interrupted:
             trial.set_user_attr(ATTR_INTERRUPTED, True)
             raise Interrupted(f"signal {_caught[0] if _caught else 'SIGINT'} during trial {trial.number}")
-        value = float(last.get(metric, math.nan))
+        value = float(report.last.get(self.cfg.metric, math.nan))
         if math.isnan(value):
-            raise RuntimeError(f"trial {trial.number}: no final value of {metric!r}")
-        trial.set_user_attr("final_eval", {k: float(v) for k, v in last.items()})
-        log.info("trial %d: %s=%.4f", trial.number, metric, value)
+            raise RuntimeError(f"trial {trial.number}: no final value of {self.cfg.metric!r}")
+        trial.set_user_attr("final_eval", {k: float(v) for k, v in report.last.items()})
+        log.info("trial %d: %s=%.4f", trial.number, self.cfg.metric, value)
         return value
+
+
+class _Report:
+    """Training's ``on_eval``: report ``metric`` at step = frames; raise ``TrialPruned`` when the
+    pruner says so (not at the final evaluation)."""
+
+    def __init__(self, trial: optuna.Trial, metric: str, total_frames: int) -> None:
+        self.trial, self.metric, self.total_frames = trial, metric, total_frames
+        self.last: dict[str, float] = {}
+
+    def __call__(self, frames: int, metrics: dict[str, float]) -> None:
+        if self.metric not in metrics:
+            raise KeyError(f"sweep.metric={self.metric!r} is not an eval metric; have {sorted(metrics)}")
+        self.last = dict(metrics)
+        self.trial.report(float(metrics[self.metric]), step=int(frames))
+        if frames < self.total_frames and self.trial.should_prune():
+            raise optuna.TrialPruned(f"{self.metric}={metrics[self.metric]:.3f} at {frames:,} frames")
+
+
+@contextlib.contextmanager
+def _closing_new_log_handlers() -> Iterator[None]:
+    """Close the handlers training adds (the run's train.log), so the next trial does not write there."""
+    logger = logging.getLogger("rlgrasp.train")
+    before = list(logger.handlers)
+    try:
+        yield
+    finally:
+        for h in [h for h in logger.handlers if h not in before]:
+            logger.removeHandler(h)
+            h.close()
 
 
 _caught: list[int] = []

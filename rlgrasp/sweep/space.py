@@ -14,21 +14,11 @@ from optuna.distributions import (
     IntDistribution,
 )
 
+from rlgrasp.utils import flatten
+
 
 def _leaf(node: Any) -> bool:
     return isinstance(node, Mapping) and "type" in node
-
-
-def flatten_nested(node: Mapping[str, Any], prefix: str = "", leaf=None) -> dict[str, Any]:
-    """``{"algo": {"lr": x}}`` -> ``{"algo.lr": x}``; ``leaf(node)`` true stops the descent."""
-    out: dict[str, Any] = {}
-    for key, value in node.items():
-        path = f"{prefix}{key}"
-        if isinstance(value, Mapping) and not (leaf and leaf(value)):
-            out.update(flatten_nested(value, path + ".", leaf))
-        else:
-            out[path] = value
-    return out
 
 
 def distribution(key: str, spec: Mapping[str, Any]) -> BaseDistribution:
@@ -61,7 +51,7 @@ def distribution(key: str, spec: Mapping[str, Any]) -> BaseDistribution:
 
 def parse_space(params: Mapping[str, Any]) -> dict[str, BaseDistribution]:
     """Dotted training key -> distribution, from the nested ``params`` mapping."""
-    flat = flatten_nested(params, leaf=_leaf)
+    flat = flatten(params, leaf=_leaf)
     bad = [k for k, v in flat.items() if not _leaf(v)]
     if bad:
         raise ValueError(f"sweep.params: {bad} are not distributions (need a 'type' field)")

@@ -19,7 +19,8 @@ from optuna.storages import BaseStorage, JournalStorage
 from optuna.storages.journal import JournalFileBackend
 from optuna.trial import FrozenTrial, TrialState
 
-from rlgrasp.sweep.space import flatten_nested, override_value
+from rlgrasp.sweep.space import override_value
+from rlgrasp.utils import flatten
 
 #: User attributes the objective writes on every trial.
 ATTR_HOST, ATTR_PID, ATTR_INTERRUPTED, ATTR_RETRY_OF = "host", "pid", "interrupted", "retry_of"
@@ -148,7 +149,7 @@ def enqueue_initial(study: optuna.Study, items: list[Mapping[str, Any]], space: 
     if study.get_trials(deepcopy=False):
         return 0
     for item in items:
-        flat = flatten_nested(item)
+        flat = flatten(item)
         params = {k: v for k, v in flat.items() if k in space}
         extra = [f"{k}={override_value(v)}" for k, v in flat.items() if k not in space]
         study.enqueue_trial(params, user_attrs={ATTR_OVERRIDES: extra} if extra else None)

@@ -19,8 +19,9 @@ import optuna
 from omegaconf import OmegaConf
 from optuna.trial import FrozenTrial, TrialState
 
-from rlgrasp.sweep.config import compose_train
+from rlgrasp.config import compose_train
 from rlgrasp.sweep.study import ATTR_INTERRUPTED, ATTR_RETRY_OF
+from rlgrasp.utils import markdown_table, pyplot
 
 log = logging.getLogger("rlgrasp.sweep")
 
@@ -79,9 +80,7 @@ def write_tables(study: optuna.Study, out_dir: Path) -> tuple[Path, Path]:
         "",
         ", ".join(f"{n} {k.lower()}" for k, n in counts.items() if n),
         "",
-        "| " + " | ".join(header) + " |",
-        "|" + "---|" * len(header),
-        *("| " + " | ".join(_fmt(r[h]) for h in header) + " |" for r in ranked),
+        markdown_table(header, [[_fmt(r[h]) for h in header] for r in ranked]),
         "",
     ]
     md_path.write_text("\n".join(lines))
@@ -98,7 +97,7 @@ def _split_override(item: str) -> tuple[str, str] | None:
 def best_config_text(study: optuna.Study, best: FrozenTrial, config_dir: Path) -> str:
     """An experiment config reproducing ``best``: its base experiment, group choices and values."""
     overrides = list(best.user_attrs.get("overrides", []))
-    composed = compose_train(config_dir, overrides)
+    composed = compose_train(overrides, config_dir)
     base, groups, values = None, [], {}
     for item in overrides:
         split = _split_override(item)
@@ -152,12 +151,10 @@ def write_plots(study: optuna.Study, out_dir: Path) -> list[Path]:
     A plot Optuna cannot draw yet (e.g. importances with fewer than two completed trials) is
     skipped with a log line. Importances use PED-ANOVA, which needs no scikit-learn.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     from optuna.importance import PedAnovaImportanceEvaluator
     from optuna.visualization import matplotlib as ovm
+
+    plt = pyplot()
 
     plots = {
         "history": lambda: ovm.plot_optimization_history(study),

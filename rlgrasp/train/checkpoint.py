@@ -1,16 +1,17 @@
 """Checkpoints: atomic save/load, retention, and rebuilding a deterministic policy from one file.
 
-Layout of a checkpoint (a plain dict, ``torch.save``d):
+Layout of a checkpoint (a plain dict, ``torch.save``d; ``rlgrasp.train.loop.Trainer.state_dict``
+writes it):
 
 - ``format``: 1
 - ``actor``, ``critic``: state dicts (both include the observation normalizer's buffers
   ``norm.mean``/``norm.var``/``norm.count``)
-- ``obs_norm``: the normalizer's state dict on its own (same values, for tools that only need it)
 - ``optimizer``: Adam's state dict
 - ``frames``, ``updates``: counters; ``generation``: how many times the run was resumed
 - ``best_eval_success``, ``last_eval``: evaluation bookkeeping (``last_eval`` may be None)
 - ``rng``: python / numpy / torch RNG states of the learner
-- ``config``: the resolved training config as a plain dict
+- ``config``: the resolved training config as a plain dict (``config["env"]`` is the env's
+  ``_target_`` node, which ``rlgrasp.config.env_factory`` builds)
 - ``spec``: ``obs_key``, ``obs_dim``, ``action_dim``, ``action_low``, ``action_high``
 - ``versions``: python, torch, torchrl, tensordict, gymnasium, pybullet, rlgrasp
 - ``run_dir``: the run directory it was written in

@@ -8,16 +8,12 @@ at another config tree.
 from __future__ import annotations
 
 import logging
-import os
 import sys
-from pathlib import Path
 
 import hydra
 from omegaconf import DictConfig
 
-from rlgrasp.train.config import register_configs
-
-CONFIG_DIR = os.environ.get("RLGRASP_CONFIG_DIR", str(Path(__file__).resolve().parents[2] / "configs"))
+from rlgrasp.config import CONFIG_DIR, register_configs
 
 register_configs()
 

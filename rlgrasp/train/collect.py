@@ -1,55 +1,60 @@
-"""Env factories and the collector: each worker steps a batch of envs and runs the policy on it.
+"""Batches of envs and the collector: each worker steps a batch of envs and runs the policy on it.
 
-RESEARCH.md section 3: with ParallelEnv the policy runs in the parent once per step and TorchRL's
-per-step cost dominates; a process collector whose workers each own a ``SerialEnv`` of several envs
-and call the actor once per batch gets close to raw physics speed.
+The policy runs inside the workers, once per step on a whole ``SyncVectorEnv`` of envs: with
+TorchRL's ``ParallelEnv`` the policy would run in the parent once per step per env and TorchRL's
+per-step cost would dominate the physics.
 """
 
 from __future__ import annotations
 
 import functools
-import importlib
 import multiprocessing
 import os
 import re
 import traceback
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import torch
 from torchrl.collectors import BaseCollector, Collector
-from torchrl.envs import EnvBase, SerialEnv
+from torchrl.envs import EnvBase
 from torchrl.envs.transforms import Compose, RewardSum, StepCounter, TransformedEnv
 
 ERROR_FILE_PREFIX = "env_error_"
+# Info entries copied into the tensordict (those the env provides).
+INFO_DTYPES = {"is_success": torch.bool, "grasped": torch.bool, "lift_height": torch.float32}
+
+#: Builds one gymnasium env: what ``rlgrasp.config.env_factory`` returns (a picklable partial).
+EnvFactory = Callable[[], Any]
 
 
-def resolve_factory(spec: str) -> Callable[..., EnvBase]:
-    """Import ``"package.module:function"``."""
-    module_name, _, attr = spec.partition(":")
-    if not attr:
-        raise ValueError(f"env.factory must look like 'package.module:function', got {spec!r}")
-    return getattr(importlib.import_module(module_name), attr)
+def env_spec(make_env: EnvFactory) -> dict[str, Any]:
+    """Observation/action sizes and bounds, from one throw-away env."""
+    env = make_env()
+    try:
+        space = env.action_space
+        spec = {
+            "obs_key": "observation",
+            "obs_dim": int(env.observation_space.shape[-1]),
+            "action_dim": int(space.shape[0]),
+            "action_low": [float(x) for x in space.low.flatten()],
+            "action_high": [float(x) for x in space.high.flatten()],
+        }
+    finally:
+        env.close()
+    return spec
 
 
-def env_kwargs(env_cfg: Mapping[str, Any]) -> dict[str, Any]:
-    """The factory's keyword arguments: every ``env`` field except ``factory``, ``kwargs`` merged in."""
-    kwargs = {k: v for k, v in env_cfg.items() if k not in ("factory", "gym_factory", "kwargs")}
-    kwargs.update(env_cfg.get("kwargs") or {})
-    return kwargs
-
-
-def _guard(env: Any, name: str, error_dir: str | None, methods=("_step", "_reset")) -> Any:
+def _guard(env: Any, name: str, error_dir: str | None) -> Any:
     """Make a failing step/reset leave a report naming the env, then re-raise.
 
     The process collector only says "At least one process failed: worker N"; the learner reads
-    these files to tell the user which env failed and why. Instance attributes shadow the bound
-    methods that ``SerialEnv`` calls on each sub-env (``_step``/``_reset``).
+    these files to tell the user which env failed and why.
     """
     if error_dir is None:
         return env
-    for method in methods:
+    for method in ("step", "reset"):
         original = getattr(env, method)
 
         def guarded(*args, _original=original, _method=method, **kwargs):
@@ -60,8 +65,7 @@ def _guard(env: Any, name: str, error_dir: str | None, methods=("_step", "_reset
                 path = Path(error_dir) / f"{ERROR_FILE_PREFIX}{slug}.txt"
                 path.parent.mkdir(parents=True, exist_ok=True)
                 path.write_text(
-                    f"{name} failed in {_method.lstrip('_')}: {type(exc).__name__}: {exc}\n\n"
-                    + traceback.format_exc()
+                    f"{name} failed in {_method}: {type(exc).__name__}: {exc}\n\n" + traceback.format_exc()
                 )
                 raise
 
@@ -69,30 +73,12 @@ def _guard(env: Any, name: str, error_dir: str | None, methods=("_step", "_reset
     return env
 
 
-def make_env(
-    env_cfg: Mapping[str, Any],
-    seed: int | None = None,
-    name: str = "env",
-    error_dir: str | None = None,
-) -> EnvBase:
-    """One env from the configured factory, seeded (its first reset uses ``seed``)."""
-    env = resolve_factory(env_cfg["factory"])(**env_kwargs(env_cfg))
-    if seed is not None:
-        env.set_seed(seed)
-    return _guard(env, f"{name} (seed {seed})", error_dir)
-
-
-# Info entries copied into the tensordict by the gym_sync path (those the env provides).
-INFO_DTYPES = {"is_success": torch.bool, "grasped": torch.bool, "lift_height": torch.float32}
-
-
-def _make_gym_env(env_cfg: Mapping[str, Any], name: str, error_dir: str | None) -> Any:
-    env = resolve_factory(env_cfg["gym_factory"])(**env_kwargs(env_cfg))
-    return _guard(env, name, error_dir, ("step", "reset"))
+def _guarded_env(make_env: EnvFactory, name: str, error_dir: str | None) -> Any:
+    return _guard(make_env(), name, error_dir)
 
 
 def make_vector_env(
-    env_cfg: Mapping[str, Any], num_envs: int, base_seed: int, worker: int, error_dir: str | None
+    make_env: EnvFactory, num_envs: int, base_seed: int, worker: int, error_dir: str | None
 ) -> EnvBase:
     """``GymWrapper(SyncVectorEnv(...))``: one TensorDict conversion per batch step.
 
@@ -105,7 +91,7 @@ def make_vector_env(
     from torchrl.envs import GymWrapper, default_info_dict_reader
 
     fns = [
-        functools.partial(_make_gym_env, env_cfg, f"worker {worker} env {i}", error_dir)
+        functools.partial(_guarded_env, make_env, f"worker {worker} env {i}", error_dir)
         for i in range(num_envs)
     ]
     venv = gym.vector.SyncVectorEnv(fns, autoreset_mode=gym.vector.AutoresetMode.DISABLED)
@@ -120,7 +106,7 @@ def make_vector_env(
 
 
 def make_batched_env(
-    env_cfg: Mapping[str, Any],
+    make_env: EnvFactory,
     num_envs: int,
     base_seed: int,
     worker: int = 0,
@@ -128,7 +114,6 @@ def make_batched_env(
     error_dir: str | None = None,
     episode_stats: bool = True,
     seed_torch: bool = True,
-    vector: str = "gym_sync",
 ) -> EnvBase:
     """A batch of ``num_envs`` envs seeded ``base_seed + i``, plus episode return/length.
 
@@ -138,19 +123,16 @@ def make_batched_env(
     torch.set_num_threads(torch_threads)
     if seed_torch:
         torch.manual_seed(base_seed)
-    if vector == "gym_sync":
-        env = make_vector_env(env_cfg, num_envs, base_seed, worker, error_dir)
-    elif vector == "serial":
-        fns = [
-            functools.partial(make_env, env_cfg, base_seed + i, f"worker {worker} env {i}", error_dir)
-            for i in range(num_envs)
-        ]
-        env = SerialEnv(num_envs, fns)
-    else:
-        raise ValueError(f"collector.vector must be 'gym_sync' or 'serial', got {vector!r}")
+    env = make_vector_env(make_env, num_envs, base_seed, worker, error_dir)
     if episode_stats:
         env = TransformedEnv(env, Compose(RewardSum(), StepCounter()))
     return env
+
+
+def frames_per_batch(cfg: Any) -> int:
+    c = cfg.collector
+    workers = 1 if c.backend == "single" or c.num_workers == 0 else c.num_workers
+    return workers * c.envs_per_worker * c.steps_per_env
 
 
 def worker_seed(seed: int, worker: int, generation: int = 0) -> int:
@@ -159,47 +141,34 @@ def worker_seed(seed: int, worker: int, generation: int = 0) -> int:
 
 
 def build_collector(
-    cfg: Any, policy: torch.nn.Module, frames_per_batch: int, generation: int, error_dir: str
+    cfg: Any, make_env: EnvFactory, policy: torch.nn.Module, generation: int, error_dir: str | None
 ) -> BaseCollector:
     """A synchronous TorchRL collector over ``num_workers`` processes, Ray actors, or in-process."""
     c = cfg.collector
-    env_cfg = dict(cfg.env)
-    in_process = c.backend == "single" or c.num_workers == 0
     common = {
-        "frames_per_batch": frames_per_batch,
+        "frames_per_batch": frames_per_batch(cfg),
         "total_frames": -1,
         "auto_register_policy_transforms": False,
     }
-    if in_process:
+    if c.backend == "single" or c.num_workers == 0:
         env = make_batched_env(
-            env_cfg,
-            c.envs_per_worker,
-            worker_seed(cfg.seed, 0, generation),
-            0,
-            torch.get_num_threads(),
-            error_dir,
-            vector=c.vector,
+            make_env, c.envs_per_worker, worker_seed(cfg.seed, 0, generation), 0,
+            torch.get_num_threads(), error_dir,
         )
         return Collector(env, policy, **common)
     if c.backend not in ("process", "ray"):
         raise ValueError(f"collector.backend must be 'process', 'ray' or 'single', got {c.backend!r}")
     fns = [
         functools.partial(
-            make_batched_env,
-            env_cfg,
-            c.envs_per_worker,
-            worker_seed(cfg.seed, w, generation),
-            w,
-            c.torch_threads,
-            error_dir,
-            vector=c.vector,
+            make_batched_env, make_env, c.envs_per_worker, worker_seed(cfg.seed, w, generation), w,
+            c.torch_threads, error_dir,
         )
         for w in range(c.num_workers)
     ]
     if c.backend == "ray":
         return _ray_collector(c, fns, policy, common)
-    # Inside a joblib (loky) multirun job the start method is not spawn; the workers need it
-    # (RESEARCH.md section 4).
+    # Inside a joblib (loky) multirun job the start method is not spawn; the workers need it: a
+    # forked child would inherit the parent's PyBullet and torch thread state.
     multiprocessing.set_start_method("spawn", force=True)
     return Collector(fns, policy, num_collectors=c.num_workers, sync=True, backend="process", **common)
 
@@ -207,7 +176,7 @@ def build_collector(
 def ray_init_kwargs(ray_cfg: Any) -> dict[str, Any]:
     """``ray.init`` keywords: join ``address`` if set, else a private local Ray on ``node_ip_address``.
 
-    RESEARCH.md section 4: a local Ray binds to the machine's network address unless it is given one.
+    A local Ray binds to the machine's network address unless it is given one.
     """
     if ray_cfg.address:
         return {"address": ray_cfg.address, "ignore_reinit_error": True, "log_to_driver": False}

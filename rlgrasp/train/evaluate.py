@@ -1,19 +1,18 @@
 """Periodic evaluation: deterministic actions on the same seeded episodes every time.
 
-Runs in the learner process on a small ``SerialEnv`` so it needs no extra workers; with a few envs
-and one episode each it costs about one collection batch.
+Runs in the learner process on a small vector env (built like a collector worker's) so it needs no
+extra workers; with a few envs and one episode each it costs about one collection batch.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import torch
 from tensordict import TensorDictBase
 from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
 
-from rlgrasp.train.collect import make_batched_env
+from rlgrasp.train.collect import EnvFactory, make_batched_env
 
 
 def episode_stats(td: TensorDictBase) -> dict[str, torch.Tensor]:
@@ -40,12 +39,12 @@ def episode_stats(td: TensorDictBase) -> dict[str, torch.Tensor]:
 class Evaluator:
     """Evaluates ``episodes`` episodes on ``num_envs`` in-process envs seeded from ``seed``."""
 
-    def __init__(self, env_cfg: dict[str, Any], episodes: int, num_envs: int, seed: int) -> None:
-        self.env_cfg = env_cfg
+    def __init__(self, make_env: EnvFactory, max_steps: int, episodes: int, num_envs: int, seed: int) -> None:
+        self.make_env = make_env
         self.episodes = episodes
         self.num_envs = max(1, min(num_envs, episodes))
         self.seed = seed
-        self.max_steps = int(env_cfg.get("max_episode_steps", 50))
+        self.max_steps = int(max_steps)
         self._env: EnvBase | None = None
 
     @torch.no_grad()
@@ -55,7 +54,7 @@ class Evaluator:
         episodes = episodes or self.episodes
         if self._env is None:
             self._env = make_batched_env(
-                self.env_cfg,
+                self.make_env,
                 self.num_envs,
                 self.seed,
                 torch_threads=torch.get_num_threads(),

@@ -31,20 +31,6 @@ def setup_text_log(run_dir: Path, name: str = "train.log") -> None:
         logging.basicConfig(level=logging.INFO, format="[%(asctime)s][%(levelname)s] %(message)s")
 
 
-def flatten(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
-    """Flat ``a.b.c`` dict with TensorBoard-hparams-friendly values (lists and None as text)."""
-    out: dict[str, Any] = {}
-    for k, v in d.items():
-        key = f"{prefix}{k}"
-        if isinstance(v, dict):
-            out.update(flatten(v, key + "."))
-        elif isinstance(v, (bool, int, float, str)):
-            out[key] = v
-        else:
-            out[key] = str(v)
-    return out
-
-
 class RunLogger:
     """TensorBoard writer (or nothing, with ``backend="none"``)."""
 
@@ -70,9 +56,11 @@ class RunLogger:
             self.writer.add_text(tag, "```\n" + text + "\n```", step)
 
     def hparams(self, hparams: dict[str, Any], metrics: dict[str, float]) -> None:
+        """``hparams`` flat (``a.b.c`` keys); values TensorBoard cannot show (lists, None) as text."""
         if self.writer is not None:
+            shown = {k: v if isinstance(v, (bool, int, float, str)) else str(v) for k, v in hparams.items()}
             clean = {k: v for k, v in metrics.items() if not math.isnan(v)}
-            self.writer.add_hparams(hparams, clean, run_name=".")
+            self.writer.add_hparams(shown, clean, run_name=".")
 
     def flush(self) -> None:
         if self.writer is not None:

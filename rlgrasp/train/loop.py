@@ -1,25 +1,37 @@
-"""The training loop: collect, update, log, evaluate, checkpoint; resume and fault handling."""
+"""The training loop: a ``Trainer`` whose steps are collect, update, log, evaluate, checkpoint, finish.
+
+``train(cfg)`` is the entry point. The Trainer's ``state_dict()`` is the checkpoint and
+``load_state_dict()`` resumes from one, so tests and tools build checkpoints through this code.
+"""
 
 from __future__ import annotations
 
+import contextlib
 import math
 import random
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
+from tensordict import TensorDictBase
 
 from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
-from rlgrasp.train.collect import build_collector, make_batched_env, read_env_errors
+from rlgrasp.train.collect import read_env_errors
 from rlgrasp.train.evaluate import Evaluator
-from rlgrasp.train.logger import RunLogger, flatten, log, progress_line, setup_text_log
-from rlgrasp.train.models import OBS_KEY, build_models
+from rlgrasp.train.logger import RunLogger, log, progress_line, setup_text_log
+from rlgrasp.train.parts import build_parts
 from rlgrasp.train.ppo import NonFiniteError, PPOLearner
+from rlgrasp.utils import flatten
+
+#: Called after each evaluation with (frames, metrics); see ``train``.
+EvalCallback = Callable[[int, dict[str, float]], None]
+# Keys that may differ between a checkpoint's config and the run resuming it without a warning.
+RESUME_KEYS = ("resume", "paths.", "total_frames", "time_budget_min")
 
 
 class TrainingError(RuntimeError):
@@ -32,34 +44,10 @@ def resolve_device(device: str) -> torch.device:
     return torch.device(device)
 
 
-def frames_per_batch(cfg: Any) -> int:
-    c = cfg.collector
-    workers = 1 if c.backend == "single" or c.num_workers == 0 else c.num_workers
-    return workers * c.envs_per_worker * c.steps_per_env
-
-
-def _env_spec(env_cfg: dict[str, Any], vector: str = "gym_sync") -> dict[str, Any]:
-    """Observation/action sizes and bounds, from one throw-away env built like the workers' ones."""
-    env = make_batched_env(env_cfg, 1, 0, episode_stats=False, seed_torch=False, vector=vector)
-    try:
-        obs_dim = int(env.observation_spec[OBS_KEY].shape[-1])
-        action_spec = env.action_spec
-        low = action_spec.space.low.flatten().tolist()
-        high = action_spec.space.high.flatten().tolist()
-    finally:
-        env.close()
-    return {
-        "obs_key": OBS_KEY,
-        "obs_dim": obs_dim,
-        "action_dim": len(low),
-        "action_low": low,
-        "action_high": high,
-    }
-
-
-def _config_diff(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
-    a, b = flatten(old), flatten(new)
-    return [f"{k}: {a.get(k)!r} -> {b.get(k)!r}" for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
+def seed_everything(seed: int) -> None:
+    random.seed(seed)
+    np.random.seed(seed)
+    torch.manual_seed(seed)
 
 
 class _Due:
@@ -76,8 +64,292 @@ class _Due:
         return True
 
 
-#: Called after each evaluation with (frames, metrics); see ``train``.
-EvalCallback = Callable[[int, dict[str, float]], None]
+class _Throughput:
+    """Frames/s of this session, measured from the end of the first batch (which includes the
+    workers' start-up) on."""
+
+    def __init__(self) -> None:
+        self.frames = 0
+        self.t0: float | None = None
+        self.frames0 = 0
+
+    def __call__(self, new_frames: int, batch_start: float) -> float:
+        self.frames += new_frames
+        now = time.perf_counter()
+        if self.t0 is None:
+            self.t0, self.frames0 = now, self.frames
+            return new_frames / max(now - batch_start, 1e-9)
+        return (self.frames - self.frames0) / max(now - self.t0, 1e-9)
+
+
+def _shut_down(collector: Any) -> None:
+    try:
+        collector.shutdown()
+    except Exception as exc:  # noqa: BLE001 - a dead worker can make shutdown complain
+        log.warning("collector shutdown: %s", exc)
+
+
+class Trainer:
+    """One training run. ``run()`` reads straight down: collect, update, log, evaluate, checkpoint,
+    until the frame or time budget is spent; then the final evaluation and checkpoint."""
+
+    def __init__(self, cfg: DictConfig, on_eval: EvalCallback | None = None) -> None:
+        self.cfg, self.on_eval = cfg, on_eval
+        self.run_dir = Path(cfg.paths.output_dir)
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        setup_text_log(self.run_dir)
+        self.ckpt_dir, self.error_dir = self.run_dir / "checkpoints", self.run_dir / "env_errors"
+        self.config = OmegaConf.to_container(cfg, resolve=True)
+        self.device = resolve_device(cfg.device)
+        torch.set_num_threads(cfg.collector.torch_threads)
+        resumed = ckpt_lib.load_checkpoint(cfg.resume, map_location=self.device) if cfg.resume else None
+
+        # --- parts: seeded first, so the same seed gives the same initial networks
+        seed_everything(cfg.seed)
+        self.parts = build_parts(cfg, self.device)
+        self.actor = self.parts.actor
+        self.learner = PPOLearner(self.actor, self.parts.critic, self.parts.norm, cfg.algo, self.device)
+
+        # --- counters, possibly resumed
+        self.frames, self.updates, self.generation = 0, 0, 0
+        self.best_success, self.last_eval = -math.inf, None
+        if resumed is not None:
+            self.load_state_dict(resumed)
+            log.info("resumed from %s at %s frames", cfg.resume, f"{self.frames:,}")
+
+        self.logger = RunLogger(
+            self.run_dir / "tensorboard", cfg.logger.backend, purge_step=self.frames + 1 if resumed else None
+        )
+        if resumed is None:
+            self.logger.text("config", OmegaConf.to_yaml(self.config), 0)
+        e = cfg.eval
+        self.evaluator = Evaluator(
+            self.parts.make_env,
+            cfg.env.get("max_episode_steps", 50),
+            e.episodes,
+            e.num_envs,
+            cfg.seed * 1_000_003 + e.seed_offset,
+        )
+        self.final_episodes = e.final_episodes or e.episodes
+
+    # --- checkpoint state ---------------------------------------------------------------------
+    def state_dict(self) -> dict[str, Any]:
+        """The checkpoint (its layout is documented in ``rlgrasp.train.checkpoint``)."""
+        return {
+            "format": ckpt_lib.FORMAT,
+            "actor": self.actor.state_dict(),
+            "critic": self.parts.critic.state_dict(),
+            "optimizer": self.learner.optimizer.state_dict(),
+            "frames": self.frames,
+            "updates": self.updates,
+            "generation": self.generation,
+            "best_eval_success": self.best_success,
+            "last_eval": self.last_eval,
+            "rng": ckpt_lib.rng_state(),
+            "config": self.config,
+            "spec": self.parts.spec,
+            "versions": ckpt_lib.package_versions(),
+            "run_dir": str(self.run_dir),
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Continue from a checkpoint: weights, optimizer, RNG, counters; the generation moves on."""
+        old, new = flatten(state["config"]), flatten(self.config)
+        for key in sorted(set(old) | set(new)):
+            if old.get(key) != new.get(key) and not key.startswith(RESUME_KEYS):
+                log.warning(
+                    "resume: config differs from the checkpoint's: %s: %r -> %r",
+                    key,
+                    old.get(key),
+                    new.get(key),
+                )
+        self.actor.load_state_dict(state["actor"])
+        self.parts.critic.load_state_dict(state["critic"])
+        self.learner.optimizer.load_state_dict(state["optimizer"])
+        ckpt_lib.set_rng_state(state["rng"])
+        self.frames, self.updates = state["frames"], state["updates"]
+        self.generation = state.get("generation", 0) + 1
+        self.best_success = state.get("best_eval_success", -math.inf)
+        self.last_eval = state.get("last_eval")
+
+    def save(self, is_best: bool = False) -> None:
+        path = ckpt_lib.write_checkpoints(
+            self.ckpt_dir, self.state_dict(), self.cfg.checkpoint.keep_last, is_best
+        )
+        log.info("checkpoint %s", path)
+
+    # --- the run --------------------------------------------------------------------------------
+    def run(self) -> float:
+        """Train; returns the final evaluation success rate (NaN if the env has none)."""
+        with contextlib.ExitStack() as cleanup:
+            cleanup.callback(self.logger.close)
+            cleanup.callback(self.evaluator.close)
+            log.info(
+                "run dir %s | device %s | %d frames per batch (%s) | %s",
+                self.run_dir,
+                self.device,
+                self.parts.frames_per_batch,
+                self.cfg.collector.backend,
+                self.parts.spec,
+            )
+            self.start = time.monotonic()  # the time budget includes the workers' start-up
+            try:
+                with self._collector() as batches:
+                    self._loop(batches)
+            except KeyboardInterrupt:
+                log.warning("interrupted at %s frames: saving a checkpoint", f"{self.frames:,}")
+                self.save()
+                return float((self.last_eval or {}).get("success_rate", float("nan")))
+            except NonFiniteError as exc:
+                raise TrainingError(
+                    f"{exc} at {self.frames:,} frames; stopped without saving, the last good checkpoint "
+                    f"is {self.ckpt_dir / 'last.pt'}"
+                ) from exc
+            return self.finish()
+
+    @contextlib.contextmanager
+    def _collector(self) -> Iterator[Iterator[TensorDictBase]]:
+        """The collector's batches; its workers are shut down however the loop ends."""
+        collector = self.parts.make_collector(self.generation, str(self.error_dir))
+        self.collector = collector
+        try:
+            yield iter(collector)
+        finally:
+            _shut_down(collector)
+
+    def _loop(self, batches: Iterator[TensorDictBase]) -> None:
+        cfg = self.cfg
+        budget_s = cfg.time_budget_min * 60 if cfg.time_budget_min else math.inf
+        eval_due = _Due(cfg.eval.interval_frames, self.frames)
+        ckpt_due = _Due(cfg.checkpoint.interval_frames, self.frames)
+        throughput = _Throughput()
+        self.recent: dict[str, float] = {}
+        start = last_console = self.start
+        while self.frames < cfg.total_frames and time.monotonic() - start < budget_s:
+            t0 = time.perf_counter()
+            batch = self.collect(batches)
+            metrics = {"time/collect_s": time.perf_counter() - t0, **self.episode_metrics(batch)}
+            metrics.update(self.update(batch))
+            metrics["charts/SPS"] = sps = throughput(batch.numel(), t0)
+            self.logger.scalars(metrics, self.frames)
+
+            is_best = False
+            if eval_due(self.frames) and self.frames < cfg.total_frames:  # the final eval runs at the end
+                is_best = self.evaluate()
+            if ckpt_due(self.frames) or is_best:
+                self.save(is_best)
+            if time.monotonic() - last_console >= cfg.logger.console_interval_s:
+                last_console = time.monotonic()
+                self.console(sps, budget_s - (last_console - start))
+
+    def collect(self, batches: Iterator[TensorDictBase]) -> TensorDictBase:
+        """The next ``[envs * workers, time]`` batch; an env crash saves a checkpoint and says which env."""
+        try:
+            batch = next(batches)
+        except (KeyboardInterrupt, StopIteration):
+            raise
+        except Exception as exc:
+            self.save()
+            time.sleep(0.5)  # let the failing worker finish writing its report
+            reports = read_env_errors(self.error_dir) or [f"{type(exc).__name__}: {exc}"]
+            raise TrainingError(
+                f"collection failed at {self.frames:,} frames; checkpoint saved in {self.ckpt_dir}\n  "
+                + "\n  ".join(reports)
+            ) from exc
+        batch = batch.reshape(-1, batch.shape[-1])
+        self.frames += batch.numel()
+        return batch
+
+    def update(self, batch: TensorDictBase) -> dict[str, float]:
+        """One PPO update at the scheduled learning rate, then the new weights to the workers."""
+        t1 = time.perf_counter()
+        lr = self.learner.lr_at(self.frames, self.cfg.total_frames)
+        self.learner.set_lr(lr)
+        losses = self.learner.update(batch)
+        self.collector.update_policy_weights_()
+        self.updates += 1
+        metrics = {f"losses/{k}": v for k, v in losses.items()}
+        metrics["charts/learning_rate"] = lr
+        metrics["time/train_s"] = time.perf_counter() - t1
+        return metrics
+
+    def episode_metrics(self, batch: TensorDictBase) -> dict[str, float]:
+        """Return, length and success of the episodes that ended in this batch (for the console too)."""
+        ep = finished_episodes(batch)
+        for key in ("charts/episodic_return", "charts/success_rate"):
+            if key in ep:
+                self.recent[key] = ep[key]
+        return ep
+
+    def console(self, sps: float, budget_left_s: float) -> None:
+        eta = min((self.cfg.total_frames - self.frames) / max(sps, 1e-9), budget_left_s)
+        eval_success = self.last_eval.get("success_rate") if self.last_eval else None
+        log.info(
+            progress_line(
+                self.frames,
+                self.cfg.total_frames,
+                sps,
+                self.recent.get("charts/success_rate"),
+                self.recent.get("charts/episodic_return"),
+                eval_success,
+                eta,
+            )
+        )
+        self.logger.flush()
+
+    def evaluate(self, final: bool = False) -> bool:
+        """Deterministic evaluation; logs it, reports it to ``on_eval``; returns whether it is the best.
+
+        An exception from ``on_eval`` (a sweep's pruner) saves a checkpoint and propagates.
+        """
+        t0 = time.perf_counter()
+        episodes = self.final_episodes if final else self.cfg.eval.episodes
+        self.actor.eval()
+        result = self.evaluator.run(self.actor, episodes)
+        self.actor.train()
+        result["frames"] = self.frames
+        self.last_eval = result
+        self.logger.scalars({f"eval/{k}": v for k, v in result.items() if k != "frames"}, self.frames)
+        self.logger.scalars({"time/eval_s": time.perf_counter() - t0}, self.frames)
+        score = result.get("success_rate", result["mean_reward"])
+        is_best = score > self.best_success
+        if is_best:
+            self.best_success = score
+        log.info("eval at %s frames: %s", f"{self.frames:,}", {k: round(v, 3) for k, v in result.items()})
+        if final and "success_rate" in result:
+            wins = round(result["success_rate"] * episodes)
+            low, high = wilson_interval(wins, episodes)
+            log.info("final eval: success %d/%d [95%% Wilson %.3f, %.3f]", wins, episodes, low, high)
+        if self.on_eval is not None:
+            try:
+                self.on_eval(self.frames, dict(result))
+            except BaseException as exc:
+                log.warning("stopped by the eval callback at %s frames: %r", f"{self.frames:,}", exc)
+                self.save(is_best)
+                raise
+        return is_best
+
+    def finish(self) -> float:
+        """Final evaluation (unless the last one is current) and checkpoint; hparams; the result."""
+        last = self.last_eval
+        if last is None or last["frames"] != self.frames or self.final_episodes > self.cfg.eval.episodes:
+            self.save(self.evaluate(final=True))
+        elif (
+            not (self.ckpt_dir / "last.pt").exists()
+            or ckpt_lib.load_checkpoint(self.run_dir)["frames"] != self.frames
+        ):
+            self.save()
+        result = self.last_eval or {}
+        success = float(result.get("success_rate", float("nan")))
+        self.logger.hparams(
+            flatten(self.config),
+            {
+                "hparam/eval_success_rate": success,
+                "hparam/eval_mean_reward": result.get("mean_reward", float("nan")),
+            },
+        )
+        log.info("finished at %s frames: eval %s", f"{self.frames:,}", result)
+        return success
 
 
 def train(cfg: DictConfig, on_eval: EvalCallback | None = None) -> float:
@@ -90,251 +362,22 @@ def train(cfg: DictConfig, on_eval: EvalCallback | None = None) -> float:
     report to its pruner. An exception it raises (e.g. ``optuna.TrialPruned``) stops training: a
     checkpoint is saved, workers are shut down, and the exception propagates unchanged.
     """
-    run_dir = Path(cfg.paths.output_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    setup_text_log(run_dir)
-    ckpt_dir = run_dir / "checkpoints"
-    error_dir = run_dir / "env_errors"
-    config = OmegaConf.to_container(cfg, resolve=True)
-    assert isinstance(config, dict)
-    device = resolve_device(cfg.device)
-    torch.set_num_threads(cfg.collector.torch_threads)
-
-    resumed = ckpt_lib.load_checkpoint(cfg.resume, map_location=device) if cfg.resume else None
-    random.seed(cfg.seed)
-    np.random.seed(cfg.seed)
-    torch.manual_seed(cfg.seed)
-
-    env_cfg = dict(config["env"])
-    spec = _env_spec(env_cfg, cfg.collector.vector)
-    actor, critic, norm = build_models(
-        spec["obs_dim"], torch.tensor(spec["action_low"]), torch.tensor(spec["action_high"]), cfg.model
-    )
-    actor, critic = actor.to(device), critic.to(device)
-    learner = PPOLearner(actor, critic, norm, cfg.algo, device)
-
-    frames, updates, generation = 0, 0, 0
-    best_success, last_eval = -math.inf, None
-    if resumed is not None:
-        for line in _config_diff(resumed["config"], config):
-            if not line.startswith(("resume", "paths.", "total_frames", "time_budget_min")):
-                log.warning("resume: config differs from the checkpoint's: %s", line)
-        actor.load_state_dict(resumed["actor"])
-        critic.load_state_dict(resumed["critic"])
-        learner.optimizer.load_state_dict(resumed["optimizer"])
-        ckpt_lib.set_rng_state(resumed["rng"])
-        frames, updates = resumed["frames"], resumed["updates"]
-        generation = resumed.get("generation", 0) + 1
-        best_success = resumed.get("best_eval_success", -math.inf)
-        last_eval = resumed.get("last_eval")
-        log.info("resumed from %s at %s frames", cfg.resume, f"{frames:,}")
-
-    def state() -> dict[str, Any]:
-        return {
-            "format": ckpt_lib.FORMAT,
-            "actor": actor.state_dict(),
-            "critic": critic.state_dict(),
-            "obs_norm": norm.state_dict(),
-            "optimizer": learner.optimizer.state_dict(),
-            "frames": frames,
-            "updates": updates,
-            "generation": generation,
-            "best_eval_success": best_success,
-            "last_eval": last_eval,
-            "rng": ckpt_lib.rng_state(),
-            "config": config,
-            "spec": spec,
-            "versions": ckpt_lib.package_versions(),
-            "run_dir": str(run_dir),
-        }
-
-    def save(is_best: bool = False) -> None:
-        path = ckpt_lib.write_checkpoints(ckpt_dir, state(), cfg.checkpoint.keep_last, is_best)
-        log.info("checkpoint %s", path)
-
-    logger = RunLogger(
-        run_dir / "tensorboard", cfg.logger.backend, purge_step=frames + 1 if resumed else None
-    )
-    if resumed is None:
-        logger.text("config", OmegaConf.to_yaml(config), 0)
-    evaluator = Evaluator(
-        env_cfg, cfg.eval.episodes, cfg.eval.num_envs, cfg.seed * 1_000_003 + cfg.eval.seed_offset
-    )
-
-    final_episodes = cfg.eval.final_episodes or cfg.eval.episodes
-
-    def evaluate(final: bool = False) -> dict[str, float]:
-        nonlocal best_success, last_eval
-        t0 = time.perf_counter()
-        episodes = final_episodes if final else cfg.eval.episodes
-        actor.eval()
-        result = evaluator.run(actor, episodes)
-        actor.train()
-        result["frames"] = frames
-        last_eval = result
-        logger.scalars({f"eval/{k}": v for k, v in result.items() if k != "frames"}, frames)
-        logger.scalars({"time/eval_s": time.perf_counter() - t0}, frames)
-        score = result.get("success_rate", result["mean_reward"])
-        is_best = score > best_success
-        if is_best:
-            best_success = score
-        log.info("eval at %s frames: %s", f"{frames:,}", {k: round(v, 3) for k, v in result.items()})
-        if final and "success_rate" in result:
-            wins = round(result["success_rate"] * episodes)
-            low, high = wilson_interval(wins, episodes)
-            log.info("final eval: success %d/%d [95%% Wilson %.3f, %.3f]", wins, episodes, low, high)
-        if on_eval is not None:
-            try:
-                on_eval(frames, dict(result))
-            except BaseException as exc:
-                log.warning("stopped by the eval callback at %s frames: %r", f"{frames:,}", exc)
-                save(is_best)
-                raise
-        return {"is_best": is_best}
-
-    fpb = frames_per_batch(cfg)
-    total = cfg.total_frames
-    budget_s = cfg.time_budget_min * 60 if cfg.time_budget_min else math.inf
-    eval_due = _Due(cfg.eval.interval_frames, frames)
-    ckpt_due = _Due(cfg.checkpoint.interval_frames, frames)
-    log.info(
-        "run dir %s | device %s | %d frames per batch (%s) | %s",
-        run_dir,
-        device,
-        fpb,
-        cfg.collector.backend,
-        spec,
-    )
-
-    collector = None
-    status = "running"
-    start = last_console = time.monotonic()
-    session_frames = 0
-    sps_t0, sps_frames0 = None, 0  # SPS is measured from the first batch on (spawn excluded)
-    recent_success = recent_return = None
-    try:
-        collector = build_collector(cfg, actor, fpb, generation, str(error_dir))
-        batches = iter(collector)
-        while frames < total and time.monotonic() - start < budget_s:
-            t0 = time.perf_counter()
-            try:
-                batch = next(batches)
-            except (KeyboardInterrupt, StopIteration):
-                raise
-            except Exception as exc:
-                status = "env_error"
-                save()
-                time.sleep(0.5)  # let the failing worker finish writing its report
-                reports = read_env_errors(error_dir) or [f"{type(exc).__name__}: {exc}"]
-                raise TrainingError(
-                    f"collection failed at {frames:,} frames; checkpoint saved in {ckpt_dir}\n  "
-                    + "\n  ".join(reports)
-                ) from exc
-            collect_s = time.perf_counter() - t0
-            batch = batch.reshape(-1, batch.shape[-1])
-            frames += batch.numel()
-            session_frames += batch.numel()
-            metrics: dict[str, float] = {"time/collect_s": collect_s}
-            ep = _finished_episodes(batch)
-            if ep:
-                metrics.update(ep)
-                recent_return = ep["charts/episodic_return"]
-                recent_success = ep.get("charts/success_rate", recent_success)
-
-            t1 = time.perf_counter()
-            lr = learner.lr_at(frames, total)
-            learner.set_lr(lr)
-            losses = learner.update(batch)
-            collector.update_policy_weights_()
-            updates += 1
-            metrics["time/train_s"] = time.perf_counter() - t1
-            elapsed = time.monotonic() - start
-            now = time.perf_counter()
-            if sps_t0 is None:  # the first batch includes the workers' start-up
-                sps = batch.numel() / max(now - t0, 1e-9)
-                sps_t0, sps_frames0 = now, session_frames
-            else:
-                sps = (session_frames - sps_frames0) / max(now - sps_t0, 1e-9)
-            metrics.update({f"losses/{k}": v for k, v in losses.items()})
-            metrics["charts/learning_rate"] = lr
-            metrics["charts/SPS"] = sps
-            logger.scalars(metrics, frames)
-
-            is_best = False
-            if eval_due(frames) and frames < total:  # at the end the final evaluation runs
-                is_best = evaluate()["is_best"]
-            if ckpt_due(frames) or is_best:
-                save(is_best)
-            if time.monotonic() - last_console >= cfg.logger.console_interval_s:
-                last_console = time.monotonic()
-                eta = min((total - frames) / max(sps, 1e-9), budget_s - elapsed)
-                eval_s = last_eval.get("success_rate") if last_eval else None
-                log.info(progress_line(frames, total, sps, recent_success, recent_return, eval_s, eta))
-                logger.flush()
-        status = "done"
-    except KeyboardInterrupt:
-        status = "interrupted"
-        log.warning("interrupted at %s frames: saving a checkpoint", f"{frames:,}")
-        save()
-    except NonFiniteError as exc:
-        status = "non_finite"
-        raise TrainingError(
-            f"{exc} at {frames:,} frames; stopped without saving, the last good checkpoint is "
-            f"{ckpt_dir / 'last.pt'}"
-        ) from exc
-    finally:
-        if collector is not None:
-            try:
-                collector.shutdown()
-            except Exception as exc:  # noqa: BLE001 - a dead worker can make shutdown complain
-                log.warning("collector shutdown: %s", exc)
-        if status != "done":
-            evaluator.close()
-            logger.close()
-
-    if status == "interrupted":
-        return float((last_eval or {}).get("success_rate", float("nan")))
-    try:
-        if last_eval is None or last_eval["frames"] != frames or final_episodes > cfg.eval.episodes:
-            save(evaluate(final=True)["is_best"])
-        elif not (ckpt_dir / "last.pt").exists() or ckpt_lib.load_checkpoint(run_dir)["frames"] != frames:
-            save()
-    except BaseException:  # the eval callback stopped the run (it saved a checkpoint)
-        evaluator.close()
-        logger.close()
-        raise
-    evaluator.close()
-    result = last_eval or {}
-    success = float(result.get("success_rate", float("nan")))
-    logger.hparams(
-        flatten(config),
-        {
-            "hparam/eval_success_rate": success,
-            "hparam/eval_mean_reward": result.get("mean_reward", float("nan")),
-        },
-    )
-    logger.close()
-    log.info("finished at %s frames (%s): eval %s", f"{frames:,}", status, result)
-    return success
+    return Trainer(cfg, on_eval).run()
 
 
-def _finished_episodes(batch) -> dict[str, float]:
+def finished_episodes(batch: TensorDictBase) -> dict[str, float]:
     """Return, length and success-at-episode-end of the episodes that ended in this batch."""
     done = batch["next", "done"].reshape(batch.shape)
     if not done.any():
         return {}
+    keys = batch.keys(True)
     out = {}
-    if ("next", "episode_reward") in batch.keys(True):
-        out["charts/episodic_return"] = float(
-            batch["next", "episode_reward"].reshape(batch.shape)[done].mean()
-        )
-    if ("next", "step_count") in batch.keys(True):
-        out["charts/episodic_length"] = float(
-            batch["next", "step_count"].reshape(batch.shape)[done].float().mean()
-        )
-    if ("next", "is_success") in batch.keys(True):
-        out["charts/success_rate"] = float(
-            batch["next", "is_success"].reshape(batch.shape)[done].float().mean()
-        )
+    for key, name in (
+        ("episode_reward", "episodic_return"),
+        ("step_count", "episodic_length"),
+        ("is_success", "success_rate"),
+    ):
+        if ("next", key) in keys:
+            out[f"charts/{name}"] = float(batch["next", key].reshape(batch.shape)[done].float().mean())
     out["charts/episodes"] = float(done.sum())
     return out

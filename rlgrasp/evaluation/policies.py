@@ -1,0 +1,112 @@
+"""The policies evaluation runs, behind one interface: a checkpoint's actor, the scripted expert, or
+uniform random actions; and ``PolicySource``, all a worker process needs to rebuild one and its env."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+POLICIES = ("checkpoint", "scripted", "random")
+
+
+@dataclass
+class PolicySource:
+    """What the workers need to rebuild the policy and the env, all picklable.
+
+    ``env_cfg`` is the env's ``_target_`` node as a plain dict (``rlgrasp.config.env_factory`` builds
+    it). ``ckpt`` is trimmed to the entries the policy needs (weights, model config, spec), so that
+    each spawned worker receives a few hundred kB rather than the optimizer state.
+    """
+
+    kind: str
+    env_cfg: dict[str, Any]
+    ckpt: dict[str, Any] | None = None
+    ckpt_path: str | None = None
+    run_dir: str | None = None
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def make_env(self) -> Any:
+        from rlgrasp.config import env_factory
+
+        return env_factory(self.env_cfg)()
+
+
+class Actor:
+    """``reset(seed)`` before an episode, ``__call__(obs) -> action``: one interface for all policies."""
+
+    def reset(self, seed: int) -> None:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:  # pragma: no cover - interface
+        raise NotImplementedError
+
+
+class CheckpointActor(Actor):
+    """The trained policy (normalizer inside), fed one observation at a time."""
+
+    def __init__(self, ckpt: dict[str, Any], deterministic: bool) -> None:
+        import torch
+        from torchrl.envs import ExplorationType
+
+        from rlgrasp.train.checkpoint import policy_from_checkpoint
+
+        self.torch = torch
+        self.policy = policy_from_checkpoint(ckpt, "cpu")
+        self.mode = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
+
+    def reset(self, seed: int) -> None:
+        # Stochastic actions: the episode's own torch RNG stream, whatever ran before it.
+        self.torch.manual_seed(seed)
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        from tensordict import TensorDict
+        from torchrl.envs import set_exploration_type
+
+        torch = self.torch
+        td = TensorDict(
+            {"observation": torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0)}, batch_size=[1]
+        )
+        with torch.no_grad(), set_exploration_type(self.mode):
+            return self.policy(td)["action"][0].numpy()
+
+
+class ScriptedActor(Actor):
+    """The env package's scripted expert (deterministic)."""
+
+    def __init__(self, env: Any) -> None:
+        from rlgrasp.envs import ScriptedExpert
+
+        self.expert = ScriptedExpert(env.obs_slices, action_dim=env.action_space.shape[0])
+
+    def reset(self, seed: int) -> None:
+        self.expert.reset()
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        return np.asarray(self.expert(obs), dtype=np.float32)
+
+
+class RandomActor(Actor):
+    """Uniform actions in the action box, from an RNG seeded per episode."""
+
+    def __init__(self, env: Any) -> None:
+        self.low, self.high = env.action_space.low, env.action_space.high
+        self.rng = np.random.default_rng(0)
+
+    def reset(self, seed: int) -> None:
+        self.rng = np.random.default_rng([seed, 0x5EED])
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        return self.rng.uniform(self.low, self.high).astype(np.float32)
+
+
+def build_policy(source: PolicySource, env: Any, deterministic: bool) -> Actor:
+    """The actor for ``source.kind`` (``checkpoint``, ``scripted`` or ``random``)."""
+    if source.kind == "checkpoint":
+        return CheckpointActor(source.ckpt, deterministic)
+    if source.kind == "scripted":
+        return ScriptedActor(env)
+    if source.kind == "random":
+        return RandomActor(env)
+    raise ValueError(f"unknown policy kind {source.kind!r}")

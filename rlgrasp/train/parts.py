@@ -1,0 +1,40 @@
+"""What a training run is made of, built from its config in one place: the env factory, the env's
+spec, the actor and critic, the batch size and the collector. Training, the benchmark scripts and the
+tests all build them here."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+from torchrl.collectors import BaseCollector
+
+from rlgrasp.config import env_factory
+from rlgrasp.train.collect import EnvFactory, build_collector, env_spec, frames_per_batch
+from rlgrasp.train.models import RunningNorm, build_models
+
+
+@dataclass
+class Parts:
+    cfg: Any
+    make_env: EnvFactory
+    spec: dict[str, Any]
+    actor: torch.nn.Module
+    critic: torch.nn.Module
+    norm: RunningNorm
+    frames_per_batch: int
+
+    def make_collector(self, generation: int = 0, error_dir: str | None = None) -> BaseCollector:
+        """The configured collector running ``actor``; ``generation`` shifts the seeds on resume."""
+        return build_collector(self.cfg, self.make_env, self.actor, generation, error_dir)
+
+
+def build_parts(cfg: Any, device: torch.device | str = "cpu") -> Parts:
+    """Env factory and spec, then the models (their init draws from torch's global RNG: seed first)."""
+    make_env = env_factory(cfg.env)
+    spec = env_spec(make_env)
+    actor, critic, norm = build_models(
+        spec["obs_dim"], torch.tensor(spec["action_low"]), torch.tensor(spec["action_high"]), cfg.model
+    )
+    return Parts(cfg, make_env, spec, actor.to(device), critic.to(device), norm, frames_per_batch(cfg))

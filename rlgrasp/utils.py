@@ -1,0 +1,43 @@
+"""Small helpers shared by training, evaluation and sweeps."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+
+def flatten(
+    node: Mapping[str, Any], prefix: str = "", leaf: Callable[[Any], bool] | None = None
+) -> dict[str, Any]:
+    """``{"algo": {"lr": x}}`` -> ``{"algo.lr": x}``; ``leaf(node)`` true stops the descent."""
+    out: dict[str, Any] = {}
+    for key, value in node.items():
+        path = f"{prefix}{key}"
+        if isinstance(value, Mapping) and not (leaf and leaf(value)):
+            out.update(flatten(value, path + ".", leaf))
+        else:
+            out[path] = value
+    return out
+
+
+def markdown_table(head: Sequence[Any], rows: Sequence[Sequence[Any]]) -> str:
+    """A Markdown table with padded columns (readable as plain text too)."""
+    cells = [[str(c) for c in head], *([str(c) for c in row] for row in rows)]
+    widths = [max(len(row[i]) for row in cells) for i in range(len(head))]
+
+    def line(row: list[str]) -> str:
+        return "| " + " | ".join(c.ljust(w) for c, w in zip(row, widths)) + " |"
+
+    return "\n".join(
+        [line(cells[0]), "|" + "|".join("-" * (w + 2) for w in widths) + "|", *map(line, cells[1:])]
+    )
+
+
+def pyplot() -> Any:
+    """``matplotlib.pyplot`` drawing to files only (no display on workers, clusters or CI)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt

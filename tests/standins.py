@@ -1,0 +1,37 @@
+"""Stand-in envs for the tests, named by ``env._target_`` like the real one (``tests.standins.X``).
+
+Spawned collector workers import them too: ``tests`` is a package, so pytest puts the repository root
+on ``sys.path`` and the workers inherit it.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+class EnvCrash(RuntimeError):
+    """The error a deliberately crashing stand-in raises."""
+
+
+def pendulum(max_episode_steps: int = 50) -> Any:
+    """Gymnasium's Pendulum-v1 with the grasp env's episode length: the pipeline without PyBullet."""
+    import gymnasium as gym
+
+    return gym.make("Pendulum-v1", max_episode_steps=max_episode_steps)
+
+
+def crashing_grasp_env(crash_after: int = 100, **env_kwargs: Any) -> Any:
+    """``PandaGraspEnv(**env_kwargs)`` whose ``step`` raises ``EnvCrash`` after ``crash_after`` steps."""
+    from rlgrasp.envs import PandaGraspEnv
+
+    env = PandaGraspEnv(**env_kwargs)
+    step, calls = env.step, [0]
+
+    def crashing_step(*args, **kwargs):
+        calls[0] += 1
+        if calls[0] > crash_after:
+            raise EnvCrash(f"deliberate crash after {crash_after} steps")
+        return step(*args, **kwargs)
+
+    env.step = crashing_step
+    return env
