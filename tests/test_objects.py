@@ -11,7 +11,13 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 from rlgrasp.envs import PandaGraspEnv, ScriptedExpert
-from rlgrasp.envs.objects import SET_NAMES, ObjectSampler, random_urdf_choice, random_urdf_numbers
+from rlgrasp.envs.objects import (
+    BROKEN_RANDOM_URDFS,
+    SET_NAMES,
+    ObjectSampler,
+    random_urdf_choice,
+    random_urdf_numbers,
+)
 
 SETS = list(SET_NAMES) + [["primitives", "random_urdfs_train"]]
 
@@ -100,6 +106,17 @@ def test_random_urdfs_split_is_fixed_disjoint_and_complete():
     rng = np.random.default_rng(0)
     drawn = {ObjectSampler("random_urdfs_test").draw(rng).name for _ in range(50)}
     assert all(name.startswith("random_urdfs/") and name.endswith("0") for name in drawn)
+
+
+def test_every_drawable_random_urdf_mesh_parses():
+    for n in random_urdf_numbers("all"):
+        if n in BROKEN_RANDOM_URDFS:
+            with pytest.raises(ValueError, match=f"{n}.obj"):
+                random_urdf_choice(n, max_width=0.05)
+        else:
+            random_urdf_choice(n, max_width=0.05)
+    train = ObjectSampler("random_urdfs_train").spec.groups[0]
+    assert len(train) == 899 and 168 not in train
 
 
 def test_fitted_meshes_fit_the_hand():

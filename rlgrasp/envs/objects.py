@@ -10,9 +10,10 @@
 
 Held-out split of pybullet_data's ``random_urdfs/000-999``: ``random_urdfs_test`` is the 100
 objects whose number ends in 0, ``random_urdfs_train`` the other 900 (the split
-KukaDiverseObjectEnv uses). Mesh objects wider than the hand are scaled down so that their smaller
-horizontal extent is at most ``max_width``; every object's size is then multiplied by the episode's
-``object_size_scale``, snapped to ``SIZE_SCALES`` so that the shapes built for it can be cached.
+KukaDiverseObjectEnv uses); number 168 is never drawn, its mesh is broken. Mesh objects wider
+than the hand are scaled down so that their smaller horizontal extent is at most ``max_width``;
+every object's size is then multiplied by the episode's ``object_size_scale``, snapped to
+``SIZE_SCALES`` so that the shapes built for it can be cached.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ HAND_OPENING = 0.08  # m, the Panda's maximal finger width
 DEFAULT_MAX_WIDTH = 0.05  # m, a fitted object's smaller horizontal extent at size scale 1
 RANDOM_URDF_MESH_SCALE = 0.015  # the scale every random_urdfs/NNN/NNN.urdf applies to its mesh
 RANDOM_URDF_MASS = 0.1  # kg, the mass every random_urdfs URDF declares
+BROKEN_RANDOM_URDFS = (168,)  # 168.obj has only NaN vertices: in the split, never drawn
 PRIMITIVE_KINDS = ("box", "cylinder", "sphere", "capsule")
 PRIMITIVE_GRID = 0.005  # m: drawn dimensions are rounded to it so built shapes can be cached
 TOYS = (  # pybullet_data extras; the ones wider than the hand are fitted like any mesh
@@ -231,7 +233,7 @@ def _set_entries(name: str, max_width: float) -> list[Any]:
     if name == "primitives":
         return ["primitive"]
     if name in ("random_urdfs", "random_urdfs_train", "random_urdfs_test"):
-        numbers = random_urdf_numbers(name.rpartition("_")[2])
+        numbers = [n for n in random_urdf_numbers(name.rpartition("_")[2]) if n not in BROKEN_RANDOM_URDFS]
         missing = [n for n in numbers if not os.path.isfile(_random_urdf_obj(n))]
         if missing:
             raise FileNotFoundError(
