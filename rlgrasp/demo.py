@@ -1,6 +1,6 @@
 """Watch the scripted expert: a few seeded episodes rendered offscreen to a GIF and a contact sheet.
 
-    rlgrasp-demo [--episodes 3] [--randomization default] [--out outputs/demo]
+    rlgrasp-demo [--episodes 3] [--randomization default] [--objects cube] [--out outputs/demo]
 """
 
 from __future__ import annotations
@@ -13,15 +13,15 @@ import numpy as np
 from rlgrasp.envs import PandaGraspEnv, ScriptedExpert
 
 
-def run(episodes: int, randomization: str, out: Path, seed: int = 0) -> float:
+def run(episodes: int, randomization: str, out: Path, seed: int = 0, objects: str = "cube") -> float:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.animation import FuncAnimation, PillowWriter
 
-    env = PandaGraspEnv(randomization=randomization, render_mode="rgb_array")
-    expert = ScriptedExpert(env.obs_slices)
+    env = PandaGraspEnv(randomization=randomization, render_mode="rgb_array", objects=objects, ee_yaw=True)
+    expert = ScriptedExpert(env.obs_slices, action_dim=env.action_dim)
     frames, successes = [], []
     for episode in range(episodes):
         obs, _ = env.reset(seed=seed + episode)
@@ -33,7 +33,7 @@ def run(episodes: int, randomization: str, out: Path, seed: int = 0) -> float:
             frames.append(env.render())
             done = terminated or truncated
         successes.append(bool(info["is_success"]))
-        print(f"episode {episode} (seed {seed + episode}): success={successes[-1]} "
+        print(f"episode {episode} (seed {seed + episode}, {info['object']}): success={successes[-1]} "
               f"lift={float(info['lift_height']) * 100:.1f} cm")
     env.close()
 
@@ -54,9 +54,10 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=3)
     parser.add_argument("--randomization", default="default")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--objects", default="cube", help="object set, e.g. primitives or random_urdfs_test")
     parser.add_argument("--out", type=Path, default=Path("outputs/demo"))
     args = parser.parse_args()
-    run(args.episodes, args.randomization, args.out, args.seed)
+    run(args.episodes, args.randomization, args.out, args.seed, args.objects)
 
 
 if __name__ == "__main__":

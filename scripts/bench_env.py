@@ -2,11 +2,11 @@
 
 Measured in one process, interleaved in rounds so that background load hits both alike; each figure
 is the median over rounds. Bare stepping = the same scene after a reset (arm holding its pose under
-position control, cube at rest), ``substeps`` calls to ``stepSimulation`` per env step. Because a
+position control, object at rest), ``substeps`` calls to ``stepSimulation`` per env step. Because a
 moving arm makes contacts that an idle one does not, the table also gives the share of env time
 spent inside ``stepSimulation`` during the env run: 1 - that share is the env's own overhead.
 
-    python scripts/bench_env.py [--steps 1000] [--rounds 5] [--randomization default]
+    python scripts/bench_env.py [--steps 1000] [--rounds 5] [--randomization default] [--objects cube]
 """
 
 from __future__ import annotations
@@ -63,17 +63,19 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=1000)
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--randomization", default="default")
+    parser.add_argument("--objects", default="cube", help="object set (rlgrasp.envs.objects)")
     args = parser.parse_args()
 
     rng = np.random.default_rng(0)
-    print(f"randomization={args.randomization}  steps/round={args.steps}  rounds={args.rounds}")
+    print(f"randomization={args.randomization}  objects={args.objects}  steps/round={args.steps}  "
+          f"rounds={args.rounds}")
     print(f"{'control_mode':<14}{'policy':<9}{'env steps/s':>12}{'bare steps/s':>13}{'ratio':>7}"
           f"{'physics share':>15}")
-    bare_env = PandaGraspEnv(randomization=args.randomization)
+    bare_env = PandaGraspEnv(randomization=args.randomization, objects=args.objects)
     PhysicsTimer(bare_env)
     cases = [(mode, "random") for mode in CONTROL_MODES] + [("ee_delta", "expert")]
     for mode, policy_name in cases:
-        env = PandaGraspEnv(control_mode=mode, randomization=args.randomization)
+        env = PandaGraspEnv(control_mode=mode, randomization=args.randomization, objects=args.objects)
         PhysicsTimer(env)
         env.reset(seed=int(rng.integers(1 << 31)))
         if policy_name == "expert":

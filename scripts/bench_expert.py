@@ -1,50 +1,87 @@
-"""Success of the scripted expert over seeded episodes, per randomization preset.
+"""Success of the scripted expert over seeded episodes, per object set and randomization preset.
 
 The expert is the proof that the task is solvable and the baseline a learned policy is compared
-with. Seeds are 0..N-1, so the figures reproduce exactly.
+with. Seeds are 0..N-1, so the figures reproduce exactly. Each failure gets one reason, read from
+the episode's info: ``too wide`` (narrowest horizontal extent above 7.5 cm), ``tipped or rolled``
+(the object's tilt changed by more than 30 degrees before it was first held), ``never grasped``,
+``slipped`` (held at some point, not at the end) or ``held, not lifted``.
 
-    python scripts/bench_expert.py [--episodes 100] [--presets none default wide]
+    python scripts/bench_expert.py [--episodes 100] [--presets none default wide] [--objects cube]
 """
 
 from __future__ import annotations
 
 import argparse
+import collections
+import math
 
 from rlgrasp.envs import PandaGraspEnv, ScriptedExpert
 from rlgrasp.stats import wilson_interval
 
+TIPPED = math.radians(30)
 
-def success_rate(preset: str, episodes: int) -> tuple[int, float]:
-    env = PandaGraspEnv(randomization=preset)
-    expert = ScriptedExpert(env.obs_slices)
-    successes, steps_to_success = 0, []
+
+def failure_reason(infos: list[dict]) -> str:
+    last = infos[-1]
+    if min(float(x) for x in last["object_extents"][:2]) > 0.075:
+        return "too wide"
+    held = [bool(i["grasped"]) for i in infos]
+    first_hold = held.index(True) if any(held) else len(infos)
+    start_tilt = float(infos[0]["object_tilt"])  # a settled mesh may rest tilted already
+    if any(abs(float(i["object_tilt"]) - start_tilt) > TIPPED for i in infos[: first_hold + 1]):
+        return "tipped or rolled"
+    if not any(held):
+        return "never grasped"
+    if not held[-1]:
+        return "slipped"
+    return "held, not lifted"
+
+
+def run(preset: str, objects, episodes: int, ee_yaw: bool) -> dict:
+    env = PandaGraspEnv(randomization=preset, objects=objects, ee_yaw=ee_yaw)
+    expert = ScriptedExpert(env.obs_slices, action_dim=env.action_dim)
+    successes, steps_to_success, reasons, failed = 0, [], collections.Counter(), []
     for seed in range(episodes):
-        obs, _ = env.reset(seed=seed)
+        obs, info = env.reset(seed=seed)
         expert.reset()
-        first = None
+        infos, first = [info], None
         for step in range(env.max_episode_steps):
             obs, _, _, _, info = env.step(expert(obs))
+            infos.append(info)
             if info["is_success"] and first is None:
                 first = step + 1
-        successes += bool(info["is_success"])
+        if info["is_success"]:
+            successes += 1
+        else:
+            reason = failure_reason(infos)
+            reasons[reason] += 1
+            failed.append(f"{seed}:{info['object']}:{reason}")
         if first is not None:
             steps_to_success.append(first)
     env.close()
     mean_steps = sum(steps_to_success) / max(len(steps_to_success), 1)
-    return successes, mean_steps
+    return {"successes": successes, "mean_steps": mean_steps, "reasons": reasons, "failed": failed}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=100)
     parser.add_argument("--presets", nargs="+", default=["none", "default", "wide"])
+    parser.add_argument("--objects", nargs="+", default=["cube"], help="object sets, one row each")
+    parser.add_argument("--no-yaw", action="store_true", help="keep the hand at yaw 0 (ee_yaw=False)")
+    parser.add_argument("--list-failures", action="store_true", help="print seed:object:reason")
     args = parser.parse_args()
-    print(f"{'preset':<9}{'success at end':>16}{'95% Wilson':>18}{'steps to first success':>25}")
-    for preset in args.presets:
-        successes, mean_steps = success_rate(preset, args.episodes)
-        low, high = wilson_interval(successes, args.episodes)
-        print(f"{preset:<9}{successes:>9d}/{args.episodes:<6d}{f'[{low:.2f}, {high:.2f}]':>18}"
-              f"{mean_steps:>25.1f}", flush=True)
+    print(f"{'objects':<20}{'preset':<9}{'success at end':>16}{'95% Wilson':>16}{'steps to success':>18}"
+          "  failure reasons")
+    for objects in args.objects:
+        for preset in args.presets:
+            r = run(preset, objects, args.episodes, ee_yaw=not args.no_yaw)
+            low, high = wilson_interval(r["successes"], args.episodes)
+            reasons = ", ".join(f"{k} {v}" for k, v in r["reasons"].most_common()) or "-"
+            print(f"{objects:<20}{preset:<9}{r['successes']:>9d}/{args.episodes:<6d}"
+                  f"{f'[{low:.2f}, {high:.2f}]':>16}{r['mean_steps']:>18.1f}  {reasons}", flush=True)
+            if args.list_failures:
+                print("   ", " ".join(r["failed"]))
 
 
 if __name__ == "__main__":

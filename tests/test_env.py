@@ -84,40 +84,40 @@ def test_drawn_randomization_is_what_pybullet_simulates(make_env):
     for seed in range(3):
         _, info = env.reset(seed=seed)
         dr = info["randomization"]
-        c, cube = env.client, env.scene.cube
-        dyn = c.getDynamicsInfo(cube, -1)
-        assert dyn[0] == pytest.approx(dr["cube_mass"])
-        assert dyn[1] == pytest.approx(dr["cube_lateral_friction"])
-        assert dyn[5] == pytest.approx(dr["cube_restitution"])
-        assert dyn[6] == pytest.approx(dr["cube_rolling_friction"])
-        assert dyn[7] == pytest.approx(dr["cube_spinning_friction"])
+        c, body = env.client, env.scene.object
+        dyn = c.getDynamicsInfo(body, -1)
+        assert dyn[0] == pytest.approx(dr["object_mass"])
+        assert dyn[1] == pytest.approx(dr["object_lateral_friction"])
+        assert dyn[5] == pytest.approx(dr["object_restitution"])
+        assert dyn[6] == pytest.approx(dr["object_rolling_friction"])
+        assert dyn[7] == pytest.approx(dr["object_spinning_friction"])
         finger = c.getDynamicsInfo(env.robot.body, env.robot.finger_links[0])
         assert finger[1] == pytest.approx(dr["finger_friction"])
         assert env.robot.finger_force == pytest.approx(dr["finger_force"])
         assert c.getPhysicsEngineParameters()["gravityAccelerationZ"] == pytest.approx(dr["gravity_z"])
-        # the active body of the size pool has the drawn size: it rests at half its edge
-        (x, y, z), quat = c.getBasePositionAndOrientation(cube)
-        assert z == pytest.approx(0.025 * dr["cube_size_scale"], abs=1e-6)
-        assert x == pytest.approx(0.6 + dr["cube_x"]) and y == pytest.approx(dr["cube_y"])
-        assert c.getEulerFromQuaternion(quat)[2] == pytest.approx(dr["cube_yaw"], abs=1e-6)
+        # the cube is built at the drawn size: it rests at half its edge
+        (x, y, z), quat = c.getBasePositionAndOrientation(body)
+        assert z == pytest.approx(0.025 * dr["object_size_scale"], abs=1e-6)
+        assert x == pytest.approx(0.6 + dr["object_x"]) and y == pytest.approx(dr["object_y"])
+        assert c.getEulerFromQuaternion(quat)[2] == pytest.approx(dr["object_yaw"], abs=1e-6)
 
 
 def test_presets_differ_in_what_they_randomize():
     rng = np.random.default_rng(0)
     none = [Randomizer("none").sample(rng) for _ in range(20)]
     default = [Randomizer("default").sample(rng) for _ in range(20)]
-    assert len({d["cube_mass"] for d in none}) == 1
-    assert len({d["cube_mass"] for d in default}) == 20
-    assert len({d["cube_x"] for d in none}) == 20  # the task's own pose variation stays
-    wide = Randomizer("wide").ranges["cube_mass"]
-    base = Randomizer("default").ranges["cube_mass"]
+    assert len({d["object_mass"] for d in none}) == 1
+    assert len({d["object_mass"] for d in default}) == 20
+    assert len({d["object_x"] for d in none}) == 20  # the task's own pose variation stays
+    wide = Randomizer("wide").ranges["object_mass"]
+    base = Randomizer("default").ranges["object_mass"]
     assert wide.high - wide.low > base.high - base.low
 
 
 def test_explicit_ranges_override_a_preset():
-    r = Randomizer({"preset": "default", "cube_mass": [0.9, 1.0], "action_delay": 2})
+    r = Randomizer({"preset": "default", "object_mass": [0.9, 1.0], "action_delay": 2})
     values = r.sample(np.random.default_rng(1))
-    assert 0.9 <= values["cube_mass"] <= 1.0
+    assert 0.9 <= values["object_mass"] <= 1.0
     assert values["action_delay"] == 2
 
 
@@ -144,7 +144,7 @@ def test_ee_delta_moves_the_grasp_point_as_commanded(axis, make_env):
 def test_ee_delta_keeps_fingertips_above_the_ground(make_env):
     env = make_env(control_mode="ee_delta", randomization="none")
     env.reset(seed=3)
-    env.scene.client.resetBasePositionAndOrientation(env.scene.cube, [0.2, 0.6, 0.025], [0, 0, 0, 1])
+    env.scene.client.resetBasePositionAndOrientation(env.scene.object, [0.2, 0.6, 0.025], [0, 0, 0, 1])
     for _ in range(15):
         env.step(np.array([0, 0, -1, 1], np.float32))
     assert _grasp_pos(env)[2] > 0.0
@@ -211,7 +211,7 @@ def test_reward_is_dense_staged_and_at_most_one(make_env):
     assert any(successes)
     # on success every stage pays: grasp + lift + success = 4/5 of the weight, plus most of reach
     assert all(r > 0.95 for r, ok in zip(rewards, successes) if ok)
-    assert rewards[0] < 0.3  # far from the cube, no grasp: only the reach term
+    assert rewards[0] < 0.3  # far from the object, no grasp: only the reach term
 
 
 def test_sparse_reward_and_terminate_on_success(make_env):
@@ -256,8 +256,8 @@ def test_unknown_control_mode_names_the_valid_ones():
 
 
 def test_unknown_randomization_parameter_or_preset():
-    with pytest.raises(ValueError, match="'cube_colour'.*cube_mass"):
-        PandaGraspEnv(randomization={"cube_colour": [0, 1]})
+    with pytest.raises(ValueError, match="'object_colour'.*object_mass"):
+        PandaGraspEnv(randomization={"object_colour": [0, 1]})
     with pytest.raises(ValueError, match="'extreme'.*none, default, wide"):
         PandaGraspEnv(randomization="extreme")
 
@@ -265,11 +265,11 @@ def test_unknown_randomization_parameter_or_preset():
 @pytest.mark.parametrize(
     "ranges, match",
     [
-        ({"cube_mass": [0.5, 0.1]}, "'cube_mass'.*greater than"),
-        ({"cube_mass": [-0.1, 0.2]}, "'cube_mass'.*outside"),
-        ({"cube_lateral_friction": -0.5}, "'cube_lateral_friction'.*outside"),
+        ({"object_mass": [0.5, 0.1]}, "'object_mass'.*greater than"),
+        ({"object_mass": [-0.1, 0.2]}, "'object_mass'.*outside"),
+        ({"object_lateral_friction": -0.5}, "'object_lateral_friction'.*outside"),
         ({"finger_friction": [math.nan, 1.0]}, "'finger_friction'.*finite"),
-        ({"cube_mass": {"low": 0.1}}, "'cube_mass'.*'low', 'high'"),
+        ({"object_mass": {"low": 0.1}}, "'object_mass'.*'low', 'high'"),
     ],
 )
 def test_bad_ranges_name_the_parameter(ranges, match):
@@ -291,7 +291,7 @@ def test_non_finite_action_is_refused(make_env):
 
 def test_missing_model_file_names_the_path():
     with pytest.raises(FileNotFoundError, match="no_such_cube.urdf"):
-        PandaGraspEnv(cube_urdf="no_such_cube.urdf")
+        PandaGraspEnv(objects={"paths": ["no_such_cube.urdf"]})
     with pytest.raises(FileNotFoundError, match="/tmp/missing/panda.urdf"):
         PandaGraspEnv(robot_urdf="/tmp/missing/panda.urdf")
 

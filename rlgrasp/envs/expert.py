@@ -1,24 +1,68 @@
 """A scripted grasp that acts only through ``ee_delta`` actions and the observation vector.
 
-It proves the task solvable under each randomization preset and is the baseline a learned policy
-is compared with.
+It proves the task solvable for each object set and randomization preset and is the baseline a
+learned policy is compared with. It grasps top-down across the object's narrowest horizontal
+extent; with ``ee_yaw`` (action_dim 5) it turns the hand to that direction, without it the hand
+keeps yaw 0.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 
 import numpy as np
 
+FINGER_REACH = 0.035  # m below the object's top at which the fingertips close on a tall object
+FLOOR_CLEARANCE = 0.012  # m above the object's bottom: the lowest grasp height
+
+
+def quat_matrix(quat: np.ndarray) -> np.ndarray:
+    """Rotation matrix of an (x, y, z, w) quaternion (normalised first: observations are noisy)."""
+    x, y, z, w = np.asarray(quat, dtype=float) / max(float(np.linalg.norm(quat)), 1e-9)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def _wrap_half_turn(angle: float) -> float:
+    """An angle into [-pi/2, pi/2): a parallel gripper is symmetric under a half turn."""
+    return (angle + math.pi / 2) % math.pi - math.pi / 2
+
+
+def grasp_plan(quat: np.ndarray, extents: np.ndarray, centre_z: float) -> tuple[float, float, float]:
+    """(hand yaw, grasp-point height, width across the fingers) for a top-down grasp.
+
+    The fingers close along the hand's y axis, which at yaw ``t`` points along (-sin t, cos t);
+    they must close along the object's narrower horizontal axis.
+    """
+    rotation = quat_matrix(quat)
+    vertical = int(np.argmax(np.abs(rotation[2])))
+    half_height = 0.5 * float(np.abs(rotation[2]) @ extents)
+    horizontal = [i for i in range(3) if i != vertical]
+    candidates = []
+    for i in horizontal:
+        axis = rotation[:, i]
+        yaw = _wrap_half_turn(math.atan2(axis[1], axis[0]) - math.pi / 2)
+        candidates.append((round(float(extents[i]) / 0.003), abs(yaw), yaw, float(extents[i])))
+    _, _, yaw, width = min(candidates)  # narrowest first; near-equal widths: the smaller turn
+    bottom, top = centre_z - half_height, centre_z + half_height
+    return yaw, max(bottom + FLOOR_CLEARANCE, top - FINGER_REACH), width
+
 
 class ScriptedExpert:
-    """Approach above the cube, descend, close, lift; start over if the cube is lost."""
+    """Approach above the object, turn, descend, close, lift; start over if the object is lost."""
 
     def __init__(
         self,
         obs_slices: Mapping[str, slice],
         action_dim: int = 4,
         ee_step: float = 0.04,
+        yaw_step: float = 0.2,
         hover: float = 0.06,
         lift_to: float = 0.15,
         close_steps: int = 4,
@@ -26,40 +70,54 @@ class ScriptedExpert:
     ):
         self.s = obs_slices
         self.action_dim = action_dim
-        self.ee_step, self.hover, self.lift_to = ee_step, hover, lift_to
+        self.use_yaw = action_dim == 5
+        self.ee_step, self.yaw_step = ee_step, yaw_step
+        self.hover, self.lift_to = hover, lift_to
         self.close_steps, self.gain = close_steps, gain
         self.reset()
 
     def reset(self) -> None:
         self.phase = "approach"
         self._closing = 0
+        self._lost = 0
+        self._yaw = 0.0  # the yaw this expert has commanded: the env starts each episode at 0
 
-    def _move(self, grasp: np.ndarray, target: np.ndarray, open_fingers: bool) -> np.ndarray:
+    def _move(self, grasp: np.ndarray, target: np.ndarray, yaw: float, open_fingers: bool) -> np.ndarray:
         action = np.zeros(self.action_dim, np.float32)
         action[:3] = np.clip(self.gain * (target - grasp) / self.ee_step, -1.0, 1.0)
+        if self.use_yaw:
+            action[3] = np.clip((yaw - self._yaw) / self.yaw_step, -1.0, 1.0)
+            self._yaw = float(np.clip(self._yaw + action[3] * self.yaw_step, -math.pi / 2, math.pi / 2))
         action[-1] = 1.0 if open_fingers else -1.0
         return action
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
-        grasp, cube = obs[self.s["grasp_pos"]], obs[self.s["cube_pos"]]
-        error = cube - grasp
+        s = self.s
+        grasp = obs[s["grasp_pos"]].astype(float)
+        centre = grasp + obs[s["object_minus_grasp"]]
+        yaw, grasp_z, _ = grasp_plan(obs[s["object_quat"]], obs[s["object_extents"]], centre[2])
+        yaw = yaw if self.use_yaw else 0.0
+        target = np.array([centre[0], centre[1], grasp_z])
+        flat = np.linalg.norm(target[:2] - grasp[:2])
         if self.phase == "approach":
-            if np.linalg.norm(error[:2]) < 0.01 and abs(grasp[2] - cube[2] - self.hover) < 0.02:
+            above = target + [0.0, 0.0, self.hover]
+            turned = abs(yaw - self._yaw) < 0.1
+            if flat < 0.01 and abs(grasp[2] - above[2]) < 0.02 and turned:
                 self.phase = "descend"
-            return self._move(grasp, cube + [0.0, 0.0, self.hover], open_fingers=True)
+            return self._move(grasp, above, yaw, open_fingers=True)
         if self.phase == "descend":
-            if abs(error[2]) < 0.01:
+            if abs(target[2] - grasp[2]) < 0.01:
                 self.phase = "close"
-            if np.linalg.norm(error[:2]) > 0.02:  # the cube moved: go back up
+            if flat > 0.02:  # the object moved: go back up
                 self.phase = "approach"
-            return self._move(grasp, cube, open_fingers=True)
+            return self._move(grasp, target, self._yaw, open_fingers=True)
         if self.phase == "close":
             self._closing += 1
             if self._closing >= self.close_steps:
-                self.phase, self._closing = "lift", 0
-            return self._move(grasp, cube, open_fingers=False)
-        # lift: a lost cube means try again
-        if np.linalg.norm(error) > 0.04:
+                self.phase, self._closing, self._lost = "lift", 0, 0
+            return self._move(grasp, target, self._yaw, open_fingers=False)
+        # lift: an object out of the fingers for a few steps means try again
+        self._lost = 0 if obs[s["grasped"]][0] > 0.5 else self._lost + 1
+        if self._lost >= 3:
             self.phase = "approach"
-        target = np.array([grasp[0], grasp[1], self.lift_to])
-        return self._move(grasp, target, open_fingers=False)
+        return self._move(grasp, np.array([grasp[0], grasp[1], self.lift_to]), self._yaw, open_fingers=False)

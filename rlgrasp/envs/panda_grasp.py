@@ -10,13 +10,14 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from rlgrasp.envs.objects import ObjectSampler, snap_scale, tilt
 from rlgrasp.envs.randomization import Randomizer
 from rlgrasp.envs.robot import MAX_FINGER_WIDTH, NEUTRAL_POSE, Panda
 from rlgrasp.envs.scene import Scene
 from rlgrasp.envs.task import LiftTask, RewardWeights
 
 CONTROL_MODES = ("ee_delta", "joint_delta", "joint_torque")
-NOMINAL_CUBE_XY = (0.6, 0.0)  # below the grasp point at the neutral pose
+NOMINAL_OBJECT_XY = (0.6, 0.0)  # below the grasp point at the neutral pose
 WORKSPACE_LOW = np.array([0.3, -0.35, 0.005])  # grasp-point targets are clipped to this box;
 WORKSPACE_HIGH = np.array([0.85, 0.35, 0.45])  # the z floor keeps the fingertips off the ground
 
@@ -28,21 +29,26 @@ def _observation_layout(action_dim: int) -> dict[str, int]:
         "finger_width": 1,
         "grasp_pos": 3,
         "grasp_vel": 3,
-        "cube_pos": 3,
-        "cube_quat": 4,
-        "cube_linvel": 3,
-        "cube_angvel": 3,
-        "cube_minus_grasp": 3,
+        "object_pos": 3,
+        "object_quat": 4,
+        "object_linvel": 3,
+        "object_angvel": 3,
+        "object_minus_grasp": 3,
+        "object_extents": 3,
         "grasped": 1,
         "prev_action": action_dim,
     }
 
 
 class PandaGraspEnv(gym.Env):
-    """A Franka Panda grasps a cube on the ground and lifts it.
+    """A Franka Panda grasps an object on the ground and lifts it.
 
+    ``objects`` says which objects episodes draw (``rlgrasp.envs.objects``; default the cube).
     Observation: one float32 vector whose parts are named in ``obs_slices`` (see
-    ``_observation_layout``). Action: a Box in [-1, 1]; the last entry is always the absolute
+    ``_observation_layout``): ``object_pos``/``object_quat`` are the object's base (centre of mass)
+    pose, ``object_minus_grasp`` is its bounding-box centre minus the grasp point and
+    ``object_extents`` the bounding box's size in the object's own frame.
+    Action: a Box in [-1, 1]; the last entry is always the absolute
     finger-width target (-1 closed, +1 open). ``control_mode``:
 
     - ``ee_delta``: grasp-point (dx, dy, dz[, dyaw]) x ``ee_step``, solved by IK, gripper down.
@@ -78,7 +84,7 @@ class PandaGraspEnv(gym.Env):
         camera_pitch: float = -25.0,
         solver_iterations: int = 20,
         robot_urdf: str = "franka_panda/panda.urdf",
-        cube_urdf: str = "cube_small.urdf",
+        objects: str | list[str] | Mapping[str, Any] | None = "cube",
     ):
         if control_mode not in CONTROL_MODES:
             raise ValueError(
@@ -95,6 +101,7 @@ class PandaGraspEnv(gym.Env):
             raise ValueError(f"time_step must be a positive number, got {time_step!r}")
         self.control_mode = control_mode
         self.randomizer = Randomizer(randomization)
+        self.objects = ObjectSampler(objects)
         self.task = LiftTask(reward, RewardWeights(**(reward_weights or {})), success_height)
         self.max_episode_steps = int(max_episode_steps)
         self.substeps = int(substeps)
@@ -110,7 +117,6 @@ class PandaGraspEnv(gym.Env):
         self.scene = Scene(
             time_step=time_step,
             gui=render_mode == "human",
-            cube_urdf=cube_urdf,
             solver_iterations=solver_iterations,
         )
         self.client = self.scene.client
@@ -140,30 +146,16 @@ class PandaGraspEnv(gym.Env):
         super().reset(seed=seed)
         rng = self.np_random
         ep = self.randomizer.sample(rng)
-        c = self.client
-        c.restoreState(self._initial_state)
-        self.scene.park_cubes()
-        ep["cube_size_scale"] = self.scene.select_cube(ep["cube_size_scale"])
-        cube = self.scene.cube
-        c.setGravity(0, 0, ep["gravity_z"])
-        c.changeDynamics(
-            cube,
-            -1,
-            mass=ep["cube_mass"],
-            lateralFriction=ep["cube_lateral_friction"],
-            spinningFriction=ep["cube_spinning_friction"],
-            rollingFriction=ep["cube_rolling_friction"],
-            restitution=ep["cube_restitution"],
-        )
-        self.robot.set_dynamics(ep["joint_damping"], ep["finger_friction"])
-        self._cube_rest_z = self.scene.cube_edge / 2
-        cube_xy = np.add(NOMINAL_CUBE_XY, (ep["cube_x"], ep["cube_y"]))
-        c.resetBasePositionAndOrientation(
-            cube,
-            [cube_xy[0], cube_xy[1], self._cube_rest_z],
-            c.getQuaternionFromEuler((0.0, 0.0, ep["cube_yaw"])),
-        )
         arm_q = np.add(NEUTRAL_POSE, rng.normal(0.0, ep["arm_pose_noise"], 7))
+        self._action_offset = rng.normal(0.0, ep["action_noise_episode"], self.action_dim)
+        self._obs_offset = rng.normal(0.0, ep["obs_noise_episode"], self._sensor_dims)
+        choice = self.objects.draw(rng)  # last: a cube-only env draws the values it always has
+        c = self.client
+        self.scene.remove_object()  # the saved state holds no object: restoring needs the same bodies
+        c.restoreState(self._initial_state)
+        c.setGravity(0, 0, ep["gravity_z"])
+        self._place_object(choice, ep)
+        self.robot.set_dynamics(ep["joint_damping"], ep["finger_friction"])
         self.robot.reset(np.clip(arm_q, self.robot.lower, self.robot.upper))
         if self.control_mode == "joint_torque":
             self.robot.use_torque_control(ep["finger_force"])
@@ -171,17 +163,59 @@ class PandaGraspEnv(gym.Env):
             self.robot.use_position_control(ep["position_gain_scale"], ep["finger_force"])
             self.robot.command_arm(self.robot.joint_state()[0])
         self.robot.command_fingers(MAX_FINGER_WIDTH)
+        if choice.kind in ("mesh", "urdf") and choice.name != "cube":
+            self._settle_object()
 
-        self._action_offset = rng.normal(0.0, ep["action_noise_episode"], self.action_dim)
-        self._obs_offset = rng.normal(0.0, ep["obs_noise_episode"], self._sensor_dims)
         self._pending = collections.deque([self._idle_action.copy()] * ep["action_delay"])
         self._prev_action = self._idle_action.copy()
         self._yaw = 0.0
         self._steps = 0
         self.episode = ep
         obs, state = self._observe()
-        info = self._info(state, success=False)
-        return obs, info
+        return obs, self._info(state, success=False)
+
+    def _settle_object(self, max_substeps: int = 48, speed: float = 5e-3) -> None:
+        """Let a mesh come to rest and take its height then as its rest height.
+
+        A mesh's bounding box says where its lowest point is, not whether it stands: many
+        random_urdfs rock or tip onto a flatter side. Lifting is measured from where it settled.
+        """
+        c, body = self.client, self.scene.object
+        for i in range(max_substeps):
+            c.stepSimulation()
+            if i >= 8:
+                linear, angular = c.getBaseVelocity(body)
+                if max(map(abs, linear)) < speed and max(map(abs, angular)) < 10 * speed:
+                    break
+        self._settle_substeps = i + 1
+        self._rest_z = c.getBasePositionAndOrientation(body)[0][2]
+
+    def _place_object(self, choice, ep: dict[str, Any]) -> None:
+        """Build the drawn object upright at the drawn pose with the drawn (or its own) dynamics."""
+        scale = ep["object_size_scale"] = snap_scale(ep["object_size_scale"])
+        geometry = self.objects.geometry(choice)
+        self.object_name = f"cube/{scale:.1f}" if choice.name == "cube" else choice.name
+        self.object_extents = np.array(geometry.extents, np.float32) * np.float32(scale)
+        self._object_offset = np.array(geometry.offset) * scale
+        self._rest_z = geometry.rest_height * scale
+        self._settle_substeps = 0
+        xy = np.add(NOMINAL_OBJECT_XY, (ep["object_x"], ep["object_y"]))
+        quat = self.client.getQuaternionFromEuler((0.0, 0.0, ep["object_yaw"]))
+        body = self.scene.spawn(choice, scale, [xy[0], xy[1], self._rest_z], quat)
+        ranges = self.randomizer.ranges
+        if "object_mass" not in ranges:
+            ep["object_mass"] = geometry.mass
+        if "object_lateral_friction" not in ranges:
+            ep["object_lateral_friction"] = geometry.lateral_friction
+        self.client.changeDynamics(
+            body,
+            -1,
+            mass=ep["object_mass"],
+            lateralFriction=ep["object_lateral_friction"],
+            spinningFriction=ep["object_spinning_friction"],
+            rollingFriction=ep["object_rolling_friction"],
+            restitution=ep["object_restitution"],
+        )
 
     def step(self, action):
         action = np.asarray(action, dtype=np.float32).reshape(self.action_dim)
@@ -199,9 +233,9 @@ class PandaGraspEnv(gym.Env):
         self._steps += 1
 
         obs, state = self._observe()
-        lift = state["cube_pos"][2] - self._cube_rest_z
+        lift = state["object_pos"][2] - self._rest_z
         reward, success = self.task.evaluate(
-            state["grasp_pos"], state["cube_pos"], lift, state["grasped"]
+            state["grasp_pos"], state["object_centre"], lift, state["grasped"]
         )
         terminated = bool(success and self.terminate_on_success)
         truncated = self._steps >= self.max_episode_steps
@@ -215,7 +249,7 @@ class PandaGraspEnv(gym.Env):
         width, height = self.render_size
         distance, yaw, pitch = self.camera
         view = self.client.computeViewMatrixFromYawPitchRoll(
-            cameraTargetPosition=[NOMINAL_CUBE_XY[0] - 0.15, NOMINAL_CUBE_XY[1], 0.2],
+            cameraTargetPosition=[NOMINAL_OBJECT_XY[0] - 0.15, NOMINAL_OBJECT_XY[1], 0.2],
             distance=distance,
             yaw=yaw,
             pitch=pitch,
@@ -261,13 +295,17 @@ class PandaGraspEnv(gym.Env):
             self.client.stepSimulation()
 
     def _observe(self) -> tuple[np.ndarray, dict[str, Any]]:
-        c, robot, cube = self.client, self.robot, self.scene.cube
+        c, robot, body = self.client, self.robot, self.scene.object
         q, qd, width = robot.joint_state()
         grasp_pos, grasp_vel = robot.grasp_point()
-        cube_pos, cube_quat = c.getBasePositionAndOrientation(cube)
-        cube_linvel, cube_angvel = c.getBaseVelocity(cube)
-        cube_pos = np.array(cube_pos)
-        grasped = LiftTask.grasped(c, robot.body, robot.finger_links, cube)
+        object_pos, object_quat = c.getBasePositionAndOrientation(body)
+        object_linvel, object_angvel = c.getBaseVelocity(body)
+        object_pos = np.array(object_pos)
+        centre = object_pos
+        if self._object_offset.any():
+            rotation = np.array(c.getMatrixFromQuaternion(object_quat)).reshape(3, 3)
+            centre = object_pos + rotation @ self._object_offset
+        grasped = LiftTask.grasped(c, robot.body, robot.finger_links, body)
         obs = np.concatenate(
             [
                 q,
@@ -275,11 +313,12 @@ class PandaGraspEnv(gym.Env):
                 [width],
                 grasp_pos,
                 grasp_vel,
-                cube_pos,
-                cube_quat,
-                cube_linvel,
-                cube_angvel,
-                cube_pos - grasp_pos,
+                object_pos,
+                object_quat,
+                object_linvel,
+                object_angvel,
+                centre - grasp_pos,
+                self.object_extents,
                 [float(grasped)],
                 self._prev_action,
             ]
@@ -288,13 +327,23 @@ class PandaGraspEnv(gym.Env):
         if ep["obs_noise_step"] > 0 or ep["obs_noise_episode"] > 0:
             noise = self._obs_offset + self.np_random.normal(0.0, ep["obs_noise_step"], self._sensor_dims)
             obs[: self._sensor_dims] += noise.astype(np.float32)
-        return obs, {"grasp_pos": grasp_pos, "cube_pos": cube_pos, "grasped": grasped}
+        state = {
+            "grasp_pos": grasp_pos,
+            "object_pos": object_pos,
+            "object_centre": centre,
+            "object_quat": object_quat,
+            "grasped": grasped,
+        }
+        return obs, state
 
     def _info(self, state: dict[str, Any], success: bool) -> dict[str, Any]:
         # numpy scalars, not Python ones: TorchRL's info reader needs a dtype.
         return {
             "is_success": np.bool_(success),
             "grasped": np.bool_(state["grasped"]),
-            "lift_height": np.float32(state["cube_pos"][2] - self._cube_rest_z),
+            "lift_height": np.float32(state["object_pos"][2] - self._rest_z),
+            "object": self.object_name,
+            "object_extents": self.object_extents.copy(),
+            "object_tilt": np.float32(tilt(state["object_quat"])),
             "randomization": dict(self.episode),
         }

@@ -14,7 +14,7 @@ from rlgrasp.envs.scene import data_path
 ARM_JOINTS = tuple(f"panda_joint{i}" for i in range(1, 8))
 FINGER_JOINTS = ("panda_finger_joint1", "panda_finger_joint2")
 FINGER_LINKS = ("panda_leftfinger", "panda_rightfinger")
-GRASP_LINK = "panda_grasptarget"  # the point between the fingertips (RESEARCH.md section 1)
+GRASP_LINK = "panda_grasptarget"  # a fixed link of the Panda URDF between the fingertips
 
 NEUTRAL_POSE = (0.0, 0.41, 0.0, -1.85, 0.0, 2.26, 0.79)
 MAX_FINGER_WIDTH = 0.08

@@ -1,19 +1,23 @@
-"""The PyBullet world: one private client, the ground, and a pool of cubes of different sizes.
+"""The PyBullet world: one private client, the ground, and the episode's object.
 
-A cube's size cannot change after creation, so size randomization picks one body from a small
-pool; the others are parked far away as static bodies (mass 0), where they cost the solver nothing.
+The object is built at each reset and removed before the next one: a parked pool of bodies would
+have to exist when the reset state is saved, and restoring a state costs more the more bodies it
+holds. Collision and visual shapes are cached per object and size scale, because PyBullet never
+frees a removed body's shapes.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
 
 import pybullet
 import pybullet_data
 from pybullet_utils.bullet_client import BulletClient
 
-CUBE_EDGE = 0.05  # m, edge of cube_small.urdf
+from rlgrasp.envs.objects import ObjectChoice
+
+PRIMITIVE_COLOUR = (0.85, 0.45, 0.2, 1.0)
+MESH_COLOUR = (0.57, 0.85, 0.78, 1.0)
 
 
 def data_path(name: str) -> str:
@@ -27,19 +31,12 @@ def data_path(name: str) -> str:
 class Scene:
     """Owns the physics client. Connect inside the process that steps it (never before a fork)."""
 
-    def __init__(
-        self,
-        time_step: float = 1.0 / 240.0,
-        gui: bool = False,
-        cube_urdf: str = "cube_small.urdf",
-        cube_scales: Sequence[float] = (0.8, 0.9, 1.0, 1.1, 1.2),
-        solver_iterations: int = 20,
-    ):
-        cube_path = data_path(cube_urdf)  # fail before connecting
+    def __init__(self, time_step: float = 1.0 / 240.0, gui: bool = False, solver_iterations: int = 20):
         self.client = BulletClient(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
         c = self.client
         c.setTimeStep(time_step)
-        # Deterministic pairs: bit-identical replays after restoreState (RESEARCH.md section 1).
+        # Deterministic overlapping pairs make a replay after restoreState bit-identical; without
+        # them the contact order, and so the result, can differ between two runs of one episode.
         # 20 solver iterations instead of PyBullet's 50 nearly double the physics speed, and the
         # scripted grasp succeeds as often (docs/BENCHMARKS.md).
         c.setPhysicsEngineParameter(
@@ -47,32 +44,63 @@ class Scene:
         )
         self.time_step = time_step
         self.plane = c.loadURDF(data_path("plane.urdf"))
-        self.cube_scales = tuple(sorted(cube_scales))
-        self.cubes = [
-            c.loadURDF(cube_path, self._park_position(i, s), globalScaling=s)
-            for i, s in enumerate(self.cube_scales)
-        ]
-        for body in self.cubes:
-            c.changeDynamics(body, -1, mass=0.0)
-        self.cube = self.cubes[self.cube_scales.index(1.0) if 1.0 in self.cube_scales else 0]
-        self.cube_edge = CUBE_EDGE
+        self.object: int | None = None
+        self._shapes: dict[tuple, tuple[int, int]] = {}
 
-    @staticmethod
-    def _park_position(index: int, scale: float) -> list[float]:
-        return [-5.0 - index, 5.0, CUBE_EDGE * scale / 2]
+    def remove_object(self) -> None:
+        """Remove the episode's object; call before restoring a state saved without it."""
+        if self.object is not None:
+            self.client.removeBody(self.object)
+            self.object = None
 
-    def select_cube(self, scale: float) -> float:
-        """Make the pool body nearest ``scale`` the active cube; return its actual scale."""
-        index = min(range(len(self.cube_scales)), key=lambda i: abs(self.cube_scales[i] - scale))
-        self.cube = self.cubes[index]
-        self.cube_edge = CUBE_EDGE * self.cube_scales[index]
-        return self.cube_scales[index]
+    def spawn(self, choice: ObjectChoice, size_scale: float, position, orientation) -> int:
+        """Build ``choice`` at ``size_scale`` x its own scale, at rest at the given pose."""
+        self.remove_object()
+        scale = choice.scale * size_scale
+        if choice.kind == "urdf":
+            body = self.client.loadURDF(choice.path, position, orientation, globalScaling=scale)
+        else:
+            collision, visual = self._shape(choice, scale)
+            body = self.client.createMultiBody(0.1, collision, visual, position, orientation)
+        self.object = body
+        return body
 
-    def park_cubes(self) -> None:
-        """Return every cube to its parking spot as a static body."""
-        for i, (body, s) in enumerate(zip(self.cubes, self.cube_scales)):
-            self.client.changeDynamics(body, -1, mass=0.0)
-            self.client.resetBasePositionAndOrientation(body, self._park_position(i, s), [0, 0, 0, 1])
+    def _shape(self, choice: ObjectChoice, scale: float) -> tuple[int, int]:
+        key = (choice.kind, choice.path, choice.dims, round(scale, 9))
+        if key not in self._shapes:
+            self._shapes[key] = self._build_shape(choice, scale)
+        return self._shapes[key]
+
+    def _build_shape(self, choice: ObjectChoice, scale: float) -> tuple[int, int]:
+        c = self.client
+        if choice.kind == "mesh":
+            from rlgrasp.envs.objects import obj_bounds
+
+            low, high = obj_bounds(choice.path)
+            centre = [-(lo + h) / 2 * scale for lo, h in zip(low, high)]  # bounding-box centre at the base
+            mesh = dict(fileName=choice.path, meshScale=[scale] * 3)
+            collision = c.createCollisionShape(pybullet.GEOM_MESH, collisionFramePosition=centre, **mesh)
+            visual = c.createVisualShape(
+                pybullet.GEOM_MESH, visualFramePosition=centre, rgbaColor=MESH_COLOUR, **mesh
+            )
+            return collision, visual
+        d = [x * scale for x in choice.dims]
+        lying = c.getQuaternionFromEuler((0.0, 1.5707963267948966, 0.0))  # capsule axis along x
+        if choice.kind == "box":
+            args = dict(shapeType=pybullet.GEOM_BOX, halfExtents=[x / 2 for x in d])
+            return c.createCollisionShape(**args), c.createVisualShape(**args, rgbaColor=PRIMITIVE_COLOUR)
+        if choice.kind == "sphere":
+            args = dict(shapeType=pybullet.GEOM_SPHERE, radius=d[0])
+            return c.createCollisionShape(**args), c.createVisualShape(**args, rgbaColor=PRIMITIVE_COLOUR)
+        shape = pybullet.GEOM_CYLINDER if choice.kind == "cylinder" else pybullet.GEOM_CAPSULE
+        frame = [0, 0, 0, 1] if choice.kind == "cylinder" else lying
+        collision = c.createCollisionShape(
+            shape, radius=d[0], height=d[1], collisionFrameOrientation=frame
+        )
+        visual = c.createVisualShape(
+            shape, radius=d[0], length=d[1], visualFrameOrientation=frame, rgbaColor=PRIMITIVE_COLOUR
+        )
+        return collision, visual
 
     def close(self) -> None:
         try:

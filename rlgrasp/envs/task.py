@@ -30,7 +30,7 @@ class RewardWeights:
 
 
 class LiftTask:
-    """Success = the cube at least ``success_height`` above its rest height, held by both fingers."""
+    """Success = the object at least ``success_height`` above its own rest height, held by both fingers."""
 
     def __init__(
         self,
@@ -45,22 +45,22 @@ class LiftTask:
         self.success_height = success_height
 
     @staticmethod
-    def grasped(client: BulletClient, robot_body: int, finger_links: list[int], cube: int) -> bool:
-        """Both fingers touch the cube."""
+    def grasped(client: BulletClient, robot_body: int, finger_links: list[int], body: int) -> bool:
+        """Both fingers touch the object."""
         return all(
-            client.getContactPoints(bodyA=robot_body, bodyB=cube, linkIndexA=link)
+            client.getContactPoints(bodyA=robot_body, bodyB=body, linkIndexA=link)
             for link in finger_links
         )
 
     def evaluate(
-        self, grasp_pos: np.ndarray, cube_pos: np.ndarray, lift: float, grasped: bool
+        self, grasp_pos: np.ndarray, object_pos: np.ndarray, lift: float, grasped: bool
     ) -> tuple[float, bool]:
-        """Reward and success for one step."""
+        """Reward and success for one step; ``object_pos`` is the point the reach term pulls towards."""
         success = bool(grasped and lift >= self.success_height)
         if self.reward_kind == "sparse":
             return float(success), success
         w = self.weights
-        reach = 1.0 - math.tanh(5.0 * float(np.linalg.norm(cube_pos - grasp_pos)))
+        reach = 1.0 - math.tanh(5.0 * float(np.linalg.norm(object_pos - grasp_pos)))
         progress = min(max(lift / self.success_height, 0.0), 1.0) if grasped else 0.0
         total = w.reach * reach + w.grasp * grasped + w.lift * progress + w.success * success
         return total / (w.reach + w.grasp + w.lift + w.success), success
