@@ -59,7 +59,9 @@ class EnvConfig:
     camera_pitch: float = -25.0
     solver_iterations: int = 20
     robot_urdf: str = "franka_panda/panda.urdf"
-    cube_urdf: str = "cube_small.urdf"
+    # A set name (the `objects` config group sets it), a list of set names, or a mapping with
+    # sets / paths / max_width / scale: see rlgrasp/envs/objects.py.
+    objects: Any = "cube"
 
 
 @dataclass
@@ -197,7 +199,7 @@ class EvalConfig:
     seed: int = 0  # episode i is reset with seed + i
     # null: the randomization the policy was trained with (baselines: the env's default, `default`).
     # A preset (none | default | wide) or explicit ranges over a base preset, e.g.
-    #   'randomization={preset:default,cube_mass:[0.5,1.0],finger_force:[5,10]}'
+    #   'randomization={preset:default,object_mass:[0.5,1.0],finger_force:[5,10]}'
     # (randomization=wide alone selects the training config group, which sets env.randomization.)
     randomization: Any = None
     # Env keywords over the checkpoint's env config, e.g. +env.max_episode_steps=80.

@@ -12,7 +12,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import rlgrasp
-from rlgrasp.envs import CONTROL_MODES, PandaGraspEnv, Randomizer, ScriptedExpert, make_torchrl_env
+from rlgrasp.envs import CONTROL_MODES, PandaGraspEnv, Randomizer, ScriptedExpert
 
 
 @pytest.fixture
@@ -45,13 +45,19 @@ def test_registered_ids_make_the_env():
 
 
 def test_torchrl_env_specs_and_info_keys():
+    """The env as the collector workers build it passes TorchRL's spec check, info keys included."""
+    import functools
+
     from torchrl.envs.utils import check_env_specs
 
-    env = make_torchrl_env(randomization="default")
+    from rlgrasp.train.collect import make_batched_env
+
+    make_env = functools.partial(PandaGraspEnv, randomization="default", objects="primitives")
+    env = make_batched_env(make_env, 2, base_seed=0, episode_stats=False, seed_torch=False)
     check_env_specs(env)
     rollout = env.rollout(3)
     assert rollout["next", "is_success"].dtype.is_floating_point is False
-    assert rollout["next", "lift_height"].shape == (3,)
+    assert rollout["next", "lift_height"].shape == (2, 3)
     env.close()
 
 

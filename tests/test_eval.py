@@ -72,7 +72,8 @@ def test_checkpoint_evaluation_writes_every_artefact(tmp_path: Path) -> None:
     assert {"mean", "std"} <= set(saved["return"]) and saved["mean_length"] == 50.0
     rows = list(csv.DictReader(open(out / "episodes.csv")))
     assert [int(r["seed"]) for r in rows] == [0, 1, 2, 3]
-    assert {"cube_mass", "finger_force", "cube_x", "return", "success_at_end", "success_once"} <= set(rows[0])
+    expected = {"object_mass", "finger_force", "object_x", "return", "success_at_end", "success_once"}
+    assert expected <= set(rows[0])
     assert "success at end" in (out / "summary.md").read_text()
     assert list((run / "tensorboard").glob("events.out.tfevents.*"))  # logged to the run
     # ckpt_kind=last and explicit randomization ranges (conditions never trained on).
@@ -86,11 +87,11 @@ def test_checkpoint_evaluation_writes_every_artefact(tmp_path: Path) -> None:
             "plots=false",
             "tensorboard=false",
             "name=t2",
-            "randomization={preset:none,cube_mass:[0.8,1.0]}",
+            "randomization={preset:none,object_mass:[0.8,1.0]}",
         )
     )
     assert m2["checkpoint"]["path"].endswith("last.pt")
-    masses = [float(r["cube_mass"]) for r in csv.DictReader(open(run / "eval" / "t2" / "episodes.csv"))]
+    masses = [float(r["object_mass"]) for r in csv.DictReader(open(run / "eval" / "t2" / "episodes.csv"))]
     assert all(0.8 <= x <= 1.0 for x in masses)
 
 

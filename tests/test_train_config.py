@@ -61,10 +61,10 @@ def test_env_schema_mirrors_the_constructor() -> None:
 
 
 def test_env_factory_is_one_picklable_partial(train_cfg) -> None:
-    cfg = train_cfg("env.ee_yaw=true", "env.randomization={preset:none,cube_mass:[0.5,1.0]}")
+    cfg = train_cfg("env.ee_yaw=true", "env.randomization={preset:none,object_mass:[0.5,1.0]}")
     make_env = pickle.loads(pickle.dumps(env_factory(cfg.env)))
     assert make_env.keywords["ee_yaw"] is True
-    assert make_env.keywords["randomization"] == {"preset": "none", "cube_mass": [0.5, 1.0]}
+    assert make_env.keywords["randomization"] == {"preset": "none", "object_mass": [0.5, 1.0]}
     assert type(make_env.keywords["randomization"]) is dict  # plain values, not OmegaConf nodes
     env = make_env()
     try:

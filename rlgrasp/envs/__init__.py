@@ -3,7 +3,6 @@
 from rlgrasp.envs.expert import ScriptedExpert
 from rlgrasp.envs.panda_grasp import CONTROL_MODES, PandaGraspEnv
 from rlgrasp.envs.randomization import PARAMS, PRESETS, Randomizer, Range
-from rlgrasp.envs.torchrl_env import make_torchrl_env
 
 __all__ = [
     "CONTROL_MODES",
@@ -13,5 +12,4 @@ __all__ = [
     "Randomizer",
     "Range",
     "ScriptedExpert",
-    "make_torchrl_env",
 ]
