@@ -188,11 +188,15 @@ def test_preempted_job_resumes_in_its_run_dir(slurm, tmp_path: Path, how: str) -
     try:
         sweeps = tmp_path / "outputs" / "multirun" / "smoke"
         job = _wait_for(lambda: next(sweeps.glob("*/0/checkpoints/last.pt"), None), timeout=300).parents[1]
-        (job_id,) = re.findall(r"^\s+id: '?(\d+_\d+)'?$", (job / ".hydra" / "hydra.yaml").read_text(), re.M)
+        (job_id,) = re.findall(r"^\s+id: '?(\d+(?:_\d+)?)'?$", (job / ".hydra" / "hydra.yaml").read_text(),
+                               re.M)
         if how == "requeue":
             subprocess.run(["scontrol", "requeue", job_id], check=True, timeout=30)
         else:
             subprocess.run(["scancel", "--signal=TERM", job_id], check=True, timeout=30)
+        # SLURM holds a requeued job for ~2 minutes (Reason=BeginTime); let it start as soon as it is pending.
+        _wait_for(lambda: True if _scontrol_job(job_id)["JobState"] == "PENDING" else None, timeout=120)
+        subprocess.run(["scontrol", "update", f"JobId={job_id}", "StartTime=now"], check=True, timeout=30)
         out, _ = proc.communicate(timeout=600)
     finally:
         proc.kill()
