@@ -280,10 +280,17 @@ def _first_not_none(value: Any, fallback: Any) -> Any:
     return fallback if value is None else value
 
 
+def _sum(*values: int) -> int:
+    return sum(values)
+
+
 def register_configs() -> None:
-    """Register every schema (idempotent) and the ``rlgrasp_or`` resolver used by ``hydra.run.dir``."""
+    """Register every schema (idempotent), the ``rlgrasp_or`` resolver used by ``hydra.run.dir`` and
+    ``rlgrasp_sum`` (OmegaConf has no arithmetic; the SLURM launcher asks for workers + 1 CPUs)."""
     if not OmegaConf.has_resolver("rlgrasp_or"):
         OmegaConf.register_new_resolver("rlgrasp_or", _first_not_none)
+    if not OmegaConf.has_resolver("rlgrasp_sum"):
+        OmegaConf.register_new_resolver("rlgrasp_sum", _sum)
     cs = ConfigStore.instance()
     cs.store(name="train_schema", node=TrainConfig)
     cs.store(group="env", name="env_schema", node=EnvConfig)

@@ -68,7 +68,7 @@ def test_slurm_launcher_config_composes() -> None:
     with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
         cfg = compose("train", overrides=["hydra/launcher=slurm"], return_hydra_config=True)
     assert cfg.hydra.launcher._target_.endswith("SlurmLauncher")
-    assert cfg.hydra.launcher.cpus_per_task == 9
+    assert cfg.hydra.launcher.cpus_per_task == 3  # collector.num_workers (2) + the learner
 
 
 # ---------------------------------------------------------------------------------------------
