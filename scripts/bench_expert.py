@@ -2,9 +2,8 @@
 
 The expert is the proof that the task is solvable and the baseline a learned policy is compared
 with. Seeds are 0..N-1, so the figures reproduce exactly. Each failure gets one reason, read from
-the episode's info: ``too wide`` (narrowest horizontal extent above 7.5 cm), ``tipped or rolled``
-(the object's tilt changed by more than 30 degrees before it was first held), ``never grasped``,
-``slipped`` (held at some point, not at the end) or ``held, not lifted``.
+the episode's info by the rules the evaluation uses (``rlgrasp.evaluation.outcomes``): ``too wide``,
+``tipped or rolled``, ``never grasped``, ``slipped`` or ``held, not lifted``.
 
     python scripts/bench_expert.py [--episodes 100] [--presets none default wide] [--objects cube]
 """
@@ -13,28 +12,18 @@ from __future__ import annotations
 
 import argparse
 import collections
-import math
 
 from rlgrasp.envs import PandaGraspEnv, ScriptedExpert
+from rlgrasp.evaluation.outcomes import failure_reason as classify
 from rlgrasp.stats import wilson_interval
-
-TIPPED = math.radians(30)
 
 
 def failure_reason(infos: list[dict]) -> str:
-    last = infos[-1]
-    if min(float(x) for x in last["object_extents"][:2]) > 0.075:
-        return "too wide"
-    held = [bool(i["grasped"]) for i in infos]
-    first_hold = held.index(True) if any(held) else len(infos)
-    start_tilt = float(infos[0]["object_tilt"])  # a settled mesh may rest tilted already
-    if any(abs(float(i["object_tilt"]) - start_tilt) > TIPPED for i in infos[: first_hold + 1]):
-        return "tipped or rolled"
-    if not any(held):
-        return "never grasped"
-    if not held[-1]:
-        return "slipped"
-    return "held, not lifted"
+    return classify(
+        [bool(i["grasped"]) for i in infos],
+        [float(i["object_tilt"]) for i in infos],
+        infos[-1]["object_extents"],
+    )
 
 
 def run(preset: str, objects, episodes: int, ee_yaw: bool) -> dict:

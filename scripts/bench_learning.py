@@ -7,12 +7,18 @@ start-up time is charged to the run.
 
     python scripts/bench_learning.py --seeds 0 1 2 --minutes 5 --out outputs/bench_learning
     python scripts/bench_learning.py --minutes 30 --tag joint_delta -- env.control_mode=joint_delta
+    python scripts/bench_learning.py --experiment grasp_objects_ppo --tag grasp_objects_ppo --minutes 20 \
+        --eval-objects random_urdfs_test train_mix --eval-episodes 200
+
+``--eval-objects`` evaluates each run's last checkpoint after training with ``scripts/evaluate.py``
+on those object sets (config group ``objects``), e.g. the held-out ``random_urdfs_test``.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import json
 import subprocess
 import sys
 import time
@@ -47,6 +53,21 @@ def run_seed(out: Path, tag: str, seed: int, minutes: float, experiment: str, ov
     return {"run_dir": run_dir, "start": start, "wall_s": time.time() - start}
 
 
+def evaluate_on(run_dir: Path, objects: str, episodes: int) -> dict:
+    """success_at_end of the run's last checkpoint on ``objects`` (seeds 0..episodes-1)."""
+    name = f"bench_{objects}"
+    cmd = [
+        sys.executable, str(ROOT / "scripts" / "evaluate.py"), f"ckpt={run_dir}", "ckpt_kind=last",
+        f"objects={objects}", f"episodes={episodes}", "workers=2", "video=false", "tensorboard=false",
+        f"name={name}",
+    ]
+    print("$", " ".join(cmd[1:]), flush=True)
+    with open(run_dir / f"{name}.log", "w") as log:
+        if subprocess.call(cmd, stdout=log, stderr=subprocess.STDOUT, cwd=ROOT) != 0:
+            raise SystemExit(f"evaluation of {run_dir} on {objects} failed; see {log.name}")
+    return json.loads((run_dir / "eval" / name / "metrics.json").read_text())["success_at_end"]
+
+
 def final_episodes(run_dir: Path) -> int:
     """Episodes behind a run's last eval point: the final evaluation's count."""
     cfg = OmegaConf.load(run_dir / ".hydra" / "config.yaml").eval
@@ -67,11 +88,13 @@ def main() -> None:
     parser.add_argument("--experiment", default="grasp_ppo")
     parser.add_argument("--tag", default="grasp_ppo")
     parser.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_learning")
+    parser.add_argument("--eval-objects", nargs="*", default=[], help="sets to evaluate after training")
+    parser.add_argument("--eval-episodes", type=int, default=200)
     parser.add_argument("overrides", nargs="*", help="extra training overrides, after --")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
 
-    rows, finals = [], []
+    rows, finals, held_out = [], [], []
     for seed in args.seeds:
         run = run_seed(args.out, args.tag, seed, args.minutes, args.experiment, args.overrides)
         curve = eval_curve(run["run_dir"], run["start"])
@@ -84,6 +107,11 @@ def main() -> None:
         print(f"seed {seed}: final eval success {success:.3f} over {episodes} episodes "
               f"[{low:.3f}, {high:.3f}] at {frames:,} frames, {minutes:.1f} min; "
               f"first >= 0.9 at {'-' if first_90 is None else f'{first_90:.1f} min'}", flush=True)
+        for objects in args.eval_objects:
+            r = evaluate_on(run["run_dir"], objects, args.eval_episodes)
+            held_out.append((seed, objects, r))
+            print(f"seed {seed}: last checkpoint on {objects}: {r['successes']}/{r['episodes']} "
+                  f"= {r['rate']:.3f} [{r['ci95'][0]:.3f}, {r['ci95'][1]:.3f}]", flush=True)
 
     csv_path = args.out / f"{args.tag}.csv"
     with open(csv_path, "w", newline="") as f:
@@ -100,6 +128,9 @@ def main() -> None:
               f"{minutes:>9.1f}{'-' if first_90 is None else f'{first_90:.1f} min':>14}")
     hits = sum(round(f[3] * f[5]) >= 0.9 * f[5] for f in finals)  # counts: 0.9 is 0.8999... in float32
     print(f"seeds with final eval success >= 0.9: {hits}/{len(finals)}")
+    for seed, objects, r in held_out:
+        print(f"seed {seed} on {objects:>20}: {r['rate']:.3f} over {r['episodes']} episodes "
+              f"[{r['ci95'][0]:.2f}, {r['ci95'][1]:.2f}]")
     print(f"wrote {csv_path} and {csv_path.with_suffix('.png')}")
 
 

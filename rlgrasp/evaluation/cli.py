@@ -184,13 +184,15 @@ def _write_artefacts(
     from rlgrasp.evaluation import metrics as M
 
     M.write_episodes_csv(out / "episodes.csv", results)
-    files = ["metrics.json", "episodes.csv", "summary.md"]
+    M.write_objects_csv(out / "objects.csv", metrics)
+    files = ["metrics.json", "episodes.csv", "objects.csv", "summary.md"]
     if cfg.plots:
-        from rlgrasp.evaluation.plots import return_histogram, success_by_parameter
+        from rlgrasp.evaluation.plots import return_histogram, success_by_object_plot, success_by_parameter
 
         metrics["success_by_parameter"] = success_by_parameter(results, out / "success_by_parameter.png")
         return_histogram(results, out / "return_histogram.png")
-        files += ["success_by_parameter.png", "return_histogram.png"]
+        success_by_object_plot(metrics, out / "success_by_object.png")
+        files += ["success_by_parameter.png", "return_histogram.png", "success_by_object.png"]
     if fmt:
         from rlgrasp.evaluation.video import write_video
 
@@ -204,8 +206,9 @@ def _write_artefacts(
     metrics["files"] = files
     M.write_json(out / "metrics.json", metrics)
     (out / "summary.md").write_text(
-        f"# Evaluation {out.name}\n\n{table}\n\nWall time {seconds:.1f} s on {cfg.workers} worker(s). "
-        f"Files: {', '.join(files)}\n"
+        f"# Evaluation {out.name}\n\n{table}\n\n## Outcomes\n\n{M.outcome_table(metrics)}\n\n"
+        f"## Success per object, lowest first (all of them: objects.csv)\n\n{M.object_table(metrics)}\n\n"
+        f"Wall time {seconds:.1f} s on {cfg.workers} worker(s). Files: {', '.join(files)}\n"
     )
     return files
 

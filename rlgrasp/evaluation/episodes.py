@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from rlgrasp.evaluation.outcomes import SUCCESS, failure_reason
 from rlgrasp.evaluation.policies import Actor, PolicySource, build_policy
 
 
@@ -41,6 +42,8 @@ class EpisodeResult:
     max_lift_height: float
     frames: list[np.ndarray] | None = None
     step_success: list[bool] = field(default_factory=list)
+    object: str = ""  # e.g. "random_urdfs/140" (envs without objects: "")
+    outcome: str = ""  # "success" or the failure reason (rlgrasp.evaluation.outcomes)
 
 
 def run_episode(env: Any, actor: Actor, index: int, seed: int, render: bool) -> EpisodeResult:
@@ -49,6 +52,8 @@ def run_episode(env: Any, actor: Actor, index: int, seed: int, render: bool) -> 
     actor.reset(seed)
     frames = [env.render()] if render else None
     total, steps, first, success, max_lift = 0.0, 0, None, False, 0.0
+    # From the reset on, as the env reports them: what failure_reason reads.
+    held, tilts = [bool(info.get("grasped", False))], [float(info.get("object_tilt", 0.0))]
     step_success = []
     while True:
         obs, reward, terminated, truncated, info = env.step(actor(obs))
@@ -59,6 +64,8 @@ def run_episode(env: Any, actor: Actor, index: int, seed: int, render: bool) -> 
         if success and first is None:
             first = steps
         max_lift = max(max_lift, float(info.get("lift_height", 0.0)))
+        held.append(bool(info.get("grasped", False)))
+        tilts.append(float(info.get("object_tilt", 0.0)))
         if render:
             frames.append(env.render())
         if terminated or truncated:
@@ -76,7 +83,15 @@ def run_episode(env: Any, actor: Actor, index: int, seed: int, render: bool) -> 
         max_lift_height=max_lift,
         frames=frames,
         step_success=step_success,
+        object=str(info.get("object", "")),
+        outcome=_outcome(success, held, tilts, info),
     )
+
+
+def _outcome(success: bool, held: list[bool], tilts: list[float], info: dict[str, Any]) -> str:
+    if success:
+        return SUCCESS
+    return failure_reason(held, tilts, info.get("object_extents", (0.0, 0.0, 0.0)))
 
 
 # --- worker processes -------------------------------------------------------------------------

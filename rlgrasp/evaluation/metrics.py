@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import collections
 import csv
 import json
 import math
@@ -12,12 +13,15 @@ from typing import Any
 import numpy as np
 
 from rlgrasp.evaluation.episodes import EpisodeResult
+from rlgrasp.evaluation.outcomes import success_by_object
 from rlgrasp.stats import wilson_interval
 from rlgrasp.utils import markdown_table
 
 EPISODE_FIELDS = (
     "episode",
     "seed",
+    "object",
+    "outcome",
     "return",
     "length",
     "success_at_end",
@@ -59,6 +63,8 @@ def summarize(results: Sequence[EpisodeResult]) -> dict[str, Any]:
         "mean_length": float(np.mean([r.length for r in results])),
         # Over the episodes that succeeded at least once (null when none did).
         "mean_steps_to_first_success": _mean(firsts),
+        "outcomes": dict(collections.Counter(r.outcome for r in results).most_common()),
+        "success_by_object": success_by_object([r.object for r in results], [r.outcome for r in results]),
     }
 
 
@@ -72,6 +78,8 @@ def episode_rows(results: Sequence[EpisodeResult]) -> tuple[list[str], list[dict
         row = {
             "episode": r.index,
             "seed": r.seed,
+            "object": r.object,
+            "outcome": r.outcome,
             "return": round(r.episode_return, 6),
             "length": r.length,
             "success_at_end": int(r.success_at_end),
@@ -121,6 +129,34 @@ def summary_table(metrics: dict[str, Any]) -> str:
         ("mean steps to first success", _fmt(m["mean_steps_to_first_success"], ".1f")),
     ]
     return markdown_table(("metric", "value"), rows)
+
+
+def outcome_table(metrics: dict[str, Any]) -> str:
+    """Episodes per outcome: how the failures split."""
+    n = metrics["episodes"]
+    rows = [(name, count, f"{count / n:.1%}") for name, count in metrics["outcomes"].items()]
+    return markdown_table(("outcome", "episodes", "share"), rows)
+
+
+def object_table(metrics: dict[str, Any], most: int = 20) -> str:
+    """The ``most`` objects with the lowest success (the whole list is in ``objects.csv``)."""
+    rows = [
+        (r["object"], r["episodes"], r["successes"], f"{r['rate']:.0%}",
+         f"[{r['ci95'][0]:.0%}, {r['ci95'][1]:.0%}]", r["main_failure"])
+        for r in metrics["success_by_object"][:most]
+    ]
+    return markdown_table(("object", "episodes", "successes", "rate", "95% Wilson", "main failure"), rows)
+
+
+def write_objects_csv(path: Path, metrics: dict[str, Any]) -> Path:
+    fields = ("object", "episodes", "successes", "rate", "ci95_low", "ci95_high", "main_failure")
+    with open(path, "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(fields)
+        for r in metrics["success_by_object"]:
+            writer.writerow([r["object"], r["episodes"], r["successes"], round(r["rate"], 4),
+                             round(r["ci95"][0], 4), round(r["ci95"][1], 4), r["main_failure"]])
+    return path
 
 
 def write_json(path: Path, data: Any) -> Path:

@@ -126,3 +126,38 @@ def return_histogram(results: Sequence[EpisodeResult], path: Path) -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def success_by_object_plot(metrics: dict[str, Any], path: Path, most: int = 30) -> Path:
+    """Left: success per object group; right: the ``most`` objects that fail most (Wilson bars)."""
+    from rlgrasp.evaluation.outcomes import object_group
+
+    plt = pyplot()
+    rows = metrics["success_by_object"]
+    groups: dict[str, list[int]] = {}
+    for r in rows:
+        n_k = groups.setdefault(object_group(r["object"]), [0, 0])
+        n_k[0] += r["episodes"]
+        n_k[1] += r["successes"]
+    worst = rows[:most][::-1]  # the worst at the top of a horizontal bar chart
+    height = max(3.0, 0.22 * max(len(worst), len(groups)) + 1.2)
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, height), gridspec_kw={"width_ratios": [1, 2]})
+    for ax, labels, counts in (
+        (left, list(groups), [tuple(v) for v in groups.values()]),
+        (right, [r["object"] for r in worst], [(r["episodes"], r["successes"]) for r in worst]),
+    ):
+        rates = [k / n for n, k in counts]
+        bounds = [wilson_interval(k, n) for n, k in counts]
+        err = [[max(0.0, r - lo) for r, (lo, _) in zip(rates, bounds)],
+               [max(0.0, hi - r) for r, (_, hi) in zip(rates, bounds)]]
+        ax.barh(range(len(labels)), rates, xerr=err, color="tab:blue", capsize=2)
+        ax.set_yticks(range(len(labels)), [f"{lab} (n={n})" for lab, (n, _) in zip(labels, counts)],
+                      fontsize=7)
+        ax.set_xlim(0, 1.02)
+        ax.set_xlabel("success at end")
+    left.set_title("per object group", fontsize=9)
+    right.set_title(f"the {len(worst)} objects with the lowest success", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
