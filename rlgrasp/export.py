@@ -212,8 +212,10 @@ def record(ckpt: dict[str, Any], n: int, seed: int) -> tuple[np.ndarray, np.ndar
 
 
 def max_abs_diff(path: Path, observations: np.ndarray, reference: np.ndarray) -> float:
-    """Largest |exported - reference| over all observations, fed to the file as one batch."""
-    exported = load_exported(path)(observations)
+    """Largest |exported - reference| over all observations, fed one at a time as in deployment (and
+    as the reference was computed: a batch sums in another order, differing in the last bits)."""
+    policy = load_exported(path)
+    exported = np.concatenate([policy(obs[None]) for obs in observations])
     if exported.shape != reference.shape:
         raise ExportError(f"{path}: actions of shape {exported.shape}, expected {reference.shape}")
     return float(np.abs(exported - reference).max())
