@@ -4,6 +4,7 @@ tracker, and ``resume=`` continues the same tracker run. Short in-process runs o
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 from typing import Any
 
@@ -79,6 +80,18 @@ def _wandb_records(path: Path) -> list[Any]:
     return out
 
 
+def _complete_records(logs: list[Path], timeout_s: float = 30.0) -> list[Any]:
+    """The records of every log once each holds its exit record: W&B's service process writes the
+    log on its own after ``finish()`` returns."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        per_log = [_wandb_records(p) for p in logs]
+        done = all(any(r.WhichOneof("record_type") == "exit" for r in recs) for recs in per_log)
+        if done or time.monotonic() > deadline:
+            return [r for recs in per_log for r in recs]
+        time.sleep(0.2)
+
+
 def _item(item: Any) -> tuple[str, Any]:
     """A history item's key and value (newer W&B writes keys as nested parts, values typed)."""
     key = item.key or "/".join(item.nested_key)
@@ -98,7 +111,7 @@ def test_wandb_offline_gets_tags_config_and_resumes_the_same_run(tmp_path: Path,
 
     logs = sorted(run_dir.glob("wandb/offline-run-*/run-*.wandb"))
     assert len(logs) == 2 and all(p.name == f"run-{run_id}.wandb" for p in logs)  # `wandb sync` joins them
-    records = [r for p in logs for r in _wandb_records(p)]
+    records = _complete_records(logs)
     runs = [r.run for r in records if r.WhichOneof("record_type") == "run"]
     assert runs and all(r.run_id == run_id for r in runs)
     assert {"panda", "smoke"} <= set(runs[0].tags) and runs[0].display_name.startswith("smoke/")
