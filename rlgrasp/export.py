@@ -256,7 +256,9 @@ def describe(ckpt: dict[str, Any], ckpt_path: Path, env: Any) -> dict[str, Any]:
     return {
         "input": {"name": "observation", "dtype": "float32", "shape": ["batch", spec["obs_dim"]]},
         "output": {"name": "action", "dtype": "float32", "shape": ["batch", spec["action_dim"]]},
-        "observation_layout": {k: [s.start, s.stop] for k, s in env.obs_slices.items()},
+        # Envs without named parts (stand-ins, your own): one block.
+        "observation_layout": {k: [s.start, s.stop] for k, s in getattr(env, "obs_slices", {}).items()}
+        or {"observation": [0, spec["obs_dim"]]},
         "action_meaning": action_meaning(env_cfg),
         "action_low": list(spec["action_low"]),
         "action_high": list(spec["action_high"]),

@@ -85,7 +85,7 @@ class WandbTracker(Tracker):
     """A W&B run whose id lives in the run directory; x axis = the ``frames`` metric, so a resumed
     run's steps may go back to the checkpoint's frames without W&B dropping them."""
 
-    def __init__(self, cfg: Any, run_dir: Path, config: dict[str, Any], run_id: str | None) -> None:
+    def __init__(self, cfg: Any, name: str, run_dir: Path, config: dict[str, Any], run_id: str | None):
         import wandb
 
         self.run = wandb.init(
@@ -95,7 +95,7 @@ class WandbTracker(Tracker):
             dir=str(run_dir),
             id=run_id or uuid.uuid4().hex[:12],
             resume="allow",
-            name=cfg.run_name,
+            name=name,
             tags=list(cfg.tags),
             config=config,
             allow_val_change=True,  # a resume may change keys such as `resume` itself
@@ -120,7 +120,7 @@ class WandbTracker(Tracker):
 class MlflowTracker(Tracker):
     """An MLflow run (client API: no process-global active run, so sweeps in one process are safe)."""
 
-    def __init__(self, cfg: Any, run_dir: Path, config: dict[str, Any], run_id: str | None) -> None:
+    def __init__(self, cfg: Any, name: str, run_dir: Path, config: dict[str, Any], run_id: str | None):
         from mlflow.tracking import MlflowClient
 
         uri = cfg.tracking_uri or os.environ.get("MLFLOW_TRACKING_URI") or "outputs/mlruns"
@@ -132,7 +132,7 @@ class MlflowTracker(Tracker):
             exp = client.get_experiment_by_name(cfg.project)
             exp_id = exp.experiment_id if exp else client.create_experiment(cfg.project)
             tags = {t: "" for t in cfg.tags} | {"rlgrasp.run_dir": str(run_dir)}
-            run_id = client.create_run(exp_id, run_name=cfg.run_name, tags=tags).info.run_id
+            run_id = client.create_run(exp_id, run_name=name, tags=tags).info.run_id
         else:
             client.update_run(run_id, status="RUNNING")
         self.run_id = run_id
@@ -208,13 +208,13 @@ def attach_tracker(base: Any, logger_cfg: Any, run_dir: Path, config: dict[str, 
         __import__(kind)
     except ImportError as exc:
         raise ImportError(f'logger={kind} needs its extra: pip install -e ".[{kind}]"') from exc
-    if not logger_cfg.run_name:
-        logger_cfg.run_name = f"{config.get('experiment_name', 'run')}/{Path(run_dir).name}"
+    name = logger_cfg.run_name or f"{config.get('experiment_name', 'run')}/{Path(run_dir).name}"
     if kind == "wandb":
-        tracker: Tracker = WandbTracker(logger_cfg, Path(run_dir), config, stored.get("wandb", {}).get("id"))
+        run_id = stored.get("wandb", {}).get("id")
+        tracker: Tracker = WandbTracker(logger_cfg, name, Path(run_dir), config, run_id)
     else:
         run_id = stored.get("mlflow", {}).get("run_id")
-        tracker = MlflowTracker(logger_cfg, Path(run_dir), config, run_id)
+        tracker = MlflowTracker(logger_cfg, name, Path(run_dir), config, run_id)
     id_file.write_text(json.dumps(tracker.id, indent=2) + "\n")
     log.info("tracking with %s: %s%s", kind, tracker.id[kind], " (resumed)" if stored else "")
     return TrackedLogger(base, tracker)
