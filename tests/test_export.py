@@ -129,3 +129,16 @@ def test_cli_and_example_run_without_training_code(tmp_path: Path) -> None:
     assert "success " in done.stdout and "/2 " in done.stdout
     bad = subprocess.run([*cli[:2], "ckpt=/no/such/run"], capture_output=True, text=True, cwd=tmp_path)
     assert bad.returncode == 2 and bad.stderr.strip().splitlines()[-1].startswith("error: missing checkpoint")
+
+
+def test_output_paths(tmp_path: Path) -> None:
+    from rlgrasp.export import output_paths
+
+    run_ckpt = tmp_path / "run" / "checkpoints" / "best.pt"
+    assert output_paths("onnx", None, run_ckpt) == {"onnx": tmp_path / "run" / "export" / "policy.onnx"}
+    loose = tmp_path / "mine.pt"
+    assert output_paths("pt2", None, loose) == {"pt2": tmp_path / "export" / "policy.pt2"}
+    assert output_paths("pt2", str(tmp_path / "a.pt2"), loose) == {"pt2": tmp_path / "a.pt2"}
+    every = output_paths("all", str(tmp_path / "out"), loose)
+    assert every == {f: tmp_path / "out" / f"policy{ext}" for f, ext in
+                     (("torchscript", ".pt"), ("onnx", ".onnx"), ("pt2", ".pt2"))}
