@@ -302,6 +302,9 @@ def register_configs() -> None:
     cs.store(name="eval_schema", node=EvalConfig)
     cs.store(group="sweep", name="sweep_schema", node=SweepConfig)
     cs.store(name=SWEEP_PRIMARY, node={"defaults": [{"sweep": "smoke"}, "_self_"]})
+    from rlgrasp.train.trackers import register_tracker_configs  # logger=wandb|mlflow (extends LoggerConfig)
+
+    register_tracker_configs()
 
 
 def compose_config(

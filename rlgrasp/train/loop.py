@@ -26,6 +26,7 @@ from rlgrasp.train.evaluate import Evaluator
 from rlgrasp.train.logger import RunLogger, log, progress_line, setup_text_log
 from rlgrasp.train.parts import build_parts
 from rlgrasp.train.ppo import NonFiniteError, PPOLearner
+from rlgrasp.train.trackers import attach_tracker
 from rlgrasp.utils import flatten
 
 #: Called after each evaluation with (frames, metrics); see ``train``.
@@ -120,6 +121,8 @@ class Trainer:
         self.logger = RunLogger(
             self.run_dir / "tensorboard", cfg.logger.backend, purge_step=self.frames + 1 if resumed else None
         )
+        # logger=wandb|mlflow: the same calls also go to that tracker (rlgrasp/train/trackers.py).
+        self.logger = attach_tracker(self.logger, cfg.logger, self.run_dir, self.config, resumed is not None)
         if resumed is None:
             self.logger.text("config", OmegaConf.to_yaml(self.config), 0)
         e = cfg.eval
