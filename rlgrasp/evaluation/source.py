@@ -55,8 +55,14 @@ def load_checked_checkpoint(path: Path) -> dict[str, Any]:
     import torch
 
     try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=False)
-    except (RuntimeError, EOFError, pickle.UnpicklingError, zipfile.BadZipFile, ValueError, OSError) as exc:
+        # weights_only: a checkpoint someone sent cannot run code when it is loaded.
+        ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as exc:
+        raise EvaluationError(
+            f"refused checkpoint: {path} needs to unpickle arbitrary Python objects; only tensors and "
+            f"plain containers are loaded ({str(exc).strip().splitlines()[-1][:200]})"
+        ) from exc
+    except (RuntimeError, EOFError, zipfile.BadZipFile, ValueError, OSError) as exc:
         raise EvaluationError(
             f"corrupt checkpoint: {path} could not be loaded ({type(exc).__name__}: {exc})"
         ) from exc
