@@ -19,6 +19,7 @@ from typing import Any
 
 from hydra import compose, initialize_config_dir
 from hydra.core.config_store import ConfigStore
+from hydra.experimental.callback import Callback
 from hydra.utils import instantiate
 from omegaconf import MISSING, DictConfig, OmegaConf
 
@@ -299,17 +300,17 @@ _RUN_TOKEN = secrets.token_hex(3)  # one per process: every resolution of hydra.
 def run_dir(resume: str | None, base: str, seed: int) -> str:
     """``hydra.run.dir``: a run directory named ``<date>_<time>_s<seed>_<random>`` under ``base``
     (two runs started in the same second never share one); ``resume=<run dir>`` that directory,
-    ``resume=<run>/checkpoints/<file>.pt`` its run; ``resume=auto`` the newest run of ``base`` with
-    this seed that holds a checkpoint, else a new one."""
+    ``resume=<run>/checkpoints/<file>.pt`` its run (any other resume: a new directory);
+    ``resume=auto`` the newest run of ``base`` with this seed that holds a checkpoint, else a new one."""
     chosen = None
     if resume == "auto":
         runs = sorted(Path(base).glob(f"*_s{seed}_*/checkpoints/*.pt"), key=lambda p: p.parts[-3])
         chosen = str(runs[-1].parents[1]) if runs else None
-    elif resume:
+    elif resume:  # a run, or a file in a run's checkpoints/; anything else fails later, in a new dir
         path = Path(resume)
-        if path.is_dir() or not path.exists():
+        if path.is_dir() and any((path / "checkpoints").glob("*.pt")):
             chosen = str(path)
-        elif path.parent.name == "checkpoints":
+        elif path.is_file() and path.parent.name == "checkpoints":
             chosen = str(path.parents[1])
     if chosen is None:
         chosen = f"{base}/{time.strftime('%Y-%m-%d_%H-%M-%S')}_s{seed}_{_RUN_TOKEN}"
@@ -459,3 +460,27 @@ def validate_train(cfg: Any) -> None:
     if problems:
         more = f" (and {len(problems) - 1} more: {'; '.join(problems[1:])})" if len(problems) > 1 else ""
         raise ConfigError(problems[0] + more)
+
+
+class RunDirCheck(Callback):
+    """Hydra callback (``configs/hydra/default.yaml``): an output directory that cannot be created
+    ends the command with one line instead of Hydra's traceback from inside its job runner."""
+
+    def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
+        self._check(config.hydra.run.dir)
+
+    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        self._check(config.hydra.sweep.dir)
+
+    @staticmethod
+    def _check(path: Any) -> None:
+        import sys
+
+        try:
+            Path(str(path)).mkdir(parents=True, exist_ok=True)
+            probe = Path(str(path)) / f".write_probe_{os.getpid()}"
+            probe.touch()
+            probe.unlink()
+        except OSError as exc:
+            print(f"error: cannot create the run directory {path}: {exc.strerror or exc}", file=sys.stderr)
+            sys.exit(2)

@@ -54,13 +54,15 @@ def load_checked_checkpoint(path: Path) -> dict[str, Any]:
     """Load and check the structure; a truncated or foreign file gets a message, not a traceback."""
     import torch
 
+    from rlgrasp.train.checkpoint import unpickler_reason
+
     try:
         # weights_only: a checkpoint someone sent cannot run code when it is loaded.
         ckpt = torch.load(path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as exc:
         raise EvaluationError(
             f"refused checkpoint: {path} needs to unpickle arbitrary Python objects; only tensors and "
-            f"plain containers are loaded ({str(exc).strip().splitlines()[-1][:200]})"
+            f"plain containers are loaded ({unpickler_reason(exc)})"
         ) from exc
     except (RuntimeError, EOFError, zipfile.BadZipFile, ValueError, OSError) as exc:
         raise EvaluationError(

@@ -72,7 +72,7 @@ def read_checkpoint(path: str | os.PathLike, map_location: str | torch.device = 
             raise CheckpointError(f"unreadable checkpoint: {path} ({_first_line(exc)})") from exc
         raise CheckpointError(
             f"refused checkpoint: {path} needs to unpickle arbitrary Python objects "
-            f"({_first_line(exc).removeprefix('Weights only load failed. ')}); only tensors and plain "
+            f"({unpickler_reason(exc)}); only tensors and plain "
             "containers are loaded (an rlgrasp checkpoint of format >= 2 holds nothing else)"
         ) from exc
     except (RuntimeError, EOFError, zipfile.BadZipFile, ValueError, OSError, AttributeError) as exc:
@@ -82,6 +82,14 @@ def read_checkpoint(path: str | os.PathLike, map_location: str | torch.device = 
     if not isinstance(state, dict) or "actor" not in state or "config" not in state:
         raise CheckpointError(f"not an rlgrasp training checkpoint: {path}")
     return state
+
+
+def unpickler_reason(exc: BaseException) -> str:
+    """What torch's weights-only unpickler refused, in one line."""
+    text = str(exc)
+    if "WeightsUnpickler error:" in text:
+        text = text.split("WeightsUnpickler error:", 1)[1].split("Check the documentation", 1)[0]
+    return " ".join(text.split())[:200] or type(exc).__name__
 
 
 def _first_line(exc: BaseException) -> str:
