@@ -72,7 +72,7 @@ CASES = [
     ("resume a missing path", ["resume={root}/nowhere"], "nowhere: no such file or directory"),
     ("resume a directory without checkpoints", ["resume={empty}"], "no checkpoints:"),
     ("resume a truncated checkpoint", ["resume={truncated}"], "unreadable checkpoint:"),
-    ("resume a file that is not a checkpoint", ["resume={foreign}"], "refused checkpoint:"),
+    ("resume a file that is not a checkpoint", ["resume={foreign}"], "unreadable checkpoint:"),
     ("resume with another model", ["resume={run}", "model.hidden_sizes=[32]"],
      "cannot change on resume: model.hidden_sizes: the checkpoint has [64, 64], the command line [32]"),
     ("resume with another algorithm setting", ["resume={run}", "algo.gamma=0.5"],

@@ -60,6 +60,10 @@ def load_checked_checkpoint(path: Path) -> dict[str, Any]:
         # weights_only: a checkpoint someone sent cannot run code when it is loaded.
         ckpt = torch.load(path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as exc:
+        if "Unsupported global" not in str(exc):
+            raise EvaluationError(
+                f"corrupt checkpoint: {path} could not be loaded ({unpickler_reason(exc)})"
+            ) from exc
         raise EvaluationError(
             f"refused checkpoint: {path} needs to unpickle arbitrary Python objects; only tensors and "
             f"plain containers are loaded ({unpickler_reason(exc)})"
