@@ -69,7 +69,7 @@ def read_checkpoint(path: str | os.PathLike, map_location: str | torch.device = 
         state = torch.load(path, map_location=map_location, weights_only=True)
     except pickle.UnpicklingError as exc:
         if "Unsupported global" not in str(exc):  # garbage, or a pickle that is no checkpoint
-            raise CheckpointError(f"unreadable checkpoint: {path} ({_first_line(exc)})") from exc
+            raise CheckpointError(f"unreadable checkpoint: {path} ({unpickler_reason(exc)})") from exc
         raise CheckpointError(
             f"refused checkpoint: {path} needs to unpickle arbitrary Python objects "
             f"({unpickler_reason(exc)}); only tensors and plain "
