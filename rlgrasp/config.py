@@ -10,6 +10,8 @@ differs from it. Training (``train.yaml``), evaluation (``eval.yaml``) and sweep
 from __future__ import annotations
 
 import os
+import secrets
+import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,6 +19,7 @@ from typing import Any
 
 from hydra import compose, initialize_config_dir
 from hydra.core.config_store import ConfigStore
+from hydra.experimental.callback import Callback
 from hydra.utils import instantiate
 from omegaconf import MISSING, DictConfig, OmegaConf
 
@@ -183,7 +186,8 @@ class TrainConfig:
     total_frames: int = 200_000
     # Wall-clock budget in minutes (null = none); training stops cleanly when it runs out.
     time_budget_min: float | None = None
-    # null, or a run directory to continue in place (its checkpoints/last.pt: frames, curves, lr).
+    # null; a run directory to continue in place (its newest readable checkpoint: frames, curves, lr)
+    # or a checkpoint file; or "auto": the newest run of this experiment and seed if any, else fresh.
     resume: str | None = None
 
 
@@ -284,11 +288,44 @@ def _sum(*values: int) -> int:
     return sum(values)
 
 
+class ConfigError(ValueError):
+    """A bad training input; the message is one line naming the key, its value and what is allowed."""
+
+
+#: Run directories this process chose that did not exist before (safe to remove on a start-up error).
+FRESH_RUN_DIRS: set[str] = set()
+_RUN_TOKEN = secrets.token_hex(3)  # one per process: every resolution of hydra.run.dir agrees
+
+
+def run_dir(resume: str | None, base: str, seed: int) -> str:
+    """``hydra.run.dir``: a run directory named ``<date>_<time>_s<seed>_<random>`` under ``base``
+    (two runs started in the same second never share one); ``resume=<run dir>`` that directory,
+    ``resume=<run>/checkpoints/<file>.pt`` its run (any other resume: a new directory);
+    ``resume=auto`` the newest run of ``base`` with this seed that holds a checkpoint, else a new one."""
+    chosen = None
+    if resume == "auto":
+        runs = sorted(Path(base).glob(f"*_s{seed}_*/checkpoints/*.pt"), key=lambda p: p.parts[-3])
+        chosen = str(runs[-1].parents[1]) if runs else None
+    elif resume:  # a run, or a file in a run's checkpoints/; anything else fails later, in a new dir
+        path = Path(resume)
+        if path.is_dir() and any((path / "checkpoints").glob("*.pt")):
+            chosen = str(path)
+        elif path.is_file() and path.parent.name == "checkpoints":
+            chosen = str(path.parents[1])
+    if chosen is None:
+        chosen = f"{base}/{time.strftime('%Y-%m-%d_%H-%M-%S')}_s{seed}_{_RUN_TOKEN}"
+    if not Path(chosen).exists():
+        FRESH_RUN_DIRS.add(str(Path(chosen).resolve()))
+    return chosen
+
+
 def register_configs() -> None:
-    """Register every schema (idempotent), the ``rlgrasp_or`` resolver used by ``hydra.run.dir`` and
-    ``rlgrasp_sum`` (OmegaConf has no arithmetic; the SLURM launcher asks for workers + 1 CPUs)."""
+    """Register every schema (idempotent), the ``rlgrasp_run_dir`` resolver used by ``hydra.run.dir``
+    and ``rlgrasp_sum`` (OmegaConf has no arithmetic; the SLURM launcher asks for workers + 1 CPUs)."""
     if not OmegaConf.has_resolver("rlgrasp_or"):
         OmegaConf.register_new_resolver("rlgrasp_or", _first_not_none)
+    if not OmegaConf.has_resolver("rlgrasp_run_dir"):
+        OmegaConf.register_new_resolver("rlgrasp_run_dir", run_dir)
     if not OmegaConf.has_resolver("rlgrasp_sum"):
         OmegaConf.register_new_resolver("rlgrasp_sum", _sum)
     cs = ConfigStore.instance()
@@ -346,3 +383,107 @@ def env_factory(env_cfg: DictConfig | Mapping[str, Any]) -> Callable[[], Any]:
     makes the keywords (``randomization`` as a preset name or a mapping) plain Python values.
     """
     return instantiate(env_cfg, _partial_=True, _convert_="all")
+
+
+# --- validation of a training config (before any worker starts) -------------------------------
+def _positive(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0
+
+
+def _train_problems(cfg: Any) -> list[str]:
+    """Each bad value of a composed training config as ``key=value: what is allowed``."""
+    c, a, m, e, k = cfg.collector, cfg.algo, cfg.model, cfg.eval, cfg.checkpoint
+    workers = 1 if c.backend == "single" or c.num_workers == 0 else c.num_workers
+    batch = workers * c.envs_per_worker * c.steps_per_env
+    checks = [
+        ("total_frames", cfg.total_frames, cfg.total_frames > 0, "must be > 0"),
+        ("time_budget_min", cfg.time_budget_min, cfg.time_budget_min is None or cfg.time_budget_min > 0,
+         "must be > 0 or null"),
+        ("collector.backend", c.backend, c.backend in ("process", "ray", "single"),
+         "must be process, ray or single"),
+        ("collector.num_workers", c.num_workers, c.num_workers >= 0, "must be >= 0 (0: in-process)"),
+        ("collector.envs_per_worker", c.envs_per_worker, c.envs_per_worker >= 1, "must be >= 1"),
+        ("collector.steps_per_env", c.steps_per_env, c.steps_per_env >= 1, "must be >= 1"),
+        ("collector.torch_threads", c.torch_threads, c.torch_threads >= 1, "must be >= 1"),
+        ("algo.epochs", a.epochs, a.epochs >= 1, "must be >= 1"),
+        ("algo.minibatch_size", a.minibatch_size, 1 <= a.minibatch_size <= max(batch, 1),
+         f"must be between 1 and the batch size ({batch:,} frames = workers x envs_per_worker x "
+         "steps_per_env)"),
+        ("algo.lr", a.lr, a.lr > 0, "must be > 0"),
+        ("algo.gamma", a.gamma, 0 < a.gamma <= 1, "must be in (0, 1]"),
+        ("algo.gae_lambda", a.gae_lambda, 0 <= a.gae_lambda <= 1, "must be in [0, 1]"),
+        ("algo.clip_epsilon", a.clip_epsilon, a.clip_epsilon > 0, "must be > 0"),
+        ("algo.max_grad_norm", a.max_grad_norm, a.max_grad_norm > 0, "must be > 0"),
+        ("model.hidden_sizes", list(m.hidden_sizes), len(m.hidden_sizes) > 0 and all(
+            _positive(h) for h in m.hidden_sizes), "must be a non-empty list of positive sizes"),
+        ("model.activation", m.activation, m.activation in ("tanh", "relu", "elu"),
+         "must be tanh, relu or elu"),
+        ("eval.episodes", e.episodes, e.episodes >= 1, "must be >= 1"),
+        ("eval.final_episodes", e.final_episodes, e.final_episodes is None or e.final_episodes >= 1,
+         "must be >= 1 or null"),
+        ("eval.num_envs", e.num_envs, e.num_envs >= 1, "must be >= 1"),
+        ("checkpoint.keep_last", k.keep_last, k.keep_last >= 1, "must be >= 1"),
+        ("checkpoint.interval_frames", k.interval_frames, k.interval_frames >= 0,
+         "must be >= 0 (0: only at the end)"),
+        ("logger.backend", cfg.logger.backend, cfg.logger.backend in ("tensorboard", "none"),
+         "must be tensorboard or none"),
+    ]
+    return [f"{key}={value!r}: {allowed}" for key, value, ok, allowed in checks if not ok] + _device_problems(
+        cfg.device
+    )
+
+
+def _device_problems(device: str) -> list[str]:
+    import torch
+
+    if device in ("auto", "cpu"):
+        return []
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, ValueError):
+        return [f"device={device!r}: must be auto, cpu, cuda or cuda:<n>"]
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        return [f"device={device!r}: CUDA is not available on this machine (use device=cpu or auto)"]
+    if dev.type == "cuda" and dev.index is not None and dev.index >= torch.cuda.device_count():
+        return [f"device={device!r}: this machine has {torch.cuda.device_count()} CUDA device(s)"]
+    if dev.type not in ("cpu", "cuda"):
+        return [f"device={device!r}: must be auto, cpu, cuda or cuda:<n>"]
+    return []
+
+
+def validate_train(cfg: Any) -> None:
+    """Refuse a training config with a bad value: ``ConfigError`` naming the first (and how many
+    more). The env's own keywords are checked by the env when the learner builds it, before workers."""
+    if OmegaConf.is_config(cfg) and cfg.env.get("_target_") == EnvConfig._target_:
+        try:
+            OmegaConf.merge(OmegaConf.structured(EnvConfig), cfg.env)
+        except Exception as exc:  # noqa: BLE001 - OmegaConf's validation errors
+            raise ConfigError(f"env: {str(exc).splitlines()[0]}") from None
+    problems = _train_problems(cfg)
+    if problems:
+        more = f" (and {len(problems) - 1} more: {'; '.join(problems[1:])})" if len(problems) > 1 else ""
+        raise ConfigError(problems[0] + more)
+
+
+class RunDirCheck(Callback):
+    """Hydra callback (``configs/hydra/default.yaml``): an output directory that cannot be created
+    ends the command with one line instead of Hydra's traceback from inside its job runner."""
+
+    def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
+        self._check(config.hydra.run.dir)
+
+    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        self._check(config.hydra.sweep.dir)
+
+    @staticmethod
+    def _check(path: Any) -> None:
+        import sys
+
+        try:
+            Path(str(path)).mkdir(parents=True, exist_ok=True)
+            probe = Path(str(path)) / f".write_probe_{os.getpid()}"
+            probe.touch()
+            probe.unlink()
+        except OSError as exc:
+            print(f"error: cannot create the run directory {path}: {exc.strerror or exc}", file=sys.stderr)
+            sys.exit(2)

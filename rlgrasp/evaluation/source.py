@@ -54,9 +54,21 @@ def load_checked_checkpoint(path: Path) -> dict[str, Any]:
     """Load and check the structure; a truncated or foreign file gets a message, not a traceback."""
     import torch
 
+    from rlgrasp.train.checkpoint import unpickler_reason
+
     try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=False)
-    except (RuntimeError, EOFError, pickle.UnpicklingError, zipfile.BadZipFile, ValueError, OSError) as exc:
+        # weights_only: a checkpoint someone sent cannot run code when it is loaded.
+        ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as exc:
+        if "Unsupported global" not in str(exc):
+            raise EvaluationError(
+                f"corrupt checkpoint: {path} could not be loaded ({unpickler_reason(exc)})"
+            ) from exc
+        raise EvaluationError(
+            f"refused checkpoint: {path} needs to unpickle arbitrary Python objects; only tensors and "
+            f"plain containers are loaded ({unpickler_reason(exc)})"
+        ) from exc
+    except (RuntimeError, EOFError, zipfile.BadZipFile, ValueError, OSError) as exc:
         raise EvaluationError(
             f"corrupt checkpoint: {path} could not be loaded ({type(exc).__name__}: {exc})"
         ) from exc

@@ -3,26 +3,33 @@
 Layout of a checkpoint (a plain dict, ``torch.save``d; ``rlgrasp.train.loop.Trainer.state_dict``
 writes it):
 
-- ``format``: 1
+- ``format``: 2 (1: RNG states as numpy/python objects, not loadable with ``weights_only=True``)
 - ``actor``, ``critic``: state dicts (both include the observation normalizer's buffers
   ``norm.mean``/``norm.var``/``norm.count``)
 - ``optimizer``: Adam's state dict
 - ``frames``, ``updates``: counters; ``generation``: how many times the run was resumed
 - ``best_eval_success``, ``last_eval``: evaluation bookkeeping (``last_eval`` may be None)
-- ``rng``: python / numpy / torch RNG states of the learner
+- ``rng``: python / numpy / torch RNG states of the learner, as tensors and plain values
 - ``config``: the resolved training config as a plain dict (``config["env"]`` is the env's
   ``_target_`` node, which ``rlgrasp.config.env_factory`` builds)
 - ``spec``: ``obs_key``, ``obs_dim``, ``action_dim``, ``action_low``, ``action_high``
 - ``versions``: python, torch, torchrl, tensordict, gymnasium, pybullet, rlgrasp
 - ``run_dir``: the run directory it was written in
+
+Only tensors and plain containers are stored, and every reader loads with ``weights_only=True``: a
+checkpoint someone sends cannot run code when it is loaded, and one that would need to unpickle any
+other object is refused (``CheckpointError``).
 """
 
 from __future__ import annotations
 
+import logging
 import os
+import pickle
 import random
 import re
 import sys
+import zipfile
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -34,8 +41,13 @@ from tensordict.nn import TensorDictModuleBase
 
 from rlgrasp.train.models import OBS_KEY, RunningNorm, build_actor
 
-FORMAT = 1
+FORMAT = 2
 _NUMBERED = re.compile(r"ckpt_(\d+)\.pt$")
+log = logging.getLogger("rlgrasp.train")
+
+
+class CheckpointError(ValueError):
+    """A checkpoint that cannot be used: missing, unreadable, refused; the message says which file."""
 
 
 def save_checkpoint(path: str | os.PathLike, state: dict[str, Any]) -> Path:
@@ -48,26 +60,103 @@ def save_checkpoint(path: str | os.PathLike, state: dict[str, Any]) -> Path:
     return path
 
 
+def read_checkpoint(path: str | os.PathLike, map_location: str | torch.device = "cpu") -> dict[str, Any]:
+    """Load one checkpoint file with ``weights_only=True``; ``CheckpointError`` says what is wrong."""
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"missing checkpoint: {path} does not exist")
+    try:
+        state = torch.load(path, map_location=map_location, weights_only=True)
+    except pickle.UnpicklingError as exc:
+        if "Unsupported global" not in str(exc):  # garbage, or a pickle that is no checkpoint
+            raise CheckpointError(f"unreadable checkpoint: {path} ({unpickler_reason(exc)})") from exc
+        raise CheckpointError(
+            f"refused checkpoint: {path} needs to unpickle arbitrary Python objects "
+            f"({unpickler_reason(exc)}); only tensors and plain "
+            "containers are loaded (an rlgrasp checkpoint of format >= 2 holds nothing else)"
+        ) from exc
+    except (RuntimeError, EOFError, zipfile.BadZipFile, ValueError, OSError, AttributeError) as exc:
+        raise CheckpointError(
+            f"unreadable checkpoint: {path} ({type(exc).__name__}: {_first_line(exc)})"
+        ) from exc
+    if not isinstance(state, dict) or "actor" not in state or "config" not in state:
+        raise CheckpointError(f"not an rlgrasp training checkpoint: {path}")
+    return state
+
+
+def unpickler_reason(exc: BaseException) -> str:
+    """What torch's weights-only unpickler refused, in one line."""
+    text = str(exc)
+    if "WeightsUnpickler error:" in text:
+        text = text.split("WeightsUnpickler error:", 1)[1].split("Check the documentation", 1)[0]
+    return " ".join(text.split())[:200] or type(exc).__name__
+
+
+def _first_line(exc: BaseException) -> str:
+    return (str(exc).strip().splitlines() or [type(exc).__name__])[0][:300]
+
+
+def checkpoint_files(ckpt_dir: str | os.PathLike) -> list[Path]:
+    """A run's checkpoints, newest first: ``last.pt``, then ``ckpt_<frames>.pt`` by frames."""
+    ckpt_dir = Path(ckpt_dir)
+    numbered = sorted((p for p in ckpt_dir.glob("ckpt_*.pt") if _NUMBERED.search(p.name)), reverse=True)
+    last = ckpt_dir / "last.pt"
+    return ([last] if last.is_file() else []) + numbered
+
+
+def newest_readable(
+    run_dir: str | os.PathLike, map_location: str | torch.device = "cpu"
+) -> tuple[Path, dict[str, Any]]:
+    """``(path, state)`` of the newest checkpoint of a run that loads; a bad ``last.pt`` (say,
+    truncated by a full disk) is skipped with a warning naming it."""
+    ckpt_dir = Path(run_dir) / "checkpoints"
+    files = checkpoint_files(ckpt_dir)
+    if not files:
+        raise CheckpointError(f"no checkpoints: {ckpt_dir} holds no last.pt or ckpt_*.pt")
+    errors = []
+    for path in files:
+        try:
+            state = read_checkpoint(path, map_location)
+        except CheckpointError as exc:
+            errors.append(str(exc))
+            log.warning("skipping %s", exc)
+            continue
+        if errors:
+            log.warning("resuming from %s instead (the newer file(s) could not be loaded)", path)
+        return path, state
+    raise CheckpointError(f"no readable checkpoint in {ckpt_dir}: " + "; ".join(errors))
+
+
 def load_checkpoint(path: str | os.PathLike, map_location: str | torch.device = "cpu") -> dict[str, Any]:
-    """Load a checkpoint file, or ``<run dir>/checkpoints/last.pt`` when given a run directory."""
+    """Load a checkpoint file, or a run directory's newest readable one (normally ``last.pt``)."""
     path = Path(path)
     if path.is_dir():
-        path = path / "checkpoints" / "last.pt"
-    # weights_only=False: the dict holds numpy RNG state and plain Python config values.
-    return torch.load(path, map_location=map_location, weights_only=False)
+        return newest_readable(path, map_location)[1]
+    return read_checkpoint(path, map_location)
 
 
 def rng_state() -> dict[str, Any]:
+    """Python, numpy and torch RNG states as tensors and plain values (``weights_only`` loadable)."""
+    version, py_state, gauss = random.getstate()
+    name, keys, pos, has_gauss, cached = np.random.get_state()
     return {
-        "python": random.getstate(),
-        "numpy": np.random.get_state(),
+        "python": {"version": version, "state": torch.tensor(py_state, dtype=torch.int64), "gauss": gauss},
+        "numpy": {
+            "name": str(name),
+            "keys": torch.from_numpy(keys.astype(np.int64)),
+            "pos": int(pos),
+            "has_gauss": int(has_gauss),
+            "cached_gaussian": float(cached),
+        },
         "torch": torch.get_rng_state(),
     }
 
 
 def set_rng_state(state: dict[str, Any]) -> None:
-    random.setstate(state["python"])
-    np.random.set_state(state["numpy"])
+    py, npy = state["python"], state["numpy"]
+    random.setstate((py["version"], tuple(int(x) for x in py["state"].tolist()), py["gauss"]))
+    keys = npy["keys"].numpy().astype(np.uint32)
+    np.random.set_state((npy["name"], keys, npy["pos"], npy["has_gauss"], npy["cached_gaussian"]))
     torch.set_rng_state(state["torch"])
 
 
@@ -117,6 +206,10 @@ def policy_from_checkpoint(
         model_cfg,
         deterministic=True,
     )
-    actor.load_state_dict(ckpt["actor"])
-    assert spec.get("obs_key", OBS_KEY) == OBS_KEY
+    try:
+        actor.load_state_dict(ckpt["actor"])
+    except RuntimeError as exc:
+        raise CheckpointError(f"checkpoint does not fit its own model config: {_first_line(exc)}") from exc
+    if spec.get("obs_key", OBS_KEY) != OBS_KEY:
+        raise CheckpointError(f"checkpoint observation key {spec.get('obs_key')!r}, expected {OBS_KEY!r}")
     return actor.to(device).eval()

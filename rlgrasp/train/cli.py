@@ -8,12 +8,14 @@ at another config tree.
 from __future__ import annotations
 
 import logging
+import shutil
 import sys
+from pathlib import Path
 
 import hydra
 from omegaconf import DictConfig
 
-from rlgrasp.config import CONFIG_DIR, register_configs
+from rlgrasp.config import CONFIG_DIR, FRESH_RUN_DIRS, register_configs
 
 register_configs()
 
@@ -21,16 +23,44 @@ register_configs()
 def run(cfg: DictConfig) -> float:
     """Train and return the final evaluation success rate (what a Hydra sweeper optimizes).
 
-    A fault (env crash, NaN) ends the process with exit code 1 and its message, without a
-    traceback through Hydra's machinery.
+    Bad input (a bad value, a resume that cannot be done) ends the process with exit code 2 and one
+    line, and removes the run directory this command created; a fault (env crash, NaN) with exit
+    code 1 and its message. Neither prints a traceback.
     """
+    from rlgrasp.config import ConfigError
+    from rlgrasp.train.checkpoint import CheckpointError
     from rlgrasp.train.loop import TrainingError, train
 
+    log = logging.getLogger("rlgrasp.train")
     try:
-        return train(cfg)
+        return train(cfg, changed=_command_line_keys(cfg))
+    except (ConfigError, CheckpointError) as exc:
+        log.error("%s", exc)
+        _remove_if_fresh(Path(cfg.paths.output_dir))
+        sys.exit(2)
     except TrainingError as exc:
-        logging.getLogger("rlgrasp.train").error("training stopped: %s", exc)
+        log.error("training stopped: %s", exc)
         sys.exit(1)
+
+
+def _command_line_keys(cfg: DictConfig) -> set[str] | None:
+    """The keys this command line sets (what a resume applies over the checkpoint's config)."""
+    from hydra.core.hydra_config import HydraConfig
+
+    from rlgrasp.train.resume import command_line_keys
+
+    if not cfg.resume or not HydraConfig.initialized():
+        return None
+    return command_line_keys(list(HydraConfig.get().overrides.task), cfg)
+
+
+def _remove_if_fresh(run_dir: Path) -> None:
+    """Remove a run directory this process created and that holds only Hydra's files and the log."""
+    if str(run_dir.resolve()) not in FRESH_RUN_DIRS or not run_dir.is_dir():
+        return
+    if {p.name for p in run_dir.iterdir()} <= {".hydra", "train.log"}:
+        logging.shutdown()
+        shutil.rmtree(run_dir, ignore_errors=True)
 
 
 @hydra.main(config_path=CONFIG_DIR, config_name="train", version_base="1.3")

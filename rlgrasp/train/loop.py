@@ -8,7 +8,10 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 import random
+import signal
+import subprocess
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -19,6 +22,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDictBase
 
+from rlgrasp.config import ConfigError
 from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.collect import read_env_errors
@@ -26,17 +30,22 @@ from rlgrasp.train.evaluate import Evaluator
 from rlgrasp.train.logger import RunLogger, log, progress_line, setup_text_log
 from rlgrasp.train.parts import build_parts
 from rlgrasp.train.ppo import NonFiniteError, PPOLearner
+from rlgrasp.train.resume import prepare_run
 from rlgrasp.train.trackers import attach_tracker
 from rlgrasp.utils import flatten
 
 #: Called after each evaluation with (frames, metrics); see ``train``.
 EvalCallback = Callable[[int, dict[str, float]], None]
-# Keys that may differ between a checkpoint's config and the run resuming it without a warning.
-RESUME_KEYS = ("resume", "paths.", "total_frames", "time_budget_min")
+#: What a scheduler sends before preemption or at a time limit (SLURM: TERM; submitit: USR2).
+STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGTERM", "SIGUSR1", "SIGUSR2") if hasattr(signal, n))
 
 
 class TrainingError(RuntimeError):
     """Training stopped on a fault (env crash, NaN); the message says what and where."""
+
+
+class _Stopped(Exception):
+    """A stop signal arrived: save and leave the loop."""
 
 
 def resolve_device(device: str) -> torch.device:
@@ -84,17 +93,45 @@ class _Throughput:
 
 
 def _shut_down(collector: Any) -> None:
+    """Stop the workers, then the weight-sync schemes: left to ``__del__`` at interpreter exit, a
+    scheme's shutdown starts a queue feeder thread during finalization and the process never ends."""
     try:
         collector.shutdown()
     except Exception as exc:  # noqa: BLE001 - a dead worker can make shutdown complain
         log.warning("collector shutdown: %s", exc)
+    for scheme in (getattr(collector, "_weight_sync_schemes", None) or {}).values():
+        try:
+            scheme.shutdown()
+        except Exception as exc:  # noqa: BLE001
+            log.warning("weight sync shutdown: %s", exc)
+
+
+def hand_off_preemption(signum: int, previous: dict[int, Any]) -> None:
+    """After the checkpoint of a stop signal: under submitit, its own checkpoint-and-requeue handler
+    (SLURM: ``scontrol requeue``; submitit_local: restart), which exits; under plain SLURM,
+    ``scontrol requeue $SLURM_JOB_ID``. Elsewhere nothing: the process exits normally."""
+    submitit = [h for h in previous.values() if getattr(h, "__name__", "") == "checkpoint_and_try_requeue"]
+    if submitit:
+        log.warning("handing over to submitit to requeue the job")
+        try:
+            submitit[0](signum, None)  # exits (SystemExit) once the job is requeued
+        except Exception as exc:  # noqa: BLE001 - e.g. scontrol refusing a job SLURM already requeues
+            log.warning("requeue through submitit failed: %s", exc)
+        return
+    job = os.environ.get("SLURM_JOB_ID")
+    if job:
+        proc = subprocess.run(["scontrol", "requeue", job], capture_output=True, text=True, timeout=60)
+        log.warning("scontrol requeue %s: %s", job, (proc.stderr or proc.stdout).strip() or "requeued")
 
 
 class Trainer:
     """One training run. ``run()`` reads straight down: collect, update, log, evaluate, checkpoint,
     until the frame or time budget is spent; then the final evaluation and checkpoint."""
 
-    def __init__(self, cfg: DictConfig, on_eval: EvalCallback | None = None) -> None:
+    def __init__(
+        self, cfg: DictConfig, on_eval: EvalCallback | None = None, resumed: dict[str, Any] | None = None
+    ) -> None:
+        """``cfg`` as ``rlgrasp.train.resume.prepare_run`` returns it, ``resumed`` the checkpoint."""
         self.cfg, self.on_eval = cfg, on_eval
         self.run_dir = Path(cfg.paths.output_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
@@ -103,11 +140,14 @@ class Trainer:
         self.config = OmegaConf.to_container(cfg, resolve=True)
         self.device = resolve_device(cfg.device)
         torch.set_num_threads(cfg.collector.torch_threads)
-        resumed = ckpt_lib.load_checkpoint(cfg.resume, map_location=self.device) if cfg.resume else None
+        self.stopped_by: int | None = None
 
         # --- parts: seeded first, so the same seed gives the same initial networks
         seed_everything(cfg.seed)
-        self.parts = build_parts(cfg, self.device)
+        try:
+            self.parts = build_parts(cfg, self.device)
+        except (ValueError, TypeError) as exc:  # the env refuses its keywords
+            raise ConfigError(f"env: {exc}".splitlines()[0]) from exc
         self.actor = self.parts.actor
         self.learner = PPOLearner(self.actor, self.parts.critic, self.parts.norm, cfg.algo, self.device)
 
@@ -157,17 +197,13 @@ class Trainer:
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Continue from a checkpoint: weights, optimizer, RNG, counters; the generation moves on."""
-        old, new = flatten(state["config"]), flatten(self.config)
-        for key in sorted(set(old) | set(new)):
-            if old.get(key) != new.get(key) and not key.startswith(RESUME_KEYS):
-                log.warning(
-                    "resume: config differs from the checkpoint's: %s: %r -> %r",
-                    key,
-                    old.get(key),
-                    new.get(key),
-                )
-        self.actor.load_state_dict(state["actor"])
-        self.parts.critic.load_state_dict(state["critic"])
+        try:
+            self.actor.load_state_dict(state["actor"])
+            self.parts.critic.load_state_dict(state["critic"])
+        except RuntimeError as exc:
+            raise ConfigError(
+                f"checkpoint does not fit the model: {str(exc).splitlines()[-1].strip()[:200]}"
+            ) from exc
         self.learner.optimizer.load_state_dict(state["optimizer"])
         ckpt_lib.set_rng_state(state["rng"])
         self.frames, self.updates = state["frames"], state["updates"]
@@ -196,11 +232,14 @@ class Trainer:
                 self.parts.spec,
             )
             self.start = time.monotonic()  # the time budget includes the workers' start-up
+            cleanup.enter_context(self._stop_signals())
             try:
-                with self._collector() as batches:
-                    self._loop(batches)
-            except KeyboardInterrupt:
-                log.warning("interrupted at %s frames: saving a checkpoint", f"{self.frames:,}")
+                if self.frames < self.cfg.total_frames:  # a finished run starts no workers
+                    with self._collector() as batches:
+                        self._loop(batches)
+            except (KeyboardInterrupt, _Stopped):
+                why = signal.Signals(self.stopped_by).name if self.stopped_by else "interrupted"
+                log.warning("%s at %s frames: saving a checkpoint", why, f"{self.frames:,}")
                 self.save()
                 return float((self.last_eval or {}).get("success_rate", float("nan")))
             except NonFiniteError as exc:
@@ -209,6 +248,30 @@ class Trainer:
                     f"is {self.ckpt_dir / 'last.pt'}"
                 ) from exc
             return self.finish()
+
+    @contextlib.contextmanager
+    def _stop_signals(self) -> Iterator[None]:
+        """SIGTERM/USR1/USR2 only set ``stopped_by``; the loop saves and leaves at its next step.
+        Installed after submitit's handlers (kept in ``previous_handlers`` for the requeue)."""
+        self.previous_handlers: dict[int, Any] = {}
+
+        def note(signum: int, frame: Any) -> None:
+            self.stopped_by = signum
+
+        for sig in STOP_SIGNALS:
+            try:
+                self.previous_handlers[sig] = signal.signal(sig, note)
+            except ValueError:  # not the main thread: the caller handles signals
+                break
+        try:
+            yield
+        finally:
+            for sig, handler in self.previous_handlers.items():
+                signal.signal(sig, handler)
+
+    def _check_stop(self) -> None:
+        if self.stopped_by is not None:
+            raise _Stopped
 
     @contextlib.contextmanager
     def _collector(self) -> Iterator[Iterator[TensorDictBase]]:
@@ -229,8 +292,10 @@ class Trainer:
         self.recent: dict[str, float] = {}
         start = last_console = self.start
         while self.frames < cfg.total_frames and time.monotonic() - start < budget_s:
+            self._check_stop()
             t0 = time.perf_counter()
             batch = self.collect(batches)
+            self._check_stop()  # a batch collected while stopping is not trained on
             metrics = {"time/collect_s": time.perf_counter() - t0, **self.episode_metrics(batch)}
             metrics.update(self.update(batch))
             metrics["charts/SPS"] = sps = throughput(batch.numel(), t0)
@@ -254,6 +319,7 @@ class Trainer:
         except Exception as exc:
             self.save()
             time.sleep(0.5)  # let the failing worker finish writing its report
+            self._check_stop()  # the workers got the stop signal too (a scheduler signals them all)
             reports = read_env_errors(self.error_dir) or [f"{type(exc).__name__}: {exc}"]
             raise TrainingError(
                 f"collection failed at {self.frames:,} frames; checkpoint saved in {self.ckpt_dir}\n  "
@@ -355,17 +421,27 @@ class Trainer:
         return success
 
 
-def train(cfg: DictConfig, on_eval: EvalCallback | None = None) -> float:
+def train(
+    cfg: DictConfig, on_eval: EvalCallback | None = None, changed: set[str] | None = None
+) -> float:
     """Train PPO as configured; returns the final evaluation success rate (NaN if the env has none).
 
     Raises ``TrainingError`` on an env crash (after saving a checkpoint) or a NaN/inf (keeping the
-    last good checkpoint). Ctrl-C saves a checkpoint and returns normally.
+    last good checkpoint), ``ConfigError``/``CheckpointError`` on bad input before anything starts.
+    Ctrl-C, SIGTERM, SIGUSR1 and SIGUSR2 save a checkpoint and return normally (under SLURM or
+    submitit after requeueing the job). ``changed``: the keys the command line set, for a resume
+    (None: all of ``cfg``; see ``rlgrasp.train.resume``).
 
     ``on_eval(frames, metrics)`` runs after every evaluation (periodic and final); a sweep uses it to
     report to its pruner. An exception it raises (e.g. ``optuna.TrialPruned``) stops training: a
     checkpoint is saved, workers are shut down, and the exception propagates unchanged.
     """
-    return Trainer(cfg, on_eval).run()
+    cfg, resumed = prepare_run(cfg, changed)
+    trainer = Trainer(cfg, on_eval, resumed)
+    result = trainer.run()
+    if trainer.stopped_by is not None and trainer.frames < cfg.total_frames:
+        hand_off_preemption(trainer.stopped_by, trainer.previous_handlers)
+    return result
 
 
 def finished_episodes(batch: TensorDictBase) -> dict[str, float]:

@@ -1,0 +1,178 @@
+"""Starting or resuming a run: which checkpoint, which config, which keys may change.
+
+``resume=<run dir>`` (or a checkpoint file) continues the run as it was launched: the checkpoint's
+resolved config is the base and only what the command line changes is applied on top. Keys in
+``MUTABLE`` may change (and are logged); any other change is refused with one line naming the key
+and both values, before any worker starts. ``resume=auto`` continues the run directory's newest
+readable checkpoint when there is one and starts fresh otherwise (``rlgrasp.config.run_dir`` picks
+the newest run of the same experiment and seed as the run directory).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from omegaconf import DictConfig, OmegaConf
+
+from rlgrasp.config import CONFIG_DIR, ConfigError, validate_train
+from rlgrasp.train import checkpoint as ckpt_lib
+from rlgrasp.utils import flatten
+
+log = logging.getLogger("rlgrasp.train")
+
+#: Keys (exact, or prefixes ending in ".") that may differ from the checkpoint's config on resume.
+MUTABLE = (
+    "resume",
+    "paths.",
+    "total_frames",
+    "time_budget_min",
+    "eval.interval_frames",
+    "eval.episodes",
+    "eval.final_episodes",
+    "eval.num_envs",
+    "checkpoint.interval_frames",
+    "checkpoint.keep_last",
+    "logger.",
+    "collector.num_workers",
+    "collector.backend",
+    "collector.torch_threads",
+    "collector.ray.",
+    "device",
+)
+_QUIET = ("resume", "paths.")  # expected to differ: not worth a log line
+_ABSENT = object()
+
+
+def _mutable(key: str) -> bool:
+    return any(key == m or (m.endswith(".") and key.startswith(m)) for m in MUTABLE)
+
+
+def prepare_run(cfg: DictConfig, changed: Iterable[str] | None = None) -> tuple[DictConfig, dict | None]:
+    """The config to train with and the checkpoint to continue from (None: a fresh run).
+
+    ``changed``: the keys the command line set (None: every key of ``cfg`` counts as set).
+    Raises ``ConfigError`` / ``CheckpointError`` with a one-line message.
+    """
+    run_dir = Path(cfg.paths.output_dir)
+    resume = cfg.resume
+    has_ckpts = bool(ckpt_lib.checkpoint_files(run_dir / "checkpoints"))
+    if resume == "auto":
+        source = run_dir if has_ckpts else None
+        if source is None:
+            log.info("resume=auto: no checkpoint in %s, starting fresh", run_dir)
+    elif resume:
+        source = Path(resume).expanduser()
+        if not source.exists():
+            raise ConfigError(f"resume={resume}: no such file or directory")
+    else:
+        if has_ckpts:
+            raise ConfigError(
+                f"run directory {run_dir} already holds checkpoints: continue it with resume={run_dir} "
+                "(or resume=auto), or start the new run elsewhere"
+            )
+        source = None
+    if source is None:
+        validate_train(cfg)
+        return cfg, None
+    if source.is_dir():
+        path, state = ckpt_lib.newest_readable(source)
+    else:
+        path, state = source, ckpt_lib.read_checkpoint(source)
+    merged = merged_config(cfg, state["config"], changed)
+    validate_train(merged)
+    log.info("resuming from %s (%s frames)", path, f"{state['frames']:,}")
+    return merged, state
+
+
+def merged_config(cfg: DictConfig, saved: dict[str, Any], changed: Iterable[str] | None) -> DictConfig:
+    """The checkpoint's config ``saved`` with the command line's changes applied; a change of a key
+    outside ``MUTABLE`` raises ``ConfigError`` naming the key and both values."""
+    given = flatten(OmegaConf.to_container(cfg, resolve=True))
+    old = flatten(saved)
+    if changed is None:
+        keys = set(given)
+    else:
+        prefixes = tuple(f"{k}." for k in changed)
+        keys = {k for k in given if k in set(changed) or k.startswith(prefixes)}
+    keys |= {k for k in given if k.startswith(_QUIET)}
+    base = OmegaConf.create(saved)
+    refused = []
+    for key in sorted(keys):
+        new, prev = given[key], old.get(key, _ABSENT)
+        if new == prev:
+            continue
+        if prev is _ABSENT and _reshaped(key, old):
+            prev = _value_around(key, old)
+        if prev is not _ABSENT and not _mutable(key):
+            refused.append(f"{key}: the checkpoint has {prev!r}, the command line {new!r}")
+            continue
+        OmegaConf.update(base, key, new, force_add=True)
+        if not key.startswith(_QUIET) and prev is not _ABSENT:
+            log.info("resume: %s: %r -> %r", key, prev, new)
+    if refused:
+        more = f" (and {len(refused) - 1} more)" if len(refused) > 1 else ""
+        raise ConfigError(
+            f"cannot change on resume: {refused[0]}{more}; on resume only these may change: "
+            + ", ".join(m.rstrip(".") for m in MUTABLE if m not in _QUIET)
+        )
+    return base
+
+
+def _reshaped(key: str, old: dict[str, Any]) -> bool:
+    """A key absent from the checkpoint because a value there is a mapping here, or the reverse
+    (``env.randomization: default`` vs ``{object_mass: ...}``), not because the schema grew."""
+    parts = key.split(".")
+    return any(".".join(parts[:i]) in old for i in range(1, len(parts))) or any(
+        k.startswith(key + ".") for k in old
+    )
+
+
+def _value_around(key: str, old: dict[str, Any]) -> Any:
+    parts = key.split(".")
+    for i in range(len(parts) - 1, 0, -1):
+        if ".".join(parts[:i]) in old:
+            return old[".".join(parts[:i])]
+    return {k[len(key) + 1 :]: v for k, v in old.items() if k.startswith(key + ".")}
+
+
+def command_line_keys(task_overrides: list[str], cfg: DictConfig) -> set[str]:
+    """The config keys a Hydra command line sets: its ``key=value`` keys, plus the keys whose value
+    its group choices (``experiment=``, ``collector=``, ...) change from the defaults."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    keys, groups = set(), []
+    for override in OverridesParser.create().parse_overrides(task_overrides):
+        name = override.key_or_group
+        if name.startswith("hydra") or override.is_delete():
+            continue
+        if (Path(CONFIG_DIR) / name).is_dir():
+            groups.append(override.input_line)
+        else:
+            keys.add(name)
+    if groups:
+        keys |= _keys_changed_by(groups, cfg)
+    return keys
+
+
+def _keys_changed_by(groups: list[str], cfg: DictConfig) -> set[str]:
+    """Keys whose value differs between the defaults and the defaults with these group choices."""
+    from hydra import compose
+    from hydra.core.global_hydra import GlobalHydra
+
+    from rlgrasp.config import compose_train
+
+    fixed = [f"paths.output_dir={cfg.paths.output_dir}"]
+    try:
+        if GlobalHydra.instance().is_initialized():
+            default, chosen = (compose("train", overrides=fixed + g) for g in ([], groups))
+        else:
+            default, chosen = (compose_train(fixed + g) for g in ([], groups))
+    except Exception as exc:  # noqa: BLE001 - fall back to the strict comparison
+        log.warning("resume: could not compose %s alone (%s); comparing every key", groups, exc)
+        return set(flatten(OmegaConf.to_container(cfg, resolve=True)))
+    a = flatten(OmegaConf.to_container(default, resolve=True))
+    b = flatten(OmegaConf.to_container(chosen, resolve=True))
+    return {k for k in set(a) | set(b) if a.get(k, _ABSENT) != b.get(k, _ABSENT)}

@@ -1,0 +1,196 @@
+"""Resume: the checkpoint's config is the base, safe loading, unique run dirs, the fallback past a bad
+last.pt, stop signals, resume=auto, and every entry point exiting."""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from rlgrasp.config import ConfigError, compose_train, run_dir
+from rlgrasp.train import checkpoint as ckpt_lib
+from rlgrasp.train.resume import merged_config, prepare_run
+
+ROOT = Path(__file__).resolve().parents[1]
+SMOKE = ["experiment=smoke", "logger=none"]
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory) -> Path:
+    """A run directory with one real smoke checkpoint at frame 0 (no workers started)."""
+    from rlgrasp.train.loop import Trainer
+
+    run = tmp_path_factory.mktemp("resume") / "run"
+    Trainer(compose_train([*SMOKE, f"paths.output_dir={run}"])).save()
+    return run
+
+
+def test_rng_states_round_trip_through_a_weights_only_load(tmp_path: Path) -> None:
+    random.seed(1), np.random.seed(2), torch.manual_seed(3)
+    ckpt_lib.save_checkpoint(tmp_path / "x.pt", {"rng": ckpt_lib.rng_state()})
+    want = (random.random(), np.random.rand(), torch.rand(1).item())
+    ckpt_lib.set_rng_state(torch.load(tmp_path / "x.pt", weights_only=True)["rng"])
+    assert (random.random(), np.random.rand(), torch.rand(1).item()) == want
+
+
+class _Evil:
+    """Unpickling this creates a file: what a malicious checkpoint would do."""
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+
+    def __reduce__(self):
+        return (Path.touch, (Path(self.path),))
+
+
+def test_a_checkpoint_that_would_run_code_is_refused_and_runs_nothing(tmp_path: Path, run: Path) -> None:
+    from rlgrasp.evaluation.source import EvaluationError, load_checked_checkpoint
+
+    marker = tmp_path / "pwned"
+    state = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
+    state["payload"] = _Evil(str(marker))
+    evil = tmp_path / "evil.pt"
+    torch.save(state, evil, pickle_protocol=2)
+    with pytest.raises(ckpt_lib.CheckpointError, match="refused checkpoint"):
+        ckpt_lib.read_checkpoint(evil)
+    with pytest.raises(EvaluationError, match="refused checkpoint"):
+        load_checked_checkpoint(evil)
+    assert not marker.exists()
+    with open(evil, "rb"):  # the crafted file does work on a plain unpickler (control)
+        torch.load(evil, weights_only=False)
+    assert marker.exists()
+
+
+def test_resume_alone_continues_the_run_as_launched(run: Path) -> None:
+    # The default config (hidden sizes 256) plus resume= and total_frames: the smoke run's own config.
+    cfg = compose_train([f"paths.output_dir={run}", f"resume={run}", "total_frames=4096", "device=cpu"])
+    merged, state = prepare_run(cfg, changed={"resume", "total_frames", "device"})
+    assert state["frames"] == 0
+    assert list(merged.model.hidden_sizes) == [64, 64]
+    assert merged.total_frames == 4096 and merged.device == "cpu"
+    assert merged.experiment_name == "smoke"
+
+
+def test_resume_refuses_a_change_of_a_fixed_key_naming_both_values(run: Path) -> None:
+    saved = ckpt_lib.load_checkpoint(run)["config"]
+    cfg = compose_train([*SMOKE, f"paths.output_dir={run}", "env.control_mode=joint_delta"])
+    with pytest.raises(ConfigError, match=r"env.control_mode: the checkpoint has 'ee_delta', the command "
+                                          r"line 'joint_delta'"):
+        merged_config(cfg, saved, {"env.control_mode"})
+    cfg = compose_train([*SMOKE, f"paths.output_dir={run}", "randomization=wide"])
+    with pytest.raises(ConfigError, match="env.randomization"):
+        merged_config(cfg, saved, {"env.randomization"})
+
+
+def test_a_truncated_last_falls_back_with_a_warning(tmp_path: Path, run: Path, caplog) -> None:
+    copy = tmp_path / "run"
+    (copy / "checkpoints").mkdir(parents=True)
+    data = (run / "checkpoints" / "last.pt").read_bytes()
+    (copy / "checkpoints" / "ckpt_0000000000.pt").write_bytes(data)
+    (copy / "checkpoints" / "last.pt").write_bytes(data[:1000])  # a full disk
+    path, state = ckpt_lib.newest_readable(copy)
+    assert path.name == "ckpt_0000000000.pt" and state["frames"] == 0
+    assert "last.pt" in caplog.text
+    assert run_dir(str(copy / "checkpoints" / "ckpt_0000000000.pt"), "x", 0) == str(copy)
+
+
+def test_run_dirs_are_unique_per_process_and_name_the_seed(tmp_path: Path) -> None:
+    code = "from rlgrasp.config import run_dir; print(run_dir(None, 'base', 7))"
+    names = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
+                            check=True).stdout.strip() for _ in range(2)}
+    assert len(names) == 2
+    assert all(n.startswith("base/") and "_s7_" in n for n in names)
+
+
+def test_resume_auto_picks_the_newest_run_of_the_seed(tmp_path: Path, run: Path) -> None:
+    base = tmp_path / "smoke"
+    assert "_s0_" in run_dir("auto", str(base), 0)  # nothing yet: a new run
+    for name in ("2026-01-01_00-00-00_s0_aaaaaa", "2026-01-02_00-00-00_s0_bbbbbb",
+                 "2026-01-03_00-00-00_s1_cccccc"):
+        (base / name / "checkpoints").mkdir(parents=True)
+        (base / name / "checkpoints" / "last.pt").write_bytes(b"")
+    assert run_dir("auto", str(base), 0).endswith("2026-01-02_00-00-00_s0_bbbbbb")
+    assert run_dir("auto", str(base), 1).endswith("_s1_cccccc")
+
+
+def test_gym_make_honours_max_episode_steps() -> None:
+    import gymnasium as gym
+
+    import rlgrasp
+
+    for kwargs, want in (({}, 50), ({"max_episode_steps": 80}, 80)):
+        env = gym.make(rlgrasp.ENV_ID, randomization="none", **kwargs)
+        env.reset(seed=0)
+        steps = 0
+        while True:
+            steps += 1
+            *_, terminated, truncated, _ = env.step(np.zeros(env.action_space.shape, np.float32))
+            if terminated or truncated:
+                break
+        env.close()
+        assert (steps, truncated) == (want, True)
+
+
+# --- through the command line -------------------------------------------------------------------
+def _train(args: list[str], cwd: Path, **kw) -> subprocess.Popen:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.Popen([sys.executable, str(ROOT / "scripts" / "train.py"), *args], cwd=cwd, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **kw)
+
+
+def _wait_for(probe, timeout: float):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if (found := probe()) is not None:
+            return found
+        time.sleep(0.3)
+    raise TimeoutError(f"nothing after {timeout} s")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGUSR1])
+def test_stop_signal_saves_then_resume_auto_finishes_and_exits(tmp_path: Path, sig: int) -> None:
+    """A stop signal saves a checkpoint and exits 0; the same command (resume=auto) continues the run
+    to the end; resuming the finished run exits at once (no hang at interpreter exit)."""
+    cmd = [*SMOKE, "resume=auto", f"paths.root_dir={tmp_path}", "total_frames=4096",
+           "checkpoint.interval_frames=100000", "eval.interval_frames=100000"]
+    proc = _train(cmd, tmp_path)
+    try:
+        runs = tmp_path / "outputs" / "train" / "smoke"
+        log = _wait_for(lambda: next(runs.glob("*/train.log"), None), 120)
+        _wait_for(lambda: True if "frames 1,024/" in log.read_text() else None, 180)
+        proc.send_signal(sig)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, out[-2000:]
+    run = log.parent
+    assert f"{signal.Signals(sig).name} at" in out
+    stopped = ckpt_lib.load_checkpoint(run)["frames"]
+    assert 1024 <= stopped < 4096  # saved on the signal, long before any interval checkpoint
+    for expect_frames in (4096, 4096):  # resume=auto: continue; then: already finished
+        t0 = time.monotonic()
+        proc = _train(cmd, tmp_path)
+        out, _ = proc.communicate(timeout=300)
+        assert proc.returncode == 0, out[-2000:]
+        assert ckpt_lib.load_checkpoint(run)["frames"] == expect_frames
+        assert "finished at 4,096 frames" in out
+    assert time.monotonic() - t0 < 60  # the finished run starts no workers and exits
+    assert len(list((tmp_path / "outputs" / "train" / "smoke").iterdir())) == 1
+
+
+@pytest.mark.slow
+def test_soak_three_kill_9_cycles(tmp_path: Path) -> None:
+    """scripts/soak_resume.py: 3 x (start or resume, random wait, kill -9 of the group), every check."""
+    proc = subprocess.run([sys.executable, str(ROOT / "scripts" / "soak_resume.py"), "--cycles", "3",
+                           "--out", str(tmp_path), "--wait", "15", "35"], capture_output=True, text=True,
+                          cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=1800)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-2000:]
+    assert "PASSED" in proc.stdout
