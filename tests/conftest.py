@@ -32,3 +32,20 @@ def eval_cfg():
         return compose_eval(list(overrides))
 
     return make
+
+
+@pytest.fixture
+def make_env():
+    """``make_env(**kwargs)``: a ``PandaGraspEnv`` closed at the end of the test."""
+    from rlgrasp.envs import PandaGraspEnv
+
+    envs = []
+
+    def _make(**kwargs):
+        env = PandaGraspEnv(**kwargs)
+        envs.append(env)
+        return env
+
+    yield _make
+    for env in envs:
+        env.close()

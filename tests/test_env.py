@@ -15,20 +15,6 @@ import rlgrasp
 from rlgrasp.envs import CONTROL_MODES, PandaGraspEnv, Randomizer, ScriptedExpert
 
 
-@pytest.fixture
-def make_env():
-    envs = []
-
-    def _make(**kwargs):
-        env = PandaGraspEnv(**kwargs)
-        envs.append(env)
-        return env
-
-    yield _make
-    for env in envs:
-        env.close()
-
-
 @pytest.mark.parametrize("mode", CONTROL_MODES)
 def test_gymnasium_check_env_passes(mode, make_env):
     env = make_env(control_mode=mode, render_mode="rgb_array", render_width=64, render_height=48)

@@ -22,20 +22,6 @@ from rlgrasp.envs.objects import (
 SETS = list(SET_NAMES) + [["primitives", "random_urdfs_train"]]
 
 
-@pytest.fixture
-def make_env():
-    envs = []
-
-    def _make(**kwargs):
-        env = PandaGraspEnv(**kwargs)
-        envs.append(env)
-        return env
-
-    yield _make
-    for env in envs:
-        env.close()
-
-
 def _box_obj(path, size) -> str:
     """An OBJ box of the given size (m), its corner at the origin (so not centred)."""
     x, y, z = size

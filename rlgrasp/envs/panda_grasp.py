@@ -40,6 +40,22 @@ def _observation_layout(action_dim: int) -> dict[str, int]:
     }
 
 
+def _check_args(
+    control_mode: str, render_mode: str | None, max_episode_steps: int, substeps: int, time_step: float
+) -> None:
+    """Bad constructor values fail here, naming the argument, before a physics client exists."""
+    if control_mode not in CONTROL_MODES:
+        raise ValueError(f"unknown control_mode {control_mode!r}; valid modes: {', '.join(CONTROL_MODES)}")
+    modes = PandaGraspEnv.metadata["render_modes"]
+    if render_mode is not None and render_mode not in modes:
+        raise ValueError(f"unknown render_mode {render_mode!r}; valid: {', '.join(modes)}")
+    for name, value in (("max_episode_steps", max_episode_steps), ("substeps", substeps)):
+        if int(value) != value or value < 1:
+            raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    if not (time_step > 0 and math.isfinite(time_step)):
+        raise ValueError(f"time_step must be a positive number, got {time_step!r}")
+
+
 class PandaGraspEnv(gym.Env):
     """A Franka Panda grasps an object on the ground and lifts it.
 
@@ -86,53 +102,28 @@ class PandaGraspEnv(gym.Env):
         robot_urdf: str = "franka_panda/panda.urdf",
         objects: str | list[str] | Mapping[str, Any] | None = "cube",
     ):
-        if control_mode not in CONTROL_MODES:
-            raise ValueError(
-                f"unknown control_mode {control_mode!r}; valid modes: {', '.join(CONTROL_MODES)}"
-            )
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(
-                f"unknown render_mode {render_mode!r}; valid: {', '.join(self.metadata['render_modes'])}"
-            )
-        for name, value in (("max_episode_steps", max_episode_steps), ("substeps", substeps)):
-            if int(value) != value or value < 1:
-                raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        if not (time_step > 0 and math.isfinite(time_step)):
-            raise ValueError(f"time_step must be a positive number, got {time_step!r}")
+        _check_args(control_mode, render_mode, max_episode_steps, substeps, time_step)
         self.control_mode = control_mode
         self.randomizer = Randomizer(randomization)
         self.objects = ObjectSampler(objects)
         self.task = LiftTask(reward, RewardWeights(**(reward_weights or {})), success_height)
-        self.max_episode_steps = int(max_episode_steps)
-        self.substeps = int(substeps)
+        self.max_episode_steps, self.substeps = int(max_episode_steps), int(substeps)
         self.terminate_on_success = terminate_on_success
         self.ee_step, self.ee_yaw, self.yaw_step = ee_step, ee_yaw, yaw_step
         self.joint_step, self.torque_fraction = joint_step, torque_fraction
-        self.gravity_compensation = gravity_compensation
-        self.render_mode = render_mode
+        self.gravity_compensation, self.render_mode = gravity_compensation, render_mode
         self.render_size = (render_width, render_height)
         self.camera = (camera_distance, camera_yaw, camera_pitch)
         self.metadata = {**self.metadata, "render_fps": round(1.0 / (time_step * substeps))}
 
-        self.scene = Scene(
-            time_step=time_step,
-            gui=render_mode == "human",
-            solver_iterations=solver_iterations,
-        )
+        gui = render_mode == "human"
+        self.scene = Scene(time_step=time_step, gui=gui, solver_iterations=solver_iterations)
         self.client = self.scene.client
         self.robot = Panda(self.client, robot_urdf)
         self.robot.reset(NEUTRAL_POSE)
         self._initial_state = self.client.saveState()
 
-        motion_dim = 3 + int(ee_yaw) if control_mode == "ee_delta" else 7
-        self.action_dim = motion_dim + 1
-        self.action_space = gym.spaces.Box(-1.0, 1.0, (self.action_dim,), np.float32)
-        layout = _observation_layout(self.action_dim)
-        self.obs_slices, start = {}, 0
-        for name, size in layout.items():
-            self.obs_slices[name] = slice(start, start + size)
-            start += size
-        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (start,), np.float32)
+        self._build_spaces()
         # Noise applies to what the sensors read, not to the flag and the agent's own action.
         self._sensor_dims = self.obs_slices["grasped"].start
 
@@ -140,6 +131,16 @@ class PandaGraspEnv(gym.Env):
         self._idle_action[-1] = 1.0  # fingers open
         self._steps = 0
         self.episode: dict[str, float] = {}
+
+    def _build_spaces(self) -> None:
+        motion_dim = 3 + int(self.ee_yaw) if self.control_mode == "ee_delta" else 7
+        self.action_dim = motion_dim + 1
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (self.action_dim,), np.float32)
+        self.obs_slices, start = {}, 0
+        for name, size in _observation_layout(self.action_dim).items():
+            self.obs_slices[name] = slice(start, start + size)
+            start += size
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (start,), np.float32)
 
     # --- gymnasium API -------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
