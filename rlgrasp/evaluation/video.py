@@ -20,7 +20,7 @@ def outcome_caption(r: EpisodeResult) -> str:
         return f"SUCCESS (lifted at step {r.first_success_step}, held to the end)"
     if r.success_once:
         return f"FAILURE at end (lifted at step {r.first_success_step}, then lost)"
-    return "FAILURE (cube never lifted)" + (" - grasped" if r.grasped_at_end else "")
+    return "FAILURE (object never lifted)" + (" - grasped" if r.grasped_at_end else "")
 
 
 def video_format(requested: str = "auto") -> str:
@@ -69,7 +69,7 @@ def write_video(r: EpisodeResult, path: Path, fps: int = 20, fmt: str = "gif") -
         for t, frame in enumerate(r.frames):
             image.set_data(frame)
             lifted = t > 0 and r.step_success[t - 1]
-            status.set_text(f"step {t}/{total}   cube lifted now: {'yes' if lifted else 'no'}")
+            status.set_text(f"step {t}/{total}   object lifted now: {'yes' if lifted else 'no'}")
             status.set_color("tab:green" if lifted else "black")
             writer.grab_frame()
     plt.close(fig)

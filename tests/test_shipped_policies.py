@@ -1,0 +1,32 @@
+"""The policies shipped in policies/ still work: an env or code change that silently breaks old
+policies fails here. Each evaluation is deterministic (seeds 0-19), so a drop is a real change."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from rlgrasp.config import compose_eval
+from rlgrasp.evaluation.cli import evaluate
+
+POLICIES = Path(__file__).resolve().parents[1] / "policies"
+
+# (file, objects to evaluate on, successes out of 20 when shipped, the floor asserted)
+CASES = [
+    ("grasp_objects_ppo.pt", "random_urdfs_test", 18, 15),
+]
+
+
+@pytest.mark.parametrize(("name", "objects", "shipped", "floor"), CASES)
+def test_shipped_policy_still_succeeds(
+    tmp_path: Path, name: str, objects: str, shipped: int, floor: int
+) -> None:
+    m = evaluate(
+        compose_eval(
+            [f"ckpt={POLICIES / name}", f"objects={objects}", "episodes=20", "video=false",
+             "plots=false", f"outputs_root={tmp_path}", "name=ship"]
+        )
+    )
+    successes = m["success_at_end"]["successes"]
+    assert successes >= floor, f"{name} on {objects}: {successes}/20 (shipped with {shipped}/20)"
