@@ -479,11 +479,15 @@ class RunDirCheck(Callback):
     def _check(path: Any) -> None:
         import sys
 
-        try:
-            Path(str(path)).mkdir(parents=True, exist_ok=True)
-            probe = Path(str(path)) / f".write_probe_{os.getpid()}"
-            probe.touch()
-            probe.unlink()
-        except OSError as exc:
-            print(f"error: cannot create the run directory {path}: {exc.strerror or exc}", file=sys.stderr)
+        # Creates nothing: hydra.run.dir holds the time, so this resolution may name another second
+        # than the one the job then creates; a directory made here would be left behind empty.
+        target = Path(str(path)).absolute()
+        existing = next(p for p in (target, *target.parents) if p.exists())
+        problem = None
+        if not existing.is_dir():
+            problem = "Not a directory"
+        elif not os.access(existing, os.W_OK | os.X_OK):
+            problem = f"{existing} is not writable"
+        if problem:
+            print(f"error: cannot create the run directory {path}: {problem}", file=sys.stderr)
             sys.exit(2)
