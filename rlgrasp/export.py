@@ -20,7 +20,6 @@ import sys
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -239,13 +238,10 @@ def action_meaning(env_cfg: dict[str, Any]) -> list[str]:
 
 
 def versions() -> dict[str, str]:
-    out = {"python": sys.version.split()[0]}
-    for name in ("torch", "numpy", "gymnasium", "pybullet", "onnx", "onnxruntime", "rlgrasp"):
-        try:
-            out[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            pass
-    return out
+    from rlgrasp.train.checkpoint import package_versions
+
+    names = ("torch", "numpy", "gymnasium", "pybullet", "onnx", "onnxruntime", "rlgrasp")
+    return package_versions(names, missing=None)
 
 
 def describe(ckpt: dict[str, Any], ckpt_path: Path, env: Any) -> dict[str, Any]:

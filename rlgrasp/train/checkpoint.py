@@ -160,13 +160,20 @@ def set_rng_state(state: dict[str, Any]) -> None:
     torch.set_rng_state(state["torch"])
 
 
-def package_versions() -> dict[str, str]:
+TRAINING_PACKAGES = ("torch", "torchrl", "tensordict", "gymnasium", "pybullet", "hydra-core", "rlgrasp")
+
+
+def package_versions(
+    names: tuple[str, ...] = TRAINING_PACKAGES, missing: str | None = "unknown"
+) -> dict[str, str]:
+    """Python's and each package's version; a package not installed is ``missing`` (None: left out)."""
     out = {"python": sys.version.split()[0]}
-    for name in ("torch", "torchrl", "tensordict", "gymnasium", "pybullet", "hydra-core", "rlgrasp"):
+    for name in names:
         try:
             out[name] = metadata.version(name)
         except metadata.PackageNotFoundError:
-            out[name] = "unknown"
+            if missing is not None:
+                out[name] = missing
     return out
 
 
