@@ -133,6 +133,8 @@ class CollectorConfig:
     envs_per_worker: int = 4
     steps_per_env: int = 128
     torch_threads: int = 1
+    # Collect the next batch while the learner updates (one update of policy lag; rlgrasp/train/batches.py).
+    overlap: bool = True
     ray: RayConfig = field(default_factory=RayConfig)
 
 

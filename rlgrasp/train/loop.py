@@ -7,6 +7,7 @@
 from __future__ import annotations
 
 import contextlib
+import copy
 import math
 import os
 import random
@@ -25,6 +26,7 @@ from tensordict import TensorDictBase
 from rlgrasp.config import ConfigError
 from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
+from rlgrasp.train.batches import Batches
 from rlgrasp.train.collect import read_env_errors
 from rlgrasp.train.evaluate import Evaluator
 from rlgrasp.train.logger import RunLogger, log, progress_line, setup_text_log
@@ -275,12 +277,16 @@ class Trainer:
 
     @contextlib.contextmanager
     def _collector(self) -> Iterator[Iterator[TensorDictBase]]:
-        """The collector's batches; its workers are shut down however the loop ends."""
-        collector = self.parts.make_collector(self.generation, str(self.error_dir))
-        self.collector = collector
+        """The collector's batches (``rlgrasp.train.batches``); its workers are shut down however the
+        loop ends."""
+        behaviour = copy.deepcopy(self.actor)
+        collector = self.parts.make_collector(self.generation, str(self.error_dir), behaviour)
+        overlap = self.cfg.collector.overlap and self.cfg.collector.backend != "single"
+        batches = Batches(collector, self.actor, behaviour, overlap)
         try:
-            yield iter(collector)
+            yield batches
         finally:
+            batches.close()
             _shut_down(collector)
 
     def _loop(self, batches: Iterator[TensorDictBase]) -> None:
@@ -330,12 +336,11 @@ class Trainer:
         return batch
 
     def update(self, batch: TensorDictBase) -> dict[str, float]:
-        """One PPO update at the scheduled learning rate, then the new weights to the workers."""
+        """One PPO update at the scheduled learning rate (the workers get the weights from ``Batches``)."""
         t1 = time.perf_counter()
         lr = self.learner.lr_at(self.frames, self.cfg.total_frames)
         self.learner.set_lr(lr)
         losses = self.learner.update(batch)
-        self.collector.update_policy_weights_()
         self.updates += 1
         metrics = {f"losses/{k}": v for k, v in losses.items()}
         metrics["charts/learning_rate"] = lr

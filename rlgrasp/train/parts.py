@@ -25,9 +25,12 @@ class Parts:
     norm: RunningNorm
     frames_per_batch: int
 
-    def make_collector(self, generation: int = 0, error_dir: str | None = None) -> BaseCollector:
-        """The configured collector running ``actor``; ``generation`` shifts the seeds on resume."""
-        return build_collector(self.cfg, self.make_env, self.actor, generation, error_dir)
+    def make_collector(
+        self, generation: int = 0, error_dir: str | None = None, policy: torch.nn.Module | None = None
+    ) -> BaseCollector:
+        """The configured collector running ``policy`` (default ``actor``); ``generation`` shifts
+        the seeds on resume."""
+        return build_collector(self.cfg, self.make_env, policy or self.actor, generation, error_dir)
 
 
 def build_parts(cfg: Any, device: torch.device | str = "cpu") -> Parts:

@@ -39,6 +39,7 @@ MUTABLE = (
     "collector.num_workers",
     "collector.backend",
     "collector.torch_threads",
+    "collector.overlap",
     "collector.ray.",
     "device",
 )

@@ -1,0 +1,82 @@
+"""The learner's batches, and the moment the workers get new weights.
+
+The workers run a copy of the actor (``behaviour``). TorchRL shares a CPU policy's parameters with
+its process workers, so without the copy every optimizer step would reach a rollout in flight and
+one seed could give two different runs. The copy takes the learner's weights only while the workers
+are idle, between two batches.
+
+With ``overlap`` the next batch is requested before the learner trains on this one, so the workers
+collect while the learner updates and evaluates (otherwise a 1-thread learner leaves the other cores
+idle for the whole update). That batch is collected with the weights of one update before: PPO's
+ratio uses the log-probs recorded at collection, so it corrects for the lag as it does for the
+epochs within one update. TorchRL's asynchronous collector overlaps too, but each worker's batch
+then carries whatever weights it had when it started, which depends on timing.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Iterator
+from typing import Any
+
+import torch
+from tensordict import TensorDictBase
+from torchrl.collectors import BaseCollector
+
+#: Waited for an in-flight batch when the run stops before the collector shuts down; a healthy
+#: batch takes about a second, a worker that died makes the collector raise well before this.
+DRAIN_TIMEOUT_S = 120.0
+
+
+class Batches(Iterator[TensorDictBase]):
+    """``next()`` gives the next batch; with ``overlap`` the one after is already being collected."""
+
+    def __init__(
+        self, collector: BaseCollector, actor: torch.nn.Module, behaviour: torch.nn.Module, overlap: bool
+    ) -> None:
+        self.collector, self.actor, self.behaviour, self.overlap = collector, actor, behaviour, overlap
+        self._iterator = iter(collector)
+        self._thread: threading.Thread | None = None
+        self._result: tuple[Any, BaseException | None] = (None, None)
+
+    def __next__(self) -> TensorDictBase:
+        if not self.overlap:
+            self._push_weights()
+            return next(self._iterator)
+        if self._thread is None:
+            self._start()
+        batch = self._wait()
+        self._push_weights()
+        self._start()
+        return batch
+
+    def close(self) -> None:
+        """Let a batch in flight arrive (it is dropped) so the workers are idle at shutdown."""
+        if self._thread is not None:
+            self._thread.join(DRAIN_TIMEOUT_S)
+            self._thread = None
+
+    def _push_weights(self) -> None:
+        self.behaviour.load_state_dict(self.actor.state_dict())  # in place, into the shared memory
+        self.collector.update_policy_weights_()
+
+    def _start(self) -> None:
+        def fetch() -> None:
+            try:
+                self._result = (next(self._iterator), None)
+            except BaseException as exc:  # noqa: BLE001 - re-raised in the learner's thread
+                self._result = (None, exc)
+
+        self._result = (None, None)
+        # A daemon thread: a collector that never answers must not keep the process alive.
+        self._thread = threading.Thread(target=fetch, name="rlgrasp-collect", daemon=True)
+        self._thread.start()
+
+    def _wait(self) -> TensorDictBase:
+        assert self._thread is not None
+        self._thread.join()
+        self._thread = None
+        batch, error = self._result
+        if error is not None:
+            raise error
+        return batch
