@@ -80,6 +80,50 @@ def test_slurm_launcher_partition_account_and_total_memory_are_overridable() -> 
     assert not any(line.startswith("#SBATCH --mem-per-cpu") for line in lines)
 
 
+@pytest.mark.parametrize(
+    ("shown_restarts", "env_restarts", "exits"),
+    [
+        (1, None, True),    # first run, SLURM requeued it (scontrol requeue): pending again
+        (2, "1", True),     # the same in the rerun
+        (0, None, False),   # not requeued (submitit refused, e.g. timed out too often): the job ends
+        (1, "1", False),
+    ],
+)
+def test_a_job_slurm_requeued_itself_exits_without_a_result(
+    tmp_path: Path, monkeypatch, shown_restarts: int, env_restarts: str | None, exits: bool
+) -> None:
+    """After `scontrol requeue` SLURM signals a job it already requeued; submitit's own requeue then
+    fails ("Job is pending execution"). Returning would write a submitit result with the preempted
+    frames, and the sweep would take it for the run's end; exiting leaves the result to the rerun."""
+    import signal
+
+    from rlgrasp.train.loop import hand_off_preemption
+
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    (bin_dir / "scontrol").write_text(
+        f"#!/bin/sh\necho 'JobId=7 JobState=COMPLETING Reason=None Restarts={shown_restarts}'\n")
+    (bin_dir / "scontrol").chmod(0o755)
+    monkeypatch.setenv("PATH", f"{bin_dir}{os.pathsep}{os.environ['PATH']}")
+    monkeypatch.setenv("SLURM_JOB_ID", "7")
+    if env_restarts is None:
+        monkeypatch.delenv("SLURM_RESTART_COUNT", raising=False)
+    else:
+        monkeypatch.setenv("SLURM_RESTART_COUNT", env_restarts)
+    calls = []
+
+    def checkpoint_and_try_requeue(signum: int, frame: object) -> None:  # submitit's handler's name
+        calls.append(signum)
+        raise subprocess.CalledProcessError(1, ["scontrol", "requeue", "7"])
+
+    if exits:
+        with pytest.raises(SystemExit):
+            hand_off_preemption(signal.SIGTERM, {signal.SIGTERM: checkpoint_and_try_requeue})
+    else:
+        hand_off_preemption(signal.SIGTERM, {signal.SIGTERM: checkpoint_and_try_requeue})
+    assert calls == [signal.SIGTERM]
+
+
 # ---------------------------------------------------------------------------------------------
 # On a cluster
 
