@@ -90,6 +90,21 @@ def test_resume_refuses_a_change_of_a_fixed_key_naming_both_values(run: Path) ->
         merged_config(cfg, saved, {"env.randomization"})
 
 
+def test_a_requeued_slurm_job_resumes_its_run_dir_without_resume_given(run: Path, monkeypatch) -> None:
+    """The requeued job runs its first command line again (no resume=) in a run dir with checkpoints."""
+    cfg = compose_train([*SMOKE, f"paths.output_dir={run}"])
+    monkeypatch.delenv("SLURM_RESTART_COUNT", raising=False)
+    with pytest.raises(ConfigError, match="already holds checkpoints"):  # a first start: refused
+        prepare_run(cfg)
+    monkeypatch.setenv("SLURM_RESTART_COUNT", "1")
+    merged, state = prepare_run(cfg)
+    assert state is not None and state["frames"] == 0
+    assert merged.resume == "auto"
+    monkeypatch.setenv("SLURM_RESTART_COUNT", "0")
+    with pytest.raises(ConfigError, match="already holds checkpoints"):
+        prepare_run(cfg)
+
+
 def test_a_truncated_last_falls_back_with_a_warning(tmp_path: Path, run: Path, caplog) -> None:
     copy = tmp_path / "run"
     (copy / "checkpoints").mkdir(parents=True)

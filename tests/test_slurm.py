@@ -80,6 +80,50 @@ def test_slurm_launcher_partition_account_and_total_memory_are_overridable() -> 
     assert not any(line.startswith("#SBATCH --mem-per-cpu") for line in lines)
 
 
+@pytest.mark.parametrize(
+    ("shown_restarts", "env_restarts", "exits"),
+    [
+        (1, None, True),    # first run, SLURM requeued it (scontrol requeue): pending again
+        (2, "1", True),     # the same in the rerun
+        (0, None, False),   # not requeued (submitit refused, e.g. timed out too often): the job ends
+        (1, "1", False),
+    ],
+)
+def test_a_job_slurm_requeued_itself_exits_without_a_result(
+    tmp_path: Path, monkeypatch, shown_restarts: int, env_restarts: str | None, exits: bool
+) -> None:
+    """After `scontrol requeue` SLURM signals a job it already requeued; submitit's own requeue then
+    fails ("Job is pending execution"). Returning would write a submitit result with the preempted
+    frames, and the sweep would take it for the run's end; exiting leaves the result to the rerun."""
+    import signal
+
+    from rlgrasp.train.loop import hand_off_preemption
+
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    (bin_dir / "scontrol").write_text(
+        f"#!/bin/sh\necho 'JobId=7 JobState=COMPLETING Reason=None Restarts={shown_restarts}'\n")
+    (bin_dir / "scontrol").chmod(0o755)
+    monkeypatch.setenv("PATH", f"{bin_dir}{os.pathsep}{os.environ['PATH']}")
+    monkeypatch.setenv("SLURM_JOB_ID", "7")
+    if env_restarts is None:
+        monkeypatch.delenv("SLURM_RESTART_COUNT", raising=False)
+    else:
+        monkeypatch.setenv("SLURM_RESTART_COUNT", env_restarts)
+    calls = []
+
+    def checkpoint_and_try_requeue(signum: int, frame: object) -> None:  # submitit's handler's name
+        calls.append(signum)
+        raise subprocess.CalledProcessError(1, ["scontrol", "requeue", "7"])
+
+    if exits:
+        with pytest.raises(SystemExit):
+            hand_off_preemption(signal.SIGTERM, {signal.SIGTERM: checkpoint_and_try_requeue})
+    else:
+        hand_off_preemption(signal.SIGTERM, {signal.SIGTERM: checkpoint_and_try_requeue})
+    assert calls == [signal.SIGTERM]
+
+
 # ---------------------------------------------------------------------------------------------
 # On a cluster
 
@@ -170,18 +214,19 @@ def test_two_seed_multirun_on_slurm(slurm, tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.skip(reason="needs resume=auto and the checkpoint on SIGTERM (reliability issue); "
-                         "remove this mark when they land")
 @pytest.mark.parametrize("how", ["requeue", "sigterm"])
 def test_preempted_job_resumes_in_its_run_dir(slurm, tmp_path: Path, how: str) -> None:
-    """Preempt a running job (scontrol requeue, or scancel --signal=TERM then requeue): it saves a
-    checkpoint, runs again in the same job dir and ends with the frames of an uninterrupted run."""
+    """Preempt a running job with `scontrol requeue` (SLURM requeues it, then sends SIGTERM) or with
+    `scancel --signal=TERM` (the training process gets SIGTERM and submitit's handler requeues the
+    job): it saves a checkpoint, runs its command line again (no resume= given) in the same job dir,
+    continues from that checkpoint and ends with the frames of an uninterrupted run."""
     frames = 8192
+    # timeout_min over 10: submitit takes any signal in a job of at most 10 minutes for its time limit
+    # (it guarantees min(0.8 T, T - 10 min) of walltime) and, with max_num_timeout=0, does not requeue.
     proc = subprocess.Popen(
         [sys.executable, str(ROOT / "scripts" / "train.py"), "-m", "hydra/launcher=slurm", "experiment=smoke",
-         "seed=0", f"paths.root_dir={tmp_path}", "resume=auto", f"total_frames={frames}",
-         "checkpoint.interval_frames=1024", "eval.interval_frames=4096", "hydra.launcher.timeout_min=10",
-         "logger=none", *IN_PROCESS],
+         "seed=0", f"paths.root_dir={tmp_path}", f"total_frames={frames}", "checkpoint.interval_frames=1024",
+         "eval.interval_frames=4096", "hydra.launcher.timeout_min=30", "logger=none", *IN_PROCESS],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=tmp_path, env=_job_env(),
     )
     try:
@@ -204,8 +249,15 @@ def test_preempted_job_resumes_in_its_run_dir(slurm, tmp_path: Path, how: str) -
     assert ckpt["frames"] == frames
     assert ckpt["generation"] >= 1  # resumed at least once
     log = (job / "train.log").read_text()
-    assert "resumed from" in log and "finished at" in log
+    (stopped,) = re.findall(r"SIGTERM at ([\d,]+) frames: saving a checkpoint", log)
+    (resumed,) = re.findall(r"resumed from auto at ([\d,]+) frames", log)
+    assert resumed == stopped and 0 < int(stopped.replace(",", "")) < frames  # from the signal's checkpoint
+    assert log.count("finished at") == 1
     assert int(_scontrol_job(job_id).get("Restarts", "0")) >= 1
+    # One result, the rerun's: the preempted run wrote none (it would have ended the sweep early).
+    (result,) = (job.parent / ".submitit").glob("*/*_result.pkl")
+    status, value = pickle.loads(result.read_bytes())
+    assert status == "success" and isinstance(value.return_value, float)
 
 
 def _wait_for(probe, timeout: float):

@@ -11,8 +11,10 @@ import copy
 import math
 import os
 import random
+import re
 import signal
 import subprocess
+import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -111,19 +113,42 @@ def _shut_down(collector: Any) -> None:
 def hand_off_preemption(signum: int, previous: dict[int, Any]) -> None:
     """After the checkpoint of a stop signal: under submitit, its own checkpoint-and-requeue handler
     (SLURM: ``scontrol requeue``; submitit_local: restart), which exits; under plain SLURM,
-    ``scontrol requeue $SLURM_JOB_ID``. Elsewhere nothing: the process exits normally."""
+    ``scontrol requeue $SLURM_JOB_ID``. Elsewhere nothing: the process exits normally.
+
+    A job SLURM requeues by itself (``scontrol requeue``, preemption) is already pending when the
+    signal arrives, so submitit's own requeue fails; that job exits without a result too: a result
+    would tell submitit (and the Hydra sweep waiting on it) the run ended at the preempted frames."""
     submitit = [h for h in previous.values() if getattr(h, "__name__", "") == "checkpoint_and_try_requeue"]
     if submitit:
         log.warning("handing over to submitit to requeue the job")
         try:
             submitit[0](signum, None)  # exits (SystemExit) once the job is requeued
         except Exception as exc:  # noqa: BLE001 - e.g. scontrol refusing a job SLURM already requeues
+            if slurm_requeued_already():
+                log.warning("SLURM requeues the job itself; exiting without a result for the rerun to write")
+                sys.exit(-1)  # what submitit does after its own requeue
             log.warning("requeue through submitit failed: %s", exc)
         return
     job = os.environ.get("SLURM_JOB_ID")
     if job:
         proc = subprocess.run(["scontrol", "requeue", job], capture_output=True, text=True, timeout=60)
         log.warning("scontrol requeue %s: %s", job, (proc.stderr or proc.stdout).strip() or "requeued")
+
+
+def slurm_requeued_already() -> bool:
+    """SLURM requeued this job while it still runs (``scontrol requeue``, preemption): its restart
+    count is past this run's ``SLURM_RESTART_COUNT`` (the job shows COMPLETING meanwhile, and
+    ``scontrol requeue`` from inside it answers "Job is pending execution")."""
+    job = os.environ.get("SLURM_JOB_ID")
+    if not job:
+        return False
+    try:
+        proc = subprocess.run(["scontrol", "-o", "show", "job", job], capture_output=True, text=True,
+                              timeout=60)
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    restarts = re.search(r"\bRestarts=(\d+)", proc.stdout)
+    return restarts is not None and int(restarts.group(1)) > int(os.environ.get("SLURM_RESTART_COUNT") or 0)
 
 
 class Trainer:

@@ -5,12 +5,14 @@ resolved config is the base and only what the command line changes is applied on
 ``MUTABLE`` may change (and are logged); any other change is refused with one line naming the key
 and both values, before any worker starts. ``resume=auto`` continues the run directory's newest
 readable checkpoint when there is one and starts fresh otherwise (``rlgrasp.config.run_dir`` picks
-the newest run of the same experiment and seed as the run directory).
+the newest run of the same experiment and seed as the run directory). A job SLURM runs again after a
+requeue (``SLURM_RESTART_COUNT`` > 0) resumes as with ``resume=auto`` when no ``resume`` was given.
 """
 
 from __future__ import annotations
 
 import logging
+import os
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -58,7 +60,7 @@ def prepare_run(cfg: DictConfig, changed: Iterable[str] | None = None) -> tuple[
     Raises ``ConfigError`` / ``CheckpointError`` with a one-line message.
     """
     run_dir = Path(cfg.paths.output_dir)
-    resume = cfg.resume
+    resume = cfg.resume or requeued_resume()
     has_ckpts = bool(ckpt_lib.checkpoint_files(run_dir / "checkpoints"))
     if resume == "auto":
         source = run_dir if has_ckpts else None
@@ -83,9 +85,21 @@ def prepare_run(cfg: DictConfig, changed: Iterable[str] | None = None) -> tuple[
     else:
         path, state = source, ckpt_lib.read_checkpoint(source)
     merged = merged_config(cfg, state["config"], changed)
+    merged.resume = resume  # what it resumed with, also when a requeue chose it
     validate_train(merged)
     log.info("resuming from %s (%s frames)", path, f"{state['frames']:,}")
     return merged, state
+
+
+def requeued_resume() -> str | None:
+    """``auto`` in a job SLURM requeued (preemption, ``scontrol requeue``, submitit's requeue): it runs
+    the command line of its first start again, in the same run directory, which now holds that
+    start's checkpoints; without this it would refuse to start there."""
+    restarts = int(os.environ.get("SLURM_RESTART_COUNT") or 0)
+    if restarts <= 0:
+        return None
+    log.info("SLURM restart %d of this job: resume=auto", restarts)
+    return "auto"
 
 
 def merged_config(cfg: DictConfig, saved: dict[str, Any], changed: Iterable[str] | None) -> DictConfig:
