@@ -74,11 +74,16 @@ def final_episodes(run_dir: Path) -> int:
     return int(cfg.get("final_episodes") or cfg.episodes)
 
 
-def eval_curve(run_dir: Path, start: float) -> list[tuple[float, int, float]]:
-    """(minutes since launch, frames, eval success) for every periodic evaluation."""
+def scalar_curve(run_dir: Path, start: float, tag: str) -> list[tuple[float, int, float]]:
+    """(minutes since launch, frames, value) of every point of a run's TensorBoard scalar ``tag``."""
     acc = EventAccumulator(str(run_dir / "tensorboard"), size_guidance={"scalars": 0})
     acc.Reload()
-    return [((e.wall_time - start) / 60, e.step, e.value) for e in acc.Scalars("eval/success_rate")]
+    return [((e.wall_time - start) / 60, e.step, e.value) for e in acc.Scalars(tag)]
+
+
+def eval_curve(run_dir: Path, start: float) -> list[tuple[float, int, float]]:
+    """(minutes since launch, frames, eval success) for every periodic evaluation."""
+    return scalar_curve(run_dir, start, "eval/success_rate")
 
 
 def main() -> None:

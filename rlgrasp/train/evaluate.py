@@ -7,6 +7,7 @@ extra workers; with a few envs and one episode each it costs about one collectio
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import torch
 from tensordict import TensorDictBase
@@ -80,3 +81,11 @@ class Evaluator:
         if self._env is not None and not self._env.is_closed:
             self._env.close()
         self._env = None
+
+
+def periodic_evaluator(make_env: EnvFactory, cfg: Any) -> Evaluator:
+    """Training's periodic evaluator for a training config: its episodes, envs and seeds (apart from
+    every collector worker's), so anything evaluating "as training does" gets the same episodes."""
+    e = cfg.eval
+    seed = cfg.seed * 1_000_003 + e.seed_offset
+    return Evaluator(make_env, cfg.env.get("max_episode_steps", 50), e.episodes, e.num_envs, seed)

@@ -30,7 +30,7 @@ from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.batches import Batches
 from rlgrasp.train.collect import read_env_errors
-from rlgrasp.train.evaluate import Evaluator
+from rlgrasp.train.evaluate import periodic_evaluator
 from rlgrasp.train.logger import RunLogger, log, progress_line, setup_text_log
 from rlgrasp.train.parts import build_parts
 from rlgrasp.train.ppo import NonFiniteError, PPOLearner
@@ -192,15 +192,8 @@ class Trainer:
         self.logger = attach_tracker(self.logger, cfg.logger, self.run_dir, self.config, resumed is not None)
         if resumed is None:
             self.logger.text("config", OmegaConf.to_yaml(self.config), 0)
-        e = cfg.eval
-        self.evaluator = Evaluator(
-            self.parts.make_env,
-            cfg.env.get("max_episode_steps", 50),
-            e.episodes,
-            e.num_envs,
-            cfg.seed * 1_000_003 + e.seed_offset,
-        )
-        self.final_episodes = e.final_episodes or e.episodes
+        self.evaluator = periodic_evaluator(self.parts.make_env, cfg)
+        self.final_episodes = cfg.eval.final_episodes or cfg.eval.episodes
 
     # --- checkpoint state ---------------------------------------------------------------------
     def state_dict(self) -> dict[str, Any]:

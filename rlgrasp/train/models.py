@@ -15,7 +15,8 @@ from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
 
 OBS_KEY = "observation"
 
-_ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU}
+#: ``model.activation`` -> its torch module class.
+ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU}
 
 
 class RunningNorm(nn.Module):
@@ -67,7 +68,7 @@ def _mlp(in_dim: int, out_dim: int, hidden: Sequence[int], activation: str, last
         in_features=in_dim,
         out_features=out_dim,
         num_cells=list(hidden),
-        activation_class=_ACTIVATIONS[activation],
+        activation_class=ACTIVATIONS[activation],
     )
     # Orthogonal init as in the PPO reference implementations; a small last layer keeps the
     # initial policy close to zero-mean and the initial values close to zero.

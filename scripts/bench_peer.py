@@ -1,0 +1,361 @@
+"""Peer comparison: rlgrasp's training against Stable-Baselines3 PPO, same env, settings and budget.
+
+Both run one after the other on the same machine, on the same wall-clock budget.
+
+    pip install -c constraints.txt -e ".[peer]"
+    python scripts/bench_peer.py --minutes 5 --seed 0
+    python scripts/bench_peer.py --minutes 5 --only sb3 -- env.control_mode=ee_delta
+
+rlgrasp runs as ``scripts/train.py experiment=<experiment>`` and is read back from its TensorBoard.
+SB3 runs PPO over a ``SubprocVecEnv`` of the same env (SB3's layout: one process per env) behind
+``VecNormalize`` on observations only (rlgrasp normalizes observations, not rewards), with the
+keywords ``sb3_kwargs`` maps from the same composed config. SB3's periodic evaluation is rlgrasp's
+own ``Evaluator`` (same episodes, seeds and deterministic actions) run inside SB3's ``learn`` after
+an update, so it costs SB3's clock what it costs rlgrasp's. Each side runs in its own process and
+its minutes count from that process's launch, so start-up is charged to both alike.
+
+Printed for each side: eval success against minutes, ``SPS`` (rlgrasp's console figure: frames/s
+from the end of the first update on, evaluations included) and frames/s from launch; then a table
+with the ratios rlgrasp/SB3. Module-level imports stay light (SB3's aside, which they load
+anyway): SB3's spawned env workers run this file's top level again.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import importlib.util
+import json
+import math
+import shutil
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # run from a checkout, uninstalled
+sys.path.insert(0, str(ROOT / "scripts"))  # bench_learning, also when this file is loaded by path
+
+INSTALL_HINT = 'Stable-Baselines3 is not installed: pip install -c constraints.txt -e ".[peer]"'
+
+try:
+    from stable_baselines3.common.callbacks import BaseCallback
+except ImportError:  # the `peer` extra is optional; only the SB3 side needs it, and checks first
+    BaseCallback = object  # type: ignore[assignment,misc]
+
+
+# --- the mapping --------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class LinearLR:
+    """rlgrasp's ``lr_at`` as an SB3 schedule: SB3 passes the fraction of ``total_timesteps`` left,
+    which is rlgrasp's ``1 - frames / total_frames`` when both learn for ``total_frames``."""
+
+    lr: float
+    min_frac: float = 0.0
+    anneal: bool = True
+
+    def __call__(self, progress_remaining: float) -> float:
+        return self.lr * max(self.min_frac, progress_remaining) if self.anneal else self.lr
+
+
+def n_envs(cfg: Any) -> int:
+    """SB3's env count: rlgrasp's workers x envs per worker (same frames per batch)."""
+    from rlgrasp.train.collect import frames_per_batch
+
+    return frames_per_batch(cfg) // cfg.collector.steps_per_env
+
+
+def sb3_kwargs(cfg: Any) -> dict[str, Any]:
+    """SB3 ``PPO`` keywords for a composed rlgrasp training config (env, seed and device aside)."""
+    from rlgrasp.train.models import ACTIVATIONS
+
+    a, m = cfg.algo, cfg.model
+    if a.loss_critic_type != "l2":
+        raise ValueError(f"algo.loss_critic_type={a.loss_critic_type!r}: SB3's value loss is l2 only")
+    return {
+        "n_steps": cfg.collector.steps_per_env,
+        "batch_size": a.minibatch_size,
+        "n_epochs": a.epochs,
+        "learning_rate": LinearLR(a.lr, a.min_lr_frac, a.anneal_lr),
+        "gamma": a.gamma,
+        "gae_lambda": a.gae_lambda,
+        "clip_range": a.clip_epsilon,
+        "ent_coef": a.entropy_coeff,
+        "vf_coef": a.critic_coeff,
+        "max_grad_norm": a.max_grad_norm,
+        "normalize_advantage": a.normalize_advantage,
+        # SB3 stops an update once its KL estimate exceeds 1.5 x target_kl, rlgrasp at target_kl.
+        "target_kl": None if a.target_kl is None else a.target_kl / 1.5,
+        "policy_kwargs": {
+            "net_arch": {"pi": list(m.hidden_sizes), "vf": list(m.hidden_sizes)},
+            "activation_fn": ACTIVATIONS[m.activation],
+            "log_std_init": m.init_log_std,
+            "ortho_init": True,  # rlgrasp's init too: gain sqrt(2), 0.01 on the policy head, 1 on the value
+            "optimizer_kwargs": {"eps": a.adam_eps},
+        },
+    }
+
+
+def vecnorm_kwargs(cfg: Any) -> dict[str, Any]:
+    """``VecNormalize`` as rlgrasp's ``RunningNorm``: observations only, clipped, eps 1e-8."""
+    return {"norm_obs": bool(cfg.model.obs_norm), "norm_reward": False, "clip_obs": cfg.model.obs_clip,
+            "epsilon": 1e-8}
+
+
+def unmatched(cfg: Any) -> list[str]:
+    """What the SB3 side cannot set like rlgrasp, for this config (printed with the results)."""
+    c = cfg.collector
+    notes = [
+        f"layout: {n_envs(cfg)} env processes (SubprocVecEnv steps one env per process); rlgrasp "
+        f"{c.num_workers} workers x {c.envs_per_worker} envs",
+        "policy: SB3 samples a Gaussian and clips actions to the bounds; rlgrasp's TanhNormal squashes "
+        "them (SB3 squashes only with gSDE)",
+        f"std floor model.min_std={cfg.model.min_std}: SB3 has none",
+        "target_kl: SB3 estimates KL as mean((r - 1) - log r) and stops before the step, rlgrasp as "
+        "mean(-log r) and after it",
+        "observation statistics: VecNormalize updates them every step, rlgrasp after each update",
+    ]
+    if cfg.algo.gae_every_epoch:
+        notes.append("algo.gae_every_epoch=true: SB3 computes advantages once per rollout")
+    return notes
+
+
+# --- the SB3 side (its own process) ---------------------------------------------------------------
+def eval_policy(model: Any, vecnorm: Any) -> Any:
+    """SB3's deterministic action (the mean, clipped to the bounds) on VecNormalize's view of the
+    observation, as the TensorDict module rlgrasp's ``Evaluator`` rolls out."""
+    import torch
+    from tensordict.nn import TensorDictModule
+
+    def act(obs: torch.Tensor) -> torch.Tensor:
+        action, _ = model.predict(vecnorm.normalize_obs(obs.numpy()), deterministic=True)
+        return torch.as_tensor(action, dtype=torch.float32)
+
+    return TensorDictModule(act, in_keys=["observation"], out_keys=["action"])
+
+
+class PeriodicEval(BaseCallback):
+    """rlgrasp's loop order inside SB3's ``learn``: after each update the SPS, then an evaluation
+    when one is due, then the budget check before the next rollout (SB3 stops at its first step)."""
+
+    def __init__(self, cfg: Any, evaluator: Any, vecnorm: Any, start: float, budget_s: float) -> None:
+        from rlgrasp.train.loop import _Due, _Throughput  # the schedule and SPS training itself uses
+
+        super().__init__()
+        self.cfg, self.evaluator, self.vecnorm = cfg, evaluator, vecnorm
+        self.start, self.budget_s = start, budget_s
+        self.due, self.throughput = _Due(cfg.eval.interval_frames, 0), _Throughput()
+        self.frames, self.over, self.batch_t0 = 0, False, time.perf_counter()
+        self.evals: list[tuple[float, int, float, int]] = []  # (unix time, frames, success, episodes)
+        self.sps: list[tuple[float, int, float]] = []  # (unix time, frames, SPS) after each update
+
+    def _on_rollout_start(self) -> None:
+        if self.num_timesteps > self.frames:
+            self._after_update()
+        self.over = time.monotonic() - self.start >= self.budget_s
+        self.batch_t0 = time.perf_counter()
+
+    def _on_step(self) -> bool:
+        return not self.over
+
+    def _on_training_end(self) -> None:
+        if not self.over and self.num_timesteps > self.frames:  # ended on total_frames
+            self._after_update()
+
+    def _after_update(self) -> None:
+        new, self.frames = self.num_timesteps - self.frames, self.num_timesteps
+        sps = self.throughput(new, self.batch_t0)
+        self.sps.append((time.time(), self.frames, sps))
+        if self.due(self.frames) and self.frames < self.cfg.total_frames:  # the last one is the final
+            self.evaluate(self.cfg.eval.episodes)
+
+    def evaluate(self, episodes: int) -> None:
+        result = self.evaluator.run(eval_policy(self.model, self.vecnorm), episodes)
+        success = result.get("success_rate", math.nan)
+        self.evals.append((time.time(), self.frames, success, episodes))
+        sps = self.sps[-1][2] if self.sps else math.nan
+        print(f"{self.frames:>9,} frames  SPS {sps:,.0f}  eval success {success:.3f} ({episodes} episodes)",
+              flush=True)
+
+
+def run_sb3(cfg: Any, out_json: Path) -> None:
+    """Train SB3 PPO on ``cfg`` until its frames or time budget run out, then the final evaluation,
+    as ``Trainer.finish`` does; writes the curve to ``out_json``."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
+
+    from rlgrasp.config import env_factory
+    from rlgrasp.train.collect import worker_seed
+    from rlgrasp.train.evaluate import periodic_evaluator
+    from rlgrasp.train.loop import resolve_device
+
+    torch.set_num_threads(cfg.collector.torch_threads)  # rlgrasp's learner threads (Trainer sets them)
+    start = time.monotonic()  # the budget includes the workers' start-up, as in Trainer.run
+    make_env = env_factory(cfg.env)
+    venv = VecNormalize(SubprocVecEnv([make_env] * n_envs(cfg), start_method="spawn"), **vecnorm_kwargs(cfg))
+    evaluator = periodic_evaluator(make_env, cfg)
+    try:
+        model = PPO("MlpPolicy", venv, seed=cfg.seed, device=str(resolve_device(cfg.device)), verbose=0,
+                    **sb3_kwargs(cfg))
+        venv.seed(worker_seed(cfg.seed, 0))  # env k seeded worker_seed + k (rlgrasp: per worker)
+        budget_s = cfg.time_budget_min * 60 if cfg.time_budget_min else math.inf
+        callback = PeriodicEval(cfg, evaluator, venv, start, budget_s)
+        model.learn(total_timesteps=cfg.total_frames, callback=callback)
+        final = cfg.eval.final_episodes or cfg.eval.episodes
+        last = callback.evals[-1] if callback.evals else None
+        if last is None or last[1] != callback.frames or final > cfg.eval.episodes:
+            callback.evaluate(final)
+    finally:
+        evaluator.close()
+        venv.close()
+    out_json.write_text(json.dumps({"evals": callback.evals, "sps": callback.sps}))
+
+
+def sb3_child(args: argparse.Namespace) -> None:
+    """``--sb3-child``: compose the config as training would and run the SB3 side in this process."""
+    from rlgrasp.config import compose_train, validate_train
+
+    run_dir = args.out / f"sb3_seed{args.seed}"
+    cfg = compose_train([f"experiment={args.experiment}", f"seed={args.seed}",
+                         f"time_budget_min={args.minutes}", f"paths.output_dir={run_dir}", *args.overrides])
+    validate_train(cfg)
+    print(f"SB3 PPO: {n_envs(cfg)} envs (SubprocVecEnv), VecNormalize {vecnorm_kwargs(cfg)}", flush=True)
+    print(f"PPO keywords: {sb3_kwargs(cfg)}", flush=True)
+    run_sb3(cfg, args.out / f"sb3_seed{args.seed}.json")
+
+
+# --- the parent: run both, read them, compare ----------------------------------------------------
+def rlgrasp_side(args: argparse.Namespace) -> dict[str, Any]:
+    """``scripts/train.py`` (through bench_learning), read back from its TensorBoard."""
+    import bench_learning
+    from omegaconf import OmegaConf
+
+    shutil.rmtree(args.out / f"rlgrasp_seed{args.seed}", ignore_errors=True)  # old events would mix in
+    run = bench_learning.run_seed(
+        args.out, "rlgrasp", args.seed, args.minutes, args.experiment, args.overrides
+    )
+    run_dir, start = run["run_dir"], run["start"]
+    periodic = int(OmegaConf.load(run_dir / ".hydra" / "config.yaml").eval.episodes)
+    curve = bench_learning.eval_curve(run_dir, start)
+    evals = [(m, f, v, periodic) for m, f, v in curve[:-1]]
+    evals += [(m, f, v, bench_learning.final_episodes(run_dir)) for m, f, v in curve[-1:]]
+    sps = bench_learning.scalar_curve(run_dir, start, "charts/SPS")
+    return {"evals": evals, "sps": sps, "wall_min": run["wall_s"] / 60}
+
+
+def sb3_side(args: argparse.Namespace) -> dict[str, Any]:
+    """This script again with ``--sb3-child``, in its own process like ``scripts/train.py``."""
+    out_json = args.out / f"sb3_seed{args.seed}.json"
+    out_json.unlink(missing_ok=True)
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--sb3-child", "--seed", str(args.seed),
+           "--minutes", str(args.minutes), "--experiment", args.experiment, "--out", str(args.out),
+           "--", *args.overrides]
+    print("$", " ".join(cmd[1:]), flush=True)
+    start = time.time()
+    with open(args.out / f"sb3_seed{args.seed}.log", "w") as log:
+        code = subprocess.call(cmd, stdout=log, stderr=subprocess.STDOUT, cwd=ROOT)
+    if code != 0:
+        raise SystemExit(f"the SB3 run failed (exit {code}); see {log.name}")
+    wall_min = (time.time() - start) / 60
+    data = json.loads(out_json.read_text())
+    evals = [((t - start) / 60, f, v, n) for t, f, v, n in data["evals"]]
+    sps = [((t - start) / 60, f, v) for t, f, v in data["sps"]]
+    return {"evals": evals, "sps": sps, "wall_min": wall_min}
+
+
+Curve = list[tuple[float, int, float, int]]  # (minutes from launch, frames, eval success, episodes)
+
+
+def summary(evals: Curve, sps: list[tuple[float, int, float]]) -> dict[str, Any]:
+    """Final success, SPS and frames/s from launch of one side's curves (minutes from its launch)."""
+    from rlgrasp.stats import wilson_interval
+
+    minutes, frames, last_sps = sps[-1] if sps else (math.nan, 0, math.nan)
+    _, _, success, episodes = evals[-1] if evals else (math.nan, 0, math.nan, 0)
+    low, high = wilson_interval(round(success * episodes), episodes) if episodes else (math.nan, math.nan)
+    first_90 = next((m for m, _, v, _ in evals if v >= 0.9 - 1e-6), None)
+    return {"frames": frames, "sps": last_sps, "launch_fps": frames / max(minutes * 60, 1e-9),
+            "success": success, "episodes": episodes, "ci": f"[{low:.2f}, {high:.2f}]",
+            "first_90": "-" if first_90 is None else f"{first_90:.1f} min"}
+
+
+def print_curves(results: dict[str, dict[str, Any]], args: argparse.Namespace) -> Path:
+    """Each side's eval success against minutes, printed and written to one CSV."""
+    names = {"rlgrasp": f"rlgrasp (scripts/train.py experiment={args.experiment})",
+             "sb3": "Stable-Baselines3 PPO (SubprocVecEnv + VecNormalize)"}
+    rows = [("side", "seed", "minutes", "frames", "eval_success_rate", "episodes")]
+    for side, r in results.items():
+        print(f"\n{names[side]}, seed {args.seed}: eval success against minutes from launch")
+        print(f"{'minutes':>8}{'frames':>10}{'success':>9}{'episodes':>9}")
+        for minutes, frames, success, episodes in r["evals"]:
+            print(f"{minutes:>8.2f}{frames:>10,}{success:>9.3f}{episodes:>9}")
+            rows.append((side, args.seed, round(minutes, 3), frames, success, episodes))
+    csv_path = args.out / f"peer_seed{args.seed}.csv"
+    with open(csv_path, "w", newline="") as f:
+        csv.writer(f).writerows(rows)
+    return csv_path
+
+
+def report(results: dict[str, dict[str, Any]], args: argparse.Namespace) -> None:
+    """The curves, then the comparison table with the ratios rlgrasp/SB3."""
+    csv_path = print_curves(results, args)
+    sums = {side: summary(r["evals"], r["sps"]) for side, r in results.items()}
+    print(f"\n{args.minutes} min budget each, seed {args.seed}, one after the other. SPS: frames/s from "
+          "the end of the first update on, evaluations included (rlgrasp's console figure)")
+    print(f"{'':<12}{'frames':>10}{'SPS':>8}{'frames/s from launch':>22}{'final success':>15}"
+          f"{'episodes':>9}{'95% Wilson':>14}{'first >= 0.9':>14}{'wall min':>10}")
+    for side, s in sums.items():
+        print(f"{side:<12}{s['frames']:>10,}{s['sps']:>8,.0f}{s['launch_fps']:>22,.0f}{s['success']:>15.3f}"
+              f"{s['episodes']:>9}{s['ci']:>14}{s['first_90']:>14}{results[side]['wall_min']:>10.1f}")
+    if len(sums) == 2:
+        a, b = sums["rlgrasp"], sums["sb3"]
+        print(f"{'rlgrasp/sb3':<12}{ratio(a['frames'], b['frames']):>10}{ratio(a['sps'], b['sps']):>8}"
+              f"{ratio(a['launch_fps'], b['launch_fps']):>22}{ratio(a['success'], b['success']):>15}")
+    if "sb3" in results:
+        print("\nNot matched on the SB3 side:\n  " + "\n  ".join(results["sb3"]["unmatched"]))
+    print(f"\nwrote {csv_path}; logs in {args.out}")
+
+
+def ratio(a: float, b: float) -> str:
+    return f"{a / b:.2f}" if b and not (math.isnan(a) or math.isnan(b)) else "-"
+
+
+def parse_args() -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--minutes", type=float, default=5.0, help="wall-clock budget of each side")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--only", choices=["rlgrasp", "sb3"], help="run one side only")
+    parser.add_argument("--experiment", default="grasp_ppo")
+    parser.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_peer")
+    parser.add_argument("--sb3-child", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("overrides", nargs="*", help="training overrides for both sides, after --")
+    return parser.parse_args()
+
+
+def main() -> None:
+    args = parse_args()
+    args.out = args.out.resolve()
+    args.out.mkdir(parents=True, exist_ok=True)
+    sides = [args.only] if args.only else ["rlgrasp", "sb3"]
+    if "sb3" in sides and importlib.util.find_spec("stable_baselines3") is None:
+        raise SystemExit(INSTALL_HINT)
+    if args.sb3_child:
+        sb3_child(args)
+        return
+    results = {}
+    for side in sides:
+        results[side] = rlgrasp_side(args) if side == "rlgrasp" else sb3_side(args)
+    if "sb3" in results:
+        from rlgrasp.config import compose_train
+
+        cfg = compose_train([f"experiment={args.experiment}", f"seed={args.seed}", *args.overrides])
+        results["sb3"]["unmatched"] = unmatched(cfg)
+    report(results, args)
+
+
+if __name__ == "__main__":
+    main()
