@@ -18,6 +18,7 @@ import torch
 from rlgrasp.config import ConfigError, compose_train, run_dir
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.resume import merged_config, prepare_run
+from tests.procs import wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 SMOKE = ["experiment=smoke", "logger=none"]
@@ -146,14 +147,6 @@ def _train(args: list[str], cwd: Path, **kw) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **kw)
 
 
-def _wait_for(probe, timeout: float):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if (found := probe()) is not None:
-            return found
-        time.sleep(0.3)
-    raise TimeoutError(f"nothing after {timeout} s")
-
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGUSR1])
 def test_stop_signal_saves_then_resume_auto_finishes_and_exits(tmp_path: Path, sig: int) -> None:
@@ -164,8 +157,8 @@ def test_stop_signal_saves_then_resume_auto_finishes_and_exits(tmp_path: Path, s
     proc = _train(cmd, tmp_path)
     try:
         runs = tmp_path / "outputs" / "train" / "smoke"
-        log = _wait_for(lambda: next(runs.glob("*/train.log"), None), 120)
-        _wait_for(lambda: True if "frames 1,024/" in log.read_text() else None, 180)
+        log = wait_for(lambda: next(runs.glob("*/train.log"), None), 120)
+        wait_for(lambda: True if "frames 1,024/" in log.read_text() else None, 180)
         proc.send_signal(sig)
         out, _ = proc.communicate(timeout=60)
     finally:
