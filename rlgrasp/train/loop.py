@@ -295,7 +295,8 @@ class Trainer:
             self._check_stop()
             t0 = time.perf_counter()
             batch = self.collect(batches)
-            self._check_stop()  # a batch collected while stopping is not trained on
+            self._check_stop()  # a batch collected while stopping is neither trained on nor counted
+            self.frames += batch.numel()
             metrics = {"time/collect_s": time.perf_counter() - t0, **self.episode_metrics(batch)}
             metrics.update(self.update(batch))
             metrics["charts/SPS"] = sps = throughput(batch.numel(), t0)
@@ -311,7 +312,8 @@ class Trainer:
                 self.console(sps, budget_s - (last_console - start))
 
     def collect(self, batches: Iterator[TensorDictBase]) -> TensorDictBase:
-        """The next ``[envs * workers, time]`` batch; an env crash saves a checkpoint and says which env."""
+        """The next batch, flattened to ``[envs * workers, time]`` (not yet counted in ``frames``: the
+        loop counts it once it is sure to train on it); an env crash saves a checkpoint and says which env."""
         try:
             batch = next(batches)
         except (KeyboardInterrupt, StopIteration):
@@ -325,9 +327,7 @@ class Trainer:
                 f"collection failed at {self.frames:,} frames; checkpoint saved in {self.ckpt_dir}\n  "
                 + "\n  ".join(reports)
             ) from exc
-        batch = batch.reshape(-1, batch.shape[-1])
-        self.frames += batch.numel()
-        return batch
+        return batch.reshape(-1, batch.shape[-1])
 
     def update(self, batch: TensorDictBase) -> dict[str, float]:
         """One PPO update at the scheduled learning rate, then the new weights to the workers."""
