@@ -124,6 +124,16 @@ def hand_off_preemption(signum: int, previous: dict[int, Any]) -> None:
         log.warning("scontrol requeue %s: %s", job, (proc.stderr or proc.stdout).strip() or "requeued")
 
 
+def pass_on_signal(signum: int, previous: dict[int, Any]) -> None:
+    """Training only borrows a stop signal to save first; a Python handler installed before it (a
+    sweep's, which stops the sweep) then gets it too. Without this, a SIGTERM to a sweep ended the
+    current trial early and the sweep went on to the next one. Submitit's handlers are
+    ``hand_off_preemption``'s."""
+    handler = previous.get(signum)
+    if callable(handler) and not getattr(handler, "__module__", "").startswith("submitit"):
+        handler(signum, None)
+
+
 class Trainer:
     """One training run. ``run()`` reads straight down: collect, update, log, evaluate, checkpoint,
     until the frame or time budget is spent; then the final evaluation and checkpoint."""
@@ -429,7 +439,8 @@ def train(
     Raises ``TrainingError`` on an env crash (after saving a checkpoint) or a NaN/inf (keeping the
     last good checkpoint), ``ConfigError``/``CheckpointError`` on bad input before anything starts.
     Ctrl-C, SIGTERM, SIGUSR1 and SIGUSR2 save a checkpoint and return normally (under SLURM or
-    submitit after requeueing the job). ``changed``: the keys the command line set, for a resume
+    submitit after requeueing the job; a Python handler the signal had before, e.g. a sweep's, is
+    called after the checkpoint and may raise). ``changed``: the keys the command line set, for a resume
     (None: all of ``cfg``; see ``rlgrasp.train.resume``).
 
     ``on_eval(frames, metrics)`` runs after every evaluation (periodic and final); a sweep uses it to
@@ -439,8 +450,10 @@ def train(
     cfg, resumed = prepare_run(cfg, changed)
     trainer = Trainer(cfg, on_eval, resumed)
     result = trainer.run()
-    if trainer.stopped_by is not None and trainer.frames < cfg.total_frames:
-        hand_off_preemption(trainer.stopped_by, trainer.previous_handlers)
+    if trainer.stopped_by is not None:
+        if trainer.frames < cfg.total_frames:
+            hand_off_preemption(trainer.stopped_by, trainer.previous_handlers)
+        pass_on_signal(trainer.stopped_by, trainer.previous_handlers)
     return result
 
 
