@@ -321,13 +321,37 @@ def run_dir(resume: str | None, base: str, seed: int) -> str:
     return chosen
 
 
+#: ``hydra.output_subdir`` per run directory, chosen once per Hydra run (Hydra resolves it more than
+#: once, the last time after writing into it); ``RunDirCheck.on_run_start`` forgets earlier runs'.
+_OUTPUT_SUBDIRS: dict[str, str] = {}
+
+
+def output_subdir(output_dir: str) -> str:
+    """``hydra.output_subdir``: ``.hydra`` for the first start in a run directory; every later start
+    there (a resume, a requeued job) ``.hydra/resume_<n>`` (n = 1, 2, ...). Hydra writes config.yaml,
+    hydra.yaml and overrides.yaml into it: in ``.hydra/`` itself a resume would overwrite the launch's."""
+    key = str(Path(output_dir).resolve())
+    if key not in _OUTPUT_SUBDIRS:
+        hydra_dir = Path(key) / ".hydra"
+        n = 0
+        if (hydra_dir / "config.yaml").exists():
+            n = 1
+            while (hydra_dir / f"resume_{n}").exists():
+                n += 1
+        _OUTPUT_SUBDIRS[key] = f".hydra/resume_{n}" if n else ".hydra"
+    return _OUTPUT_SUBDIRS[key]
+
+
 def register_configs() -> None:
-    """Register every schema (idempotent), the ``rlgrasp_run_dir`` resolver used by ``hydra.run.dir``
-    and ``rlgrasp_sum`` (OmegaConf has no arithmetic; the SLURM launcher asks for workers + 1 CPUs)."""
+    """Register every schema (idempotent), the resolvers of ``hydra.run.dir`` (``rlgrasp_run_dir``) and
+    ``hydra.output_subdir`` (``rlgrasp_output_subdir``), and ``rlgrasp_sum`` (OmegaConf has no
+    arithmetic; the SLURM launcher asks for workers + 1 CPUs)."""
     if not OmegaConf.has_resolver("rlgrasp_or"):
         OmegaConf.register_new_resolver("rlgrasp_or", _first_not_none)
     if not OmegaConf.has_resolver("rlgrasp_run_dir"):
         OmegaConf.register_new_resolver("rlgrasp_run_dir", run_dir)
+    if not OmegaConf.has_resolver("rlgrasp_output_subdir"):
+        OmegaConf.register_new_resolver("rlgrasp_output_subdir", output_subdir)
     if not OmegaConf.has_resolver("rlgrasp_sum"):
         OmegaConf.register_new_resolver("rlgrasp_sum", _sum)
     cs = ConfigStore.instance()
@@ -472,6 +496,7 @@ class RunDirCheck(Callback):
     ends the command with one line instead of Hydra's traceback from inside its job runner."""
 
     def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
+        _OUTPUT_SUBDIRS.clear()  # a new start in this process (tests run several): choose afresh
         self._check(config.hydra.run.dir)
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:

@@ -1,9 +1,10 @@
 """Kill -9 soak of resume: N cycles of start-or-resume, a random wait, ``kill -9`` of the whole process
 group (learner and collector workers); then every check, and a final resume that runs to the end.
 
-    python scripts/soak_resume.py --cycles 3 [--out /tmp/soak] [--seed 0] [--wait 15 40]
+    python scripts/soak_resume.py --cycles 3 [--out /tmp/soak] [--seed 0] [--wait 15 40] [--total-frames N]
 
-Checks after each kill: no process of the group is left; every file under ``checkpoints/`` loads
+Checks after each kill: the command was still running when killed (a cycle that reaches the end tests
+nothing); no process of the group is left; every file under ``checkpoints/`` loads
 (``weights_only``); the newest checkpoint's frames never go backwards; what the kill lost (frames the
 learner had reached minus the newest checkpoint's) is at most one checkpoint interval. At the end:
 the final resume exits 0 at ``total_frames`` and the TensorBoard curves have no duplicated or
@@ -27,6 +28,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 PROGRESS = re.compile(r"frames ([\d,]+)/")
 
+from rlgrasp.utils import processes_in_group  # noqa: E402
+
 
 def train_command(out: Path, seed: int, total: int, interval: int) -> list[str]:
     return [
@@ -34,19 +37,6 @@ def train_command(out: Path, seed: int, total: int, interval: int) -> list[str]:
         f"seed={seed}", f"paths.root_dir={out}", f"total_frames={total}",
         f"checkpoint.interval_frames={interval}", "eval.interval_frames=4096",
     ]
-
-
-def group_left(pgid: int) -> list[int]:
-    """Processes still in process group ``pgid``."""
-    left = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[2]) == pgid and fields[0] != "Z":
-            left.append(int(stat.parent.name))
-    return left
 
 
 def run_dirs(out: Path, seed: int) -> list[Path]:
@@ -75,21 +65,23 @@ def reached(log_text: str) -> int:
     return int(found[-1].replace(",", "")) if found else 0
 
 
-def kill_cycle(cmd: list[str], wait_s: float, log_file: Path) -> tuple[int, float, list[int]]:
-    """Start the command in its own process group, wait, kill -9 the group: (pgid, waited, left)."""
+def kill_cycle(cmd: list[str], wait_s: float, log_file: Path) -> tuple[int, float, list[int], int | None]:
+    """Start the command in its own process group, wait, kill -9 the group: (pgid, waited, left, exit
+    code if the command ended by itself before the kill, else None)."""
     with open(log_file, "a") as out:
         proc = subprocess.Popen(cmd, cwd=ROOT, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
     t0 = time.monotonic()
+    ended = None
     try:
-        proc.wait(timeout=wait_s)
+        ended = proc.wait(timeout=wait_s)
     except subprocess.TimeoutExpired:
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()
     waited = time.monotonic() - t0
     deadline = time.monotonic() + 10
-    while group_left(proc.pid) and time.monotonic() < deadline:
+    while processes_in_group(proc.pid) and time.monotonic() < deadline:
         time.sleep(0.2)
-    return proc.pid, waited, group_left(proc.pid)
+    return proc.pid, waited, processes_in_group(proc.pid), ended
 
 
 def tensorboard_problems(run: Path) -> list[str]:
@@ -115,7 +107,7 @@ def soak(args: argparse.Namespace) -> int:
     for cycle in range(1, args.cycles + 1):
         runs = run_dirs(out, args.seed)
         log_start = {r: (r / "train.log").stat().st_size for r in runs if (r / "train.log").exists()}
-        pgid, waited, left = kill_cycle(cmd, rng.uniform(*args.wait), out / "soak_train_output.txt")
+        pgid, waited, left, ended = kill_cycle(cmd, rng.uniform(*args.wait), out / "soak_train_output.txt")
         run = max(run_dirs(out, args.seed), key=lambda r: check_checkpoints(r)[0])
         text = (run / "train.log").read_text()[log_start.get(run, 0):]
         at_kill = reached(text)
@@ -123,6 +115,8 @@ def soak(args: argparse.Namespace) -> int:
         lost = max(at_kill - frames, 0)
         if left:
             problems.append(f"processes left in group {pgid}: {left}")
+        if ended is not None:  # nothing was killed: this cycle tested nothing
+            problems.append(f"ended by itself (exit {ended}) before the kill: raise --total-frames")
         if frames < best:
             problems.append(f"frames went backwards: {best} -> {frames}")
         if lost > args.interval:
@@ -162,9 +156,12 @@ def main() -> int:
     p.add_argument("--out", default="outputs/soak")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--wait", type=float, nargs=2, default=(15.0, 40.0), metavar=("MIN_S", "MAX_S"))
-    p.add_argument("--total-frames", type=int, default=16384)
+    p.add_argument("--total-frames", type=int, default=None,
+                   help="default: 16,384 per cycle, so that no cycle reaches the end")
     p.add_argument("--interval", type=int, default=2048, help="checkpoint.interval_frames")
-    return soak(p.parse_args())
+    args = p.parse_args()
+    args.total_frames = args.total_frames or 16384 * args.cycles
+    return soak(args)
 
 
 if __name__ == "__main__":

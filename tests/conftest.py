@@ -12,6 +12,7 @@ import pytest
 os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
 
 from rlgrasp.config import compose_eval, compose_train  # noqa: E402
+from tests.procs import Started, start_script  # noqa: E402
 
 
 @pytest.fixture
@@ -49,3 +50,19 @@ def make_env():
     yield _make
     for env in envs:
         env.close()
+
+
+@pytest.fixture
+def script(tmp_path):
+    """``script(name, *args, cwd=tmp_path, env=None)``: ``python scripts/<name>.py`` started in its own
+    process group (``tests.procs.Started``); whatever is left of each group is killed at the end."""
+    started: list[Started] = []
+
+    def start(name: str, *args: str, cwd=None, env=None) -> Started:
+        out = tmp_path / f"{name}_{len(started)}.out"
+        started.append(start_script(name, list(args), cwd or tmp_path, out, env))
+        return started[-1]
+
+    yield start
+    for s in started:
+        s.kill_group()

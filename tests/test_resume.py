@@ -18,6 +18,7 @@ import torch
 from rlgrasp.config import ConfigError, compose_train, run_dir
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.resume import merged_config, prepare_run
+from tests.procs import wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 SMOKE = ["experiment=smoke", "logger=none"]
@@ -161,15 +162,6 @@ def _train(args: list[str], cwd: Path, **kw) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **kw)
 
 
-def _wait_for(probe, timeout: float):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if (found := probe()) is not None:
-            return found
-        time.sleep(0.3)
-    raise TimeoutError(f"nothing after {timeout} s")
-
-
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGUSR1])
 def test_stop_signal_saves_then_resume_auto_finishes_and_exits(tmp_path: Path, sig: int) -> None:
     """A stop signal saves a checkpoint and exits 0; the same command (resume=auto) continues the run
@@ -179,8 +171,8 @@ def test_stop_signal_saves_then_resume_auto_finishes_and_exits(tmp_path: Path, s
     proc = _train(cmd, tmp_path)
     try:
         runs = tmp_path / "outputs" / "train" / "smoke"
-        log = _wait_for(lambda: next(runs.glob("*/train.log"), None), 120)
-        _wait_for(lambda: True if "frames 1,024/" in log.read_text() else None, 180)
+        log = wait_for(lambda: next(runs.glob("*/train.log"), None), 120)
+        wait_for(lambda: True if "frames 1,024/" in log.read_text() else None, 180)
         proc.send_signal(sig)
         out, _ = proc.communicate(timeout=60)
     finally:
@@ -199,6 +191,27 @@ def test_stop_signal_saves_then_resume_auto_finishes_and_exits(tmp_path: Path, s
         assert "finished at 4,096 frames" in out
     assert time.monotonic() - t0 < 60  # the finished run starts no workers and exits
     assert len(list((tmp_path / "outputs" / "train" / "smoke").iterdir())) == 1
+
+
+def test_a_resume_keeps_the_launch_config_in_dot_hydra(tmp_path: Path) -> None:
+    """Hydra writes each start's config and overrides; a later start in the run (resume, requeue) goes
+    to .hydra/resume_<n>/, so .hydra/ keeps the launch's. A refused resume leaves no resume_<n>."""
+    run = tmp_path / "run"
+    tiny = ["collector=single", "collector.envs_per_worker=1", "collector.steps_per_env=16",
+            "algo.minibatch_size=16", "eval.episodes=1", "eval.final_episodes=1", "eval.num_envs=1"]
+    for args, code in (([*SMOKE, *tiny, f"hydra.run.dir={run}", "total_frames=16"], 0),
+                       ([f"resume={run}", "total_frames=32"], 0),
+                       ([f"resume={run}", "algo.gamma=0.5"], 2)):
+        proc = _train(args, tmp_path)
+        out, _ = proc.communicate(timeout=300)
+        assert proc.returncode == code and "Traceback" not in out, out[-2000:]
+    hydra = run / ".hydra"
+    assert "total_frames: 16\n" in (hydra / "config.yaml").read_text()
+    assert "resume" not in (hydra / "overrides.yaml").read_text()
+    assert sorted(p.name for p in hydra.iterdir() if p.is_dir()) == ["resume_1"]
+    assert "total_frames=32" in (hydra / "resume_1" / "overrides.yaml").read_text()
+    assert {p.name for p in (hydra / "resume_1").iterdir()} == {"config.yaml", "hydra.yaml", "overrides.yaml"}
+    assert ckpt_lib.load_checkpoint(run)["frames"] == 32
 
 
 @pytest.mark.slow

@@ -17,6 +17,8 @@ from pathlib import Path
 import pytest
 import torch
 
+from tests.procs import wait_for
+
 ROOT = Path(__file__).resolve().parents[1]
 # In-process collection (collector.num_workers=0: one CPU per job), so both seeds run at once on two cores.
 IN_PROCESS = ["collector=single", "collector.num_workers=0", "collector.envs_per_worker=4"]
@@ -231,7 +233,7 @@ def test_preempted_job_resumes_in_its_run_dir(slurm, tmp_path: Path, how: str) -
     )
     try:
         sweeps = tmp_path / "outputs" / "multirun" / "smoke"
-        job = _wait_for(lambda: next(sweeps.glob("*/0/checkpoints/last.pt"), None), timeout=300).parents[1]
+        job = wait_for(lambda: next(sweeps.glob("*/0/checkpoints/last.pt"), None), timeout=300).parents[1]
         (job_id,) = re.findall(r"^\s+id: '?(\d+(?:_\d+)?)'?$", (job / ".hydra" / "hydra.yaml").read_text(),
                                re.M)
         if how == "requeue":
@@ -239,7 +241,7 @@ def test_preempted_job_resumes_in_its_run_dir(slurm, tmp_path: Path, how: str) -
         else:
             subprocess.run(["scancel", "--signal=TERM", job_id], check=True, timeout=30)
         # SLURM holds a requeued job for ~2 minutes (Reason=BeginTime); let it start as soon as it is pending.
-        _wait_for(lambda: True if _scontrol_job(job_id)["JobState"] == "PENDING" else None, timeout=120)
+        wait_for(lambda: True if _scontrol_job(job_id)["JobState"] == "PENDING" else None, timeout=120)
         subprocess.run(["scontrol", "update", f"JobId={job_id}", "StartTime=now"], check=True, timeout=30)
         out, _ = proc.communicate(timeout=600)
     finally:
@@ -259,12 +261,3 @@ def test_preempted_job_resumes_in_its_run_dir(slurm, tmp_path: Path, how: str) -
     status, value = pickle.loads(result.read_bytes())
     assert status == "success" and isinstance(value.return_value, float)
 
-
-def _wait_for(probe, timeout: float):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        found = probe()
-        if found is not None:
-            return found
-        time.sleep(0.5)
-    raise TimeoutError(f"nothing after {timeout} s")

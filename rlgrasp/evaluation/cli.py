@@ -6,11 +6,14 @@ the output location first; create the output directory only once episodes have r
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import shutil
+import signal
 import sys
 import tempfile
+from collections.abc import Iterator
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -213,13 +216,38 @@ def _write_artefacts(
     return files
 
 
-def run(cfg: DictConfig) -> float:
-    """Evaluate; a bad input exits with code 2 and one clear line (no traceback)."""
+@contextlib.contextmanager
+def _sigterm_as_interrupt() -> Iterator[list[int]]:
+    """SIGTERM (``kill``, a scheduler) stops the evaluation as Ctrl-C does, unwinding through the
+    worker pool's exit (which terminates the workers) and the staging folder's removal. Python's
+    default would end this process at once and leave the spawned workers running, orphaned.
+    Yields the signals caught."""
+    caught: list[int] = []
+
+    def interrupt(signum: int, frame: Any) -> None:
+        caught.append(signum)
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
     try:
-        return float(evaluate(cfg)["success_at_end"]["rate"])
-    except EvaluationError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        sys.exit(2)
+        yield caught
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def run(cfg: DictConfig) -> float:
+    """Evaluate; a bad input exits with code 2 and one clear line (no traceback); Ctrl-C or SIGTERM
+    with 128 + the signal's number and one line, leaving no worker and no partial output behind."""
+    with _sigterm_as_interrupt() as caught:
+        try:
+            return float(evaluate(cfg)["success_at_end"]["rate"])
+        except EvaluationError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            sys.exit(2)
+        except KeyboardInterrupt:
+            sig = signal.Signals(caught[0] if caught else signal.SIGINT)
+            print(f"error: stopped by {sig.name}; the evaluation was not written", file=sys.stderr)
+            sys.exit(128 + sig)
 
 
 @hydra.main(config_path=CONFIG_DIR, config_name="eval", version_base="1.3")

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import multiprocessing as mp
+import signal
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -107,6 +108,13 @@ def _init_worker(source: PolicySource, deterministic: bool, video_episodes: int)
     _WORKER.update(env=env, actor=build_policy(source, env, deterministic), video_episodes=video_episodes)
 
 
+def _init_pool_worker(source: PolicySource, deterministic: bool, video_episodes: int) -> None:
+    """A pool worker leaves Ctrl-C to the parent, which terminates the pool: without this, a Ctrl-C
+    at a terminal (sent to the whole group) also prints a KeyboardInterrupt traceback per worker."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _init_worker(source, deterministic, video_episodes)
+
+
 def _run_chunk(jobs: Sequence[tuple[int, int]]) -> list[EpisodeResult]:
     env, actor, k = _WORKER["env"], _WORKER["actor"], _WORKER["video_episodes"]
     return [run_episode(env, actor, i, seed, render=i < k) for i, seed in jobs]
@@ -163,7 +171,7 @@ def run_episodes(
     else:
         ctx = mp.get_context("spawn")
         with ctx.Pool(
-            workers, initializer=_init_worker, initargs=(source, deterministic, video_episodes)
+            workers, initializer=_init_pool_worker, initargs=(source, deterministic, video_episodes)
         ) as pool:
             for chunk_result in pool.imap_unordered(_run_chunk, chunks):
                 results.extend(chunk_result)

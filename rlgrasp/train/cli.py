@@ -36,7 +36,7 @@ def run(cfg: DictConfig) -> float:
         return train(cfg, changed=_command_line_keys(cfg))
     except (ConfigError, CheckpointError) as exc:
         log.error("%s", exc)
-        _remove_if_fresh(Path(cfg.paths.output_dir))
+        _remove_what_this_start_wrote(Path(cfg.paths.output_dir))
         sys.exit(2)
     except TrainingError as exc:
         log.error("training stopped: %s", exc)
@@ -54,13 +54,21 @@ def _command_line_keys(cfg: DictConfig) -> set[str] | None:
     return command_line_keys(list(HydraConfig.get().overrides.task), cfg)
 
 
-def _remove_if_fresh(run_dir: Path) -> None:
-    """Remove a run directory this process created and that holds only Hydra's files and the log."""
-    if str(run_dir.resolve()) not in FRESH_RUN_DIRS or not run_dir.is_dir():
+def _remove_what_this_start_wrote(run_dir: Path) -> None:
+    """After a refused start: remove the run directory if this process created it and it holds only
+    Hydra's files and the log; in an existing run, the ``.hydra/resume_<n>`` Hydra just wrote."""
+    if not run_dir.is_dir():
         return
-    if {p.name for p in run_dir.iterdir()} <= {".hydra", "train.log"}:
-        logging.shutdown()
-        shutil.rmtree(run_dir, ignore_errors=True)
+    if str(run_dir.resolve()) in FRESH_RUN_DIRS:
+        if {p.name for p in run_dir.iterdir()} <= {".hydra", "train.log"}:
+            logging.shutdown()
+            shutil.rmtree(run_dir, ignore_errors=True)
+        return
+    from hydra.core.hydra_config import HydraConfig
+
+    subdir = HydraConfig.get().output_subdir if HydraConfig.initialized() else None
+    if subdir and subdir.startswith(".hydra/resume_"):
+        shutil.rmtree(run_dir / subdir, ignore_errors=True)
 
 
 @hydra.main(config_path=CONFIG_DIR, config_name="train", version_base="1.3")

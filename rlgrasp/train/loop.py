@@ -151,6 +151,16 @@ def slurm_requeued_already() -> bool:
     return restarts is not None and int(restarts.group(1)) > int(os.environ.get("SLURM_RESTART_COUNT") or 0)
 
 
+def pass_on_signal(signum: int, previous: dict[int, Any]) -> None:
+    """Training only borrows a stop signal to save first; a Python handler installed before it (a
+    sweep's, which stops the sweep) then gets it too. Without this, a SIGTERM to a sweep ended the
+    current trial early and the sweep went on to the next one. Submitit's handlers are
+    ``hand_off_preemption``'s."""
+    handler = previous.get(signum)
+    if callable(handler) and not getattr(handler, "__module__", "").startswith("submitit"):
+        handler(signum, None)
+
+
 class Trainer:
     """One training run. ``run()`` reads straight down: collect, update, log, evaluate, checkpoint,
     until the frame or time budget is spent; then the final evaluation and checkpoint."""
@@ -319,7 +329,8 @@ class Trainer:
             self._check_stop()
             t0 = time.perf_counter()
             batch = self.collect(batches)
-            self._check_stop()  # a batch collected while stopping is not trained on
+            self._check_stop()  # a batch collected while stopping is neither trained on nor counted
+            self.frames += batch.numel()
             metrics = {"time/collect_s": time.perf_counter() - t0, **self.episode_metrics(batch)}
             metrics.update(self.update(batch))
             metrics["charts/SPS"] = sps = throughput(batch.numel(), t0)
@@ -335,7 +346,8 @@ class Trainer:
                 self.console(sps, budget_s - (last_console - start))
 
     def collect(self, batches: Iterator[TensorDictBase]) -> TensorDictBase:
-        """The next ``[envs * workers, time]`` batch; an env crash saves a checkpoint and says which env."""
+        """The next batch, flattened to ``[envs * workers, time]`` (not yet counted in ``frames``: the
+        loop counts it once it is sure to train on it); an env crash saves a checkpoint and says which env."""
         try:
             batch = next(batches)
         except (KeyboardInterrupt, StopIteration):
@@ -349,9 +361,7 @@ class Trainer:
                 f"collection failed at {self.frames:,} frames; checkpoint saved in {self.ckpt_dir}\n  "
                 + "\n  ".join(reports)
             ) from exc
-        batch = batch.reshape(-1, batch.shape[-1])
-        self.frames += batch.numel()
-        return batch
+        return batch.reshape(-1, batch.shape[-1])
 
     def update(self, batch: TensorDictBase) -> dict[str, float]:
         """One PPO update at the scheduled learning rate (the workers get the weights from ``Batches``)."""
@@ -452,7 +462,8 @@ def train(
     Raises ``TrainingError`` on an env crash (after saving a checkpoint) or a NaN/inf (keeping the
     last good checkpoint), ``ConfigError``/``CheckpointError`` on bad input before anything starts.
     Ctrl-C, SIGTERM, SIGUSR1 and SIGUSR2 save a checkpoint and return normally (under SLURM or
-    submitit after requeueing the job). ``changed``: the keys the command line set, for a resume
+    submitit after requeueing the job; a Python handler the signal had before, e.g. a sweep's, is
+    called after the checkpoint and may raise). ``changed``: the keys the command line set, for a resume
     (None: all of ``cfg``; see ``rlgrasp.train.resume``).
 
     ``on_eval(frames, metrics)`` runs after every evaluation (periodic and final); a sweep uses it to
@@ -462,8 +473,10 @@ def train(
     cfg, resumed = prepare_run(cfg, changed)
     trainer = Trainer(cfg, on_eval, resumed)
     result = trainer.run()
-    if trainer.stopped_by is not None and trainer.frames < cfg.total_frames:
-        hand_off_preemption(trainer.stopped_by, trainer.previous_handlers)
+    if trainer.stopped_by is not None:
+        if trainer.frames < cfg.total_frames:
+            hand_off_preemption(trainer.stopped_by, trainer.previous_handlers)
+        pass_on_signal(trainer.stopped_by, trainer.previous_handlers)
     return result
 
 

@@ -1,0 +1,95 @@
+"""Every entry point exits: ``rlgrasp-eval``, the sweep and ``rlgrasp-export`` run to the end, or stop
+on a signal midway, within a timeout, with a clear exit status, leaving no process of their group
+(pool workers, collector workers) behind. Training and the resume of a finished run: tests/test_resume.py."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+from pathlib import Path
+
+import optuna
+import pytest
+
+from rlgrasp.sweep.study import ATTR_INTERRUPTED, ATTR_RETRY_OF
+from tests.procs import in_group, wait_for
+from tests.test_eval import make_run
+
+QUIET_EVAL = ["video=false", "plots=false", "tensorboard=false"]
+
+
+def test_eval_runs_to_the_end_and_exits(tmp_path: Path, script) -> None:
+    run = make_run(tmp_path)
+    done = script("evaluate", f"ckpt={run}", "episodes=4", "workers=2", "name=done", *QUIET_EVAL)
+    assert done.wait(timeout=180) == 0, done.output()[-2000:]
+    assert (run / "eval" / "done" / "metrics.json").is_file()
+    assert done.left() == []
+
+
+@pytest.mark.parametrize(
+    ("sig", "to_group"),
+    [(signal.SIGTERM, False),  # `kill <pid>`, a scheduler: the pool workers were left running, orphaned
+     (signal.SIGINT, True)],  # Ctrl-C at a terminal: the whole group gets it
+    ids=["sigterm-to-main", "sigint-to-group"],
+)
+def test_eval_stopped_midway_exits_and_leaves_nothing(
+    tmp_path: Path, script, sig: int, to_group: bool
+) -> None:
+    run = make_run(tmp_path)
+    stopped = script("evaluate", f"ckpt={run}", "episodes=2000", "workers=2", "name=stopped", *QUIET_EVAL)
+    wait_for(lambda: True if len(in_group(stopped.pid, "spawn_main")) == 2 else None, 180, stopped)
+    time.sleep(3)  # the pool workers are starting or running episodes (2,000 take minutes)
+    if to_group:
+        os.killpg(stopped.pid, sig)
+    else:
+        stopped.proc.send_signal(sig)
+    assert stopped.wait(timeout=60) == 128 + sig, stopped.output()[-2000:]
+    out = stopped.output()
+    assert f"error: stopped by {signal.Signals(sig).name}; the evaluation was not written" in out
+    assert "Traceback" not in out, out[-3000:]
+    assert not (run / "eval").exists()  # neither the output folder nor its staging folder
+    assert stopped.left() == []
+
+
+def _trials(root: Path) -> list[optuna.trial.FrozenTrial]:
+    storage = optuna.storages.JournalStorage(
+        optuna.storages.journal.JournalFileBackend(str(root / "smoke" / "journal.log"))
+    )
+    return optuna.load_study(study_name="smoke", storage=storage).get_trials()
+
+
+def test_sweep_stops_on_sigterm_then_the_same_command_finishes(tmp_path: Path, script) -> None:
+    """SIGTERM during a trial (collector workers running): the trial saves, the sweep stops with 130 and
+    is resumable; the same command then runs to the end. Before, training kept the SIGTERM to itself: the
+    trial ended early as COMPLETE with a half-trained value and the sweep went on."""
+    root = tmp_path / "sweeps"
+    cmd = ["experiment=smoke", "sweep=smoke", f"sweep.root_dir={root}", "sweep.n_trials=1",
+           "sweep.plots=false",
+           # the smoke experiment's process collector (one worker, 512-frame batches), not collector=single
+           'sweep.overrides=["collector.num_workers=1","eval.interval_frames=512","eval.episodes=4","logger=none"]']
+    first = script("sweep", *cmd)
+    log = root / "smoke" / "trials" / "0000" / "train.log"
+    wait_for(lambda: True if log.is_file() and "frames 512/" in log.read_text() else None, 240, first)
+    first.proc.send_signal(signal.SIGTERM)
+    assert first.wait(timeout=90) == 130, first.output()[-3000:]
+    assert "SIGTERM at 512 frames: saving a checkpoint" in log.read_text()
+    assert first.left() == []
+    (trial,) = _trials(root)
+    assert trial.state.name == "FAIL" and trial.user_attrs[ATTR_INTERRUPTED] is True
+
+    second = script("sweep", *cmd)
+    assert second.wait(timeout=300) == 0, second.output()[-3000:]
+    assert second.left() == []
+    trials = _trials(root)
+    assert [t.state.name for t in trials] == ["FAIL", "COMPLETE"]
+    assert trials[1].user_attrs[ATTR_RETRY_OF] == 0
+
+
+def test_export_runs_to_the_end_and_exits(tmp_path: Path, script) -> None:
+    pytest.importorskip("onnxruntime")
+    run = make_run(tmp_path)
+    done = script("export", f"ckpt={run}", "format=all", "verify_obs=100")
+    assert done.wait(timeout=300) == 0, done.output()[-2000:]
+    assert {p.name for p in (run / "export").glob("policy.*")} >= {"policy.pt", "policy.onnx", "policy.pt2"}
+    assert done.left() == []
