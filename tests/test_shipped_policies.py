@@ -14,7 +14,7 @@ POLICIES = Path(__file__).resolve().parents[1] / "policies"
 
 # (file, objects to evaluate on, successes out of 20 when shipped, the floor asserted)
 CASES = [
-    ("grasp_objects_ppo.pt", "random_urdfs_test", 18, 15),
+    ("grasp_objects_ppo.pt", "random_urdfs_test", 17, 14),
     ("grasp_ppo.pt", "cube", 17, 14),
 ]
 
