@@ -1,0 +1,53 @@
+"""When the workers see new weights: only between batches, one update late with overlap."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from rlgrasp.train.batches import Batches
+
+
+class RecordingCollector:
+    """Stands in for a TorchRL collector: each batch records the weight its policy had when the
+    batch was collected."""
+
+    def __init__(self, policy: torch.nn.Module) -> None:
+        self.policy = policy
+        self.weight_pushes = 0
+
+    def __iter__(self):
+        while True:
+            yield float(self.policy.weight.detach().clone())
+
+    def update_policy_weights_(self) -> None:
+        self.weight_pushes += 1
+
+
+def _run(overlap: bool, updates: int = 4) -> tuple[list[float], int]:
+    actor = torch.nn.Linear(1, 1, bias=False)
+    torch.nn.init.constant_(actor.weight, 0.0)
+    behaviour = torch.nn.Linear(1, 1, bias=False)
+    behaviour.load_state_dict(actor.state_dict())
+    collector = RecordingCollector(behaviour)
+    batches = Batches(collector, actor, behaviour, overlap)
+    seen = []
+    for k in range(updates):
+        seen.append(next(batches))
+        with torch.no_grad():
+            actor.weight.fill_(k + 1.0)  # the "update" on batch k
+    batches.close()
+    return seen, collector.weight_pushes
+
+
+def test_without_overlap_each_batch_uses_the_latest_weights() -> None:
+    seen, pushes = _run(overlap=False)
+    assert seen == [0.0, 1.0, 2.0, 3.0]
+    assert pushes == 4
+
+
+@pytest.mark.parametrize("repeat", range(3))
+def test_with_overlap_each_batch_is_one_update_late(repeat: int) -> None:
+    seen, _ = _run(overlap=True)
+    # batch k+1 is collected while the learner updates on batch k, with the weights before it
+    assert seen == [0.0, 0.0, 1.0, 2.0]
