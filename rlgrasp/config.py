@@ -135,6 +135,9 @@ class CollectorConfig:
     torch_threads: int = 1
     # Collect the next batch while the learner updates (one update of policy lag; rlgrasp/train/batches.py).
     overlap: bool = True
+    # Cut each env's first episode at a different length so that a worker's envs are not in phase:
+    # needed when steps_per_env is short against an episode (rlgrasp/train/collect.py StaggeredStart).
+    stagger_starts: bool = False
     ray: RayConfig = field(default_factory=RayConfig)
 
 

@@ -16,9 +16,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
+import numpy as np
 import torch
+from tensordict import TensorDictBase
 from torchrl.collectors import BaseCollector, Collector
-from torchrl.envs import EnvBase
+from torchrl.envs import EnvBase, default_info_dict_reader
 from torchrl.envs.transforms import Compose, RewardSum, StepCounter, TransformedEnv
 
 ERROR_FILE_PREFIX = "env_error_"
@@ -73,25 +76,87 @@ def _guard(env: Any, name: str, error_dir: str | None) -> Any:
     return env
 
 
-def _guarded_env(make_env: EnvFactory, name: str, error_dir: str | None) -> Any:
-    return _guard(make_env(), name, error_dir)
+class StaggeredStart(gym.Wrapper):
+    """Cut the env's first episode short (truncated) at ``first_length`` steps.
+
+    The envs of a worker are reset together and their episodes have one length, so without this
+    they stay in phase for the whole run, and a batch of a short-segment layout (32 envs x 16 steps)
+    holds the same 16 steps of every episode: the approach in one batch, the lift in another, and
+    PPO learned far slower. Staggering the first episodes spreads the phases over every batch.
+    Deterministic (no random draw), so the envs' own random streams are unchanged.
+    """
+
+    def __init__(self, env: gym.Env, first_length: int):
+        super().__init__(env)
+        self._cut_at: int | None = first_length
+        self._steps = 0
+
+    def reset(self, **kwargs):
+        self._steps = 0
+        return self.env.reset(**kwargs)
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self._steps += 1
+        if self._cut_at is not None and self._steps >= self._cut_at:
+            truncated, self._cut_at = True, None
+        return obs, reward, terminated, truncated, info
+
+
+def _guarded_env(
+    make_env: EnvFactory, name: str, error_dir: str | None, index: int = 0, stagger_over: int = 0
+) -> Any:
+    """One env; with ``stagger_over`` = n > 1, env ``index`` of n ends its first episode after
+    (index + 1) / n of the episode length."""
+    env = _guard(make_env(), name, error_dir)
+    length = getattr(env.unwrapped, "max_episode_steps", None)
+    if stagger_over > 1 and length:
+        first = max(1, round(length * (index + 1) / stagger_over))
+        if first < length:
+            env = StaggeredStart(env, first)
+    return env
+
+
+class _VectorInfoReader(default_info_dict_reader):
+    """TorchRL's info reader, given arrays of one dtype.
+
+    After a partial reset (some envs only) gymnasium's vector infos hold ``None`` for the envs that
+    were not reset, an object array TorchRL turns into non-tensor data that then fails to merge
+    (``torch.where`` on ``NonTensorData``); those entries are not read anyway (the reset mask
+    selects the reset envs), so they become zeros of the key's dtype.
+    """
+
+    def __call__(self, info_dict: dict[str, Any], tensordict: TensorDictBase) -> TensorDictBase:
+        info_dict = dict(info_dict)
+        for key in self.keys:
+            value = info_dict.get(key)
+            if isinstance(value, np.ndarray) and value.dtype == object:
+                dtype = torch.empty((), dtype=INFO_DTYPES[key]).numpy().dtype
+                info_dict[key] = np.array([0 if v is None else v for v in value], dtype=dtype)
+        return super().__call__(info_dict, tensordict)
 
 
 def make_vector_env(
-    make_env: EnvFactory, num_envs: int, base_seed: int, worker: int, error_dir: str | None
+    make_env: EnvFactory,
+    num_envs: int,
+    base_seed: int,
+    worker: int,
+    error_dir: str | None,
+    stagger: bool = False,
 ) -> EnvBase:
     """``GymWrapper(SyncVectorEnv(...))``: one TensorDict conversion per batch step.
 
     Autoreset is disabled so that TorchRL resets finished envs itself (``reset_mask``) and the
     final observation of an episode is kept. Vector infos arrive as arrays, which TorchRL's
-    ``default_info_dict_reader`` reads directly.
+    ``default_info_dict_reader`` reads directly. ``stagger``: see ``StaggeredStart``.
     """
-    import gymnasium as gym
     from torchrl.data import Composite, Unbounded
-    from torchrl.envs import GymWrapper, default_info_dict_reader
+    from torchrl.envs import GymWrapper
 
     fns = [
-        functools.partial(_guarded_env, make_env, f"worker {worker} env {i}", error_dir)
+        functools.partial(
+            _guarded_env, make_env, f"worker {worker} env {i}", error_dir, i, num_envs if stagger else 0
+        )
         for i in range(num_envs)
     ]
     venv = gym.vector.SyncVectorEnv(fns, autoreset_mode=gym.vector.AutoresetMode.DISABLED)
@@ -100,7 +165,7 @@ def make_vector_env(
     env = GymWrapper(venv)
     if keys:
         spec = Composite({k: Unbounded((num_envs,), dtype=INFO_DTYPES[k]) for k in keys}, shape=(num_envs,))
-        env.set_info_dict_reader(default_info_dict_reader(keys, spec=spec))
+        env.set_info_dict_reader(_VectorInfoReader(keys, spec=spec))
     env.set_seed(base_seed)  # envs seeded base_seed + i
     return env
 
@@ -114,6 +179,7 @@ def make_batched_env(
     error_dir: str | None = None,
     episode_stats: bool = True,
     seed_torch: bool = True,
+    stagger: bool = False,
 ) -> EnvBase:
     """A batch of ``num_envs`` envs seeded ``base_seed + i``, plus episode return/length.
 
@@ -123,7 +189,7 @@ def make_batched_env(
     torch.set_num_threads(torch_threads)
     if seed_torch:
         torch.manual_seed(base_seed)
-    env = make_vector_env(make_env, num_envs, base_seed, worker, error_dir)
+    env = make_vector_env(make_env, num_envs, base_seed, worker, error_dir, stagger)
     if episode_stats:
         env = TransformedEnv(env, Compose(RewardSum(), StepCounter()))
     return env
@@ -153,7 +219,7 @@ def build_collector(
     if c.backend == "single" or c.num_workers == 0:
         env = make_batched_env(
             make_env, c.envs_per_worker, worker_seed(cfg.seed, 0, generation), 0,
-            torch.get_num_threads(), error_dir,
+            torch.get_num_threads(), error_dir, stagger=c.stagger_starts,
         )
         return Collector(env, policy, **common)
     if c.backend not in ("process", "ray"):
@@ -161,7 +227,7 @@ def build_collector(
     fns = [
         functools.partial(
             make_batched_env, make_env, c.envs_per_worker, worker_seed(cfg.seed, w, generation), w,
-            c.torch_threads, error_dir,
+            c.torch_threads, error_dir, stagger=c.stagger_starts,
         )
         for w in range(c.num_workers)
     ]

@@ -377,7 +377,8 @@ class Trainer:
 
     def episode_metrics(self, batch: TensorDictBase) -> dict[str, float]:
         """Return, length and success of the episodes that ended in this batch (for the console too)."""
-        ep = finished_episodes(batch)
+        stagger = self.cfg.collector.get("stagger_starts", False)
+        ep = finished_episodes(batch, self.cfg.env.get("max_episode_steps") if stagger else None)
         for key in ("charts/episodic_return", "charts/success_rate"):
             if key in ep:
                 self.recent[key] = ep[key]
@@ -480,12 +481,19 @@ def train(
     return result
 
 
-def finished_episodes(batch: TensorDictBase) -> dict[str, float]:
-    """Return, length and success-at-episode-end of the episodes that ended in this batch."""
+def finished_episodes(batch: TensorDictBase, full_length: int | None = None) -> dict[str, float]:
+    """Return, length and success-at-episode-end of the episodes that ended in this batch.
+
+    Episodes truncated before ``full_length`` steps are the first episodes ``StaggeredStart`` cut
+    short (``collector.stagger_starts``): they are left out so that the curves compare like with like.
+    """
     done = batch["next", "done"].reshape(batch.shape)
+    keys = batch.keys(True)
+    if full_length and ("next", "step_count") in keys and ("next", "truncated") in keys:
+        steps = batch["next", "step_count"].reshape(batch.shape)
+        done = done & ~(batch["next", "truncated"].reshape(batch.shape) & (steps < full_length))
     if not done.any():
         return {}
-    keys = batch.keys(True)
     out = {}
     for key, name in (
         ("episode_reward", "episodic_return"),
