@@ -2,9 +2,11 @@
 cluster on loopback). Same env, MLP actor, batch layout (grasp_ppo: 2 workers x 8 envs x 64 steps).
 
     python scripts/bench_scale.py [--batches 8] [--warmup 2] [--setups process ray ray_2nodes]
+    python scripts/bench_scale.py --workers 1 2 4 8 [--setups process]
 
-Prints one markdown row per setup: median and IQR of frames/s over the timed batches (each batch
-also pays the weight broadcast that training does after every update).
+Prints one markdown row per setup (and worker count, with ``--workers``): median and IQR of
+frames/s over the timed batches (each batch also pays the weight broadcast that training does after
+every update), and with ``--workers`` the ratio to the first count's rate.
 """
 
 from __future__ import annotations
@@ -69,15 +71,23 @@ def main() -> None:
     parser.add_argument("--batches", type=int, default=8)
     parser.add_argument("--warmup", type=int, default=2)
     parser.add_argument("--setups", nargs="+", default=["process", "ray", "ray_2nodes"])
-    parser.add_argument("overrides", nargs="*", help="training overrides, e.g. collector.num_workers=4")
+    parser.add_argument(
+        "--workers", type=int, nargs="+", help="a curve over collector.num_workers (8 envs each by default)"
+    )
+    parser.add_argument("overrides", nargs="*", help="training overrides, e.g. collector.envs_per_worker=4")
     args = parser.parse_args()
-    print("| backend | frames/s median | IQR | batches |")
-    print("|---|---|---|---|")
+    print("| backend | workers | frames/s median | IQR | batches | vs first row |")
+    print("|---|---|---|---|---|---|")
+    first = None
     for setup in args.setups:
-        rates = bench(setup, args.batches, args.warmup, args.overrides)
-        q = statistics.quantiles(rates, n=4)
-        med = statistics.median(rates)
-        print(f"| {setup} | {med:,.0f} | {q[0]:,.0f}-{q[2]:,.0f} | {len(rates)} |", flush=True)
+        for workers in args.workers or [None]:
+            extra = [f"collector.num_workers={workers}"] if workers else []
+            rates = bench(setup, args.batches, args.warmup, [*args.overrides, *extra])
+            q = statistics.quantiles(rates, n=4)
+            med = statistics.median(rates)
+            first = first or med
+            row = [setup, workers or "config", f"{med:,.0f}", f"{q[0]:,.0f}-{q[2]:,.0f}", len(rates)]
+            print("| " + " | ".join(map(str, row)) + f" | {med / first:.2f} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -7,10 +7,10 @@ are idle, between two batches.
 
 With ``overlap`` the next batch is requested before the learner trains on this one, so the workers
 collect while the learner updates and evaluates (otherwise a 1-thread learner leaves the other cores
-idle for the whole update). That batch is collected with the weights of one update before: PPO's
-ratio uses the log-probs recorded at collection, so it corrects for the lag as it does for the
-epochs within one update. TorchRL's asynchronous collector overlaps too, but each worker's batch
-then carries whatever weights it had when it started, which depends on timing.
+idle for the whole update). That batch is collected with the weights of one update before, so the
+learner then runs PPO with a proximal policy apart from the behaviour policy (``PPOLearner``,
+``stale_batches``). TorchRL's asynchronous collector overlaps too, but each worker's batch then
+carries whatever weights it had when it started, which depends on timing.
 """
 
 from __future__ import annotations
@@ -26,6 +26,11 @@ from torchrl.collectors import BaseCollector
 #: Waited for an in-flight batch when the run stops before the collector shuts down; a healthy
 #: batch takes about a second, a worker that died makes the collector raise well before this.
 DRAIN_TIMEOUT_S = 120.0
+
+
+def collects_ahead(cfg: Any) -> bool:
+    """Whether batches come one update late (``collector.overlap``; the in-process backend cannot)."""
+    return bool(cfg.collector.overlap) and cfg.collector.backend != "single"
 
 
 class Batches(Iterator[TensorDictBase]):

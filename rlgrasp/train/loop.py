@@ -28,7 +28,7 @@ from tensordict import TensorDictBase
 from rlgrasp.config import ConfigError
 from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
-from rlgrasp.train.batches import Batches
+from rlgrasp.train.batches import Batches, collects_ahead
 from rlgrasp.train.collect import read_env_errors
 from rlgrasp.train.evaluate import periodic_evaluator
 from rlgrasp.train.logger import RunLogger, log, progress_line, setup_text_log
@@ -186,7 +186,9 @@ class Trainer:
         except (ValueError, TypeError) as exc:  # the env refuses its keywords
             raise ConfigError(f"env: {exc}".splitlines()[0]) from exc
         self.actor = self.parts.actor
-        self.learner = PPOLearner(self.actor, self.parts.critic, self.parts.norm, cfg.algo, self.device)
+        self.learner = PPOLearner(
+            self.actor, self.parts.critic, self.parts.norm, cfg.algo, self.device, collects_ahead(cfg)
+        )
 
         # --- counters, possibly resumed
         self.frames, self.updates, self.generation = 0, 0, 0
@@ -309,8 +311,7 @@ class Trainer:
         loop ends."""
         behaviour = copy.deepcopy(self.actor)
         collector = self.parts.make_collector(self.generation, str(self.error_dir), behaviour)
-        overlap = self.cfg.collector.overlap and self.cfg.collector.backend != "single"
-        batches = Batches(collector, self.actor, behaviour, overlap)
+        batches = Batches(collector, self.actor, behaviour, collects_ahead(self.cfg))
         try:
             yield batches
         finally:

@@ -1,8 +1,15 @@
 """The PPO update: GAE (each epoch by default), clipped loss over shuffled minibatches.
 
-TorchRL provides the pieces (``GAE``, ``ClipPPOLoss``, ``SamplerWithoutReplacement``); this module
-only adds what it lacks: the learning-rate schedule, the target-KL stop, finiteness checks and the
-per-update metrics.
+TorchRL provides the pieces (``GAE``, ``ClipPPOLoss``, ``SamplerWithoutReplacement``); this module only adds what it lacks: the learning-rate schedule, the target-KL stop,
+finiteness checks and the per-update metrics.
+
+Stale batches (collected with the weights of one update before, ``collector.overlap``): the clip
+and the target-KL stop then act around the policy at the start of this update (the proximal
+policy), not around the older policy that collected the batch, while the surrogate stays weighted
+by pi / pi_behaviour (decoupled PPO, Hilton et al. 2021: TorchRL's ``delay_actor``). Measured
+without it: the KL to the collecting policy starts at the last update's, the target-KL stop cut the
+epochs from 9.2 to 6.6 per update on average and learning per frame fell by half
+(docs/BENCHMARKS.md, "Throughput").
 """
 
 from __future__ import annotations
@@ -13,7 +20,7 @@ from typing import Any
 import torch
 from tensordict import TensorDictBase
 from torchrl.data import LazyTensorStorage, ReplayBuffer, SamplerWithoutReplacement
-from torchrl.objectives import ClipPPOLoss
+from torchrl.objectives import ClipPPOLoss, HardUpdate
 from torchrl.objectives.value import GAE
 
 from rlgrasp.train.models import RunningNorm
@@ -26,7 +33,15 @@ class NonFiniteError(RuntimeError):
 class PPOLearner:
     """Owns the loss, the advantage estimator and the optimizer; ``update`` does one PPO round."""
 
-    def __init__(self, actor, critic, norm: RunningNorm, algo_cfg: Any, device: torch.device):
+    def __init__(
+        self,
+        actor,
+        critic,
+        norm: RunningNorm,
+        algo_cfg: Any,
+        device: torch.device,
+        stale_batches: bool = False,
+    ):
         self.cfg = algo_cfg
         self.norm = norm
         self.device = device
@@ -39,7 +54,11 @@ class PPOLearner:
             critic_coeff=algo_cfg.critic_coeff,
             loss_critic_type=algo_cfg.loss_critic_type,
             normalize_advantage=algo_cfg.normalize_advantage,
+            delay_actor=stale_batches,  # the proximal policy lives in target_actor_network_params
         )
+        # HardUpdate copies the current weights into the proximal policy when its counter equals the
+        # interval: with 0, at every ``step()``, which ``update`` calls once before its epochs.
+        self.proximal = HardUpdate(self.loss, value_network_update_interval=0) if stale_batches else None
         self.gae = GAE(
             gamma=algo_cfg.gamma, lmbda=algo_cfg.gae_lambda, value_network=critic, average_gae=False
         )
@@ -64,6 +83,8 @@ class PPOLearner:
         n = batch.numel()
         mb = min(cfg.minibatch_size, n)
         buffer = self._buffer(n, mb)
+        if self.proximal is not None:
+            self.proximal.step()
         sums: dict[str, float] = {}
         count = 0
         stopped_early = False
