@@ -1,15 +1,17 @@
 """The PPO update: GAE (each epoch by default), clipped loss over shuffled minibatches.
 
-TorchRL provides the pieces (``GAE``, ``ClipPPOLoss``, ``SamplerWithoutReplacement``); this module only adds what it lacks: the learning-rate schedule, the target-KL stop,
-finiteness checks and the per-update metrics.
+TorchRL provides the pieces (``GAE``, ``ClipPPOLoss``, ``SamplerWithoutReplacement``); this module
+only adds what it lacks: the learning-rate schedule, the target-KL stop, finiteness checks, the
+per-update metrics and the refreshed log-probs of stale batches.
 
-Stale batches (collected with the weights of one update before, ``collector.overlap``): the clip
-and the target-KL stop then act around the policy at the start of this update (the proximal
-policy), not around the older policy that collected the batch, while the surrogate stays weighted
-by pi / pi_behaviour (decoupled PPO, Hilton et al. 2021: TorchRL's ``delay_actor``). Measured
-without it: the KL to the collecting policy starts at the last update's, the target-KL stop cut the
-epochs from 9.2 to 6.6 per update on average and learning per frame fell by half
-(docs/BENCHMARKS.md, "Throughput").
+Stale batches (collected with the weights of one update before, ``collector.overlap``): their
+log-probs are recomputed with the learner's weights before the epochs, so the clip and the
+target-KL stop act around this update's starting policy, as with fresh batches; the one update of
+lag between the collecting policy and that one is not corrected. Measured (docs/BENCHMARKS.md,
+"Throughput"): with the log-probs recorded at collection the KL starts at the last update's, the
+target-KL stop cut the epochs from 9.2 to 6.6 per update and learning per frame fell by half;
+TorchRL's decoupled loss (``delay_actor``, the collecting policy's ratio kept as a weight) let the
+k1 KL estimate go negative, so the stop never fired, and the entropy collapsed.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from typing import Any
 import torch
 from tensordict import TensorDictBase
 from torchrl.data import LazyTensorStorage, ReplayBuffer, SamplerWithoutReplacement
-from torchrl.objectives import ClipPPOLoss, HardUpdate
+from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
 from rlgrasp.train.models import RunningNorm
@@ -54,11 +56,9 @@ class PPOLearner:
             critic_coeff=algo_cfg.critic_coeff,
             loss_critic_type=algo_cfg.loss_critic_type,
             normalize_advantage=algo_cfg.normalize_advantage,
-            delay_actor=stale_batches,  # the proximal policy lives in target_actor_network_params
         )
-        # HardUpdate copies the current weights into the proximal policy when its counter equals the
-        # interval: with 0, at every ``step()``, which ``update`` calls once before its epochs.
-        self.proximal = HardUpdate(self.loss, value_network_update_interval=0) if stale_batches else None
+        self.actor = actor
+        self.stale_batches = stale_batches
         self.gae = GAE(
             gamma=algo_cfg.gamma, lmbda=algo_cfg.gae_lambda, value_network=critic, average_gae=False
         )
@@ -83,8 +83,8 @@ class PPOLearner:
         n = batch.numel()
         mb = min(cfg.minibatch_size, n)
         buffer = self._buffer(n, mb)
-        if self.proximal is not None:
-            self.proximal.step()
+        if self.stale_batches:
+            self.refresh_log_probs(batch)
         sums: dict[str, float] = {}
         count = 0
         stopped_early = False
@@ -134,6 +134,13 @@ class PPOLearner:
         metrics["epochs"] = float(epoch + 1)
         metrics["minibatches"] = float(count)
         return metrics
+
+    @torch.no_grad()
+    def refresh_log_probs(self, batch: TensorDictBase) -> None:
+        """The batch's log-probs under the current weights (see the module docstring)."""
+        key = self.loss.tensor_keys.sample_log_prob
+        old = batch[key]
+        batch[key] = self.actor.get_dist(batch).log_prob(batch["action"]).reshape(old.shape).to(old.dtype)
 
     def _buffer(self, n: int, mb: int) -> ReplayBuffer:
         """One buffer reused across updates (same batch size every round)."""

@@ -1,0 +1,64 @@
+"""What one PPO update costs the learner, per frame: the ceiling on frames/s however many workers
+collect (with ``collector.overlap`` a batch takes about max(collection, update + evaluation)).
+
+    python scripts/bench_update.py [--threads 1 2] [--minibatch 512 1024] [--repeats 3] [overrides ...]
+
+Collects one batch in-process with the configured layout (default ``experiment=grasp_ppo``), then
+times ``PPOLearner.update`` on it for each torch thread count and minibatch size, with the target-KL
+stop off so that every update runs all its epochs (training stops some updates early: a bound).
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout, uninstalled
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--threads", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--minibatch", type=int, nargs="+", default=[512, 1024])
+    parser.add_argument("--repeats", type=int, default=3, help="timed updates per setting, after a warm-up")
+    parser.add_argument("overrides", nargs="*", help="Hydra overrides (default experiment=grasp_ppo)")
+    args = parser.parse_args()
+
+    import torch
+
+    from rlgrasp.config import compose_train
+    from rlgrasp.train.parts import build_parts
+    from rlgrasp.train.ppo import PPOLearner
+
+    cfg = compose_train([*(args.overrides or ["experiment=grasp_ppo"]), "collector=single"])
+    torch.manual_seed(0)
+    collector = build_parts(cfg).make_collector()
+    batch = next(iter(collector))
+    collector.shutdown()
+    frames = batch.numel()
+    print(f"{frames:,} frames per batch, {cfg.algo.epochs} epochs, hidden {list(cfg.model.hidden_sizes)}")
+    print("| torch threads | minibatch | ms per update | ms per frame | learner ceiling, frames/s |")
+    print("|---|---|---|---|---|")
+    for threads in args.threads:
+        torch.set_num_threads(threads)
+        for minibatch in args.minibatch:
+            algo = copy.deepcopy(cfg.algo)
+            algo.minibatch_size, algo.target_kl = minibatch, None
+            parts = build_parts(cfg)
+            learner = PPOLearner(parts.actor, parts.critic, parts.norm, algo, torch.device("cpu"), True)
+            learner.update(batch.clone())
+            t0 = time.perf_counter()
+            for _ in range(args.repeats):
+                learner.update(batch.clone())
+            ms = (time.perf_counter() - t0) / args.repeats * 1000
+            row = [threads, minibatch, f"{ms:.0f}", f"{ms / frames:.3f}", f"{frames / ms * 1000:,.0f}"]
+            print("| " + " | ".join(map(str, row)) + " |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
