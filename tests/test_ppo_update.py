@@ -32,12 +32,35 @@ def _batch(actor) -> TensorDict:
     return td
 
 
-def _learner(**algo) -> tuple[PPOLearner, object]:
+def _learner(stale_batches: bool = False, **algo) -> tuple[PPOLearner, object]:
     torch.manual_seed(0)
     model_cfg = OmegaConf.structured(MLPConfig(hidden_sizes=[16, 16]))
     algo_cfg = OmegaConf.structured(PPOConfig(minibatch_size=32, target_kl=None, **algo))
     actor, critic, norm = build_models(OBS_DIM, -torch.ones(ACT_DIM), torch.ones(ACT_DIM), model_cfg)
-    return PPOLearner(actor, critic, norm, algo_cfg, torch.device("cpu")), actor
+    learner = PPOLearner(actor, critic, norm, algo_cfg, torch.device("cpu"), stale_batches)
+    return learner, actor
+
+
+@pytest.mark.parametrize("stale", [False, True])
+def test_a_stale_batch_is_judged_against_the_learners_policy(stale: bool) -> None:
+    """A batch collected with older weights: with ``stale_batches`` the first minibatch's KL is the
+    learner's own (zero), without it the KL to the collecting policy."""
+    learner, actor = _learner(stale, epochs=1)
+    batch = _batch(actor)
+    with torch.no_grad():  # the learner moved on since the batch was collected
+        for p in actor.parameters():
+            p.add_(0.3 * torch.randn_like(p))
+    losses = learner.loss(_with_advantage(learner, batch, stale))
+    kl = abs(float(losses["kl_approx"]))
+    assert (kl < 1e-5) if stale else (kl > 1e-2)
+
+
+def _with_advantage(learner: PPOLearner, batch: TensorDict, stale: bool) -> TensorDict:
+    if stale:
+        learner.refresh_log_probs(batch)
+    with torch.no_grad():
+        learner.gae(batch)
+    return batch.reshape(-1)
 
 
 @pytest.mark.parametrize("every_epoch, expected_calls", [(True, 3), (False, 1)])

@@ -39,13 +39,14 @@ REQUIRED_TAGS = {
 # re-measured when the observation gained `object_extents` (3 more inputs, so another network init)
 # with the object sets, and when `collector.overlap` became the default (the second batch is
 # collected with the first weights; `collector.overlap=false` still gives mean_reward
-# 2.073204517364502).
+# 2.073204517364502), and when overlapped batches got their log-probs recomputed by the learner
+# (the first losses moved in the 6th digit: recomputed rather than recorded log-probs).
 SMOKE_PINNED = {  # experiment=smoke: seed 0, two process workers, 2,048 frames
     "first_losses": {
-        "policy_loss": -0.004469789564609528,
+        "policy_loss": -0.004469783045351505,
         "value_loss": 0.1951102316379547,
         "entropy": 2.3896048069000244,
-        "approx_kl": -0.00019776890985667706,
+        "approx_kl": -0.0001977781648747623,
         "grad_norm": 2.9372127056121826,
         "explained_variance": -1.7989351749420166,
     },
@@ -53,10 +54,10 @@ SMOKE_PINNED = {  # experiment=smoke: seed 0, two process workers, 2,048 frames
 }
 ONE_WORKER_PINNED = {  # experiment=smoke collector.num_workers=1 seed=3 total_frames=512
     "first_losses": {
-        "policy_loss": -1.7462298274040222e-09,
+        "policy_loss": 1.1408701539039612e-08,
         "value_loss": 0.3723558485507965,
         "entropy": 2.3941917419433594,
-        "approx_kl": -6.51925802230835e-09,
+        "approx_kl": 0.0,
         "grad_norm": 4.781360626220703,
         "explained_variance": -0.619930624961853,
     },
