@@ -142,12 +142,12 @@ class PeriodicEval(BaseCallback):
     when one is due, then the budget check before the next rollout (SB3 stops at its first step)."""
 
     def __init__(self, cfg: Any, evaluator: Any, vecnorm: Any, start: float, budget_s: float) -> None:
-        from rlgrasp.train.loop import _Due, _Throughput  # the schedule and SPS training itself uses
+        from rlgrasp.train.loop import Due, Throughput  # the schedule and SPS training itself uses
 
         super().__init__()
         self.cfg, self.evaluator, self.vecnorm = cfg, evaluator, vecnorm
         self.start, self.budget_s = start, budget_s
-        self.due, self.throughput = _Due(cfg.eval.interval_frames, 0), _Throughput()
+        self.due, self.throughput = Due(cfg.eval.interval_frames, 0), Throughput()
         self.frames, self.over, self.batch_t0 = 0, False, time.perf_counter()
         self.evals: list[tuple[float, int, float, int]] = []  # (unix time, frames, success, episodes)
         self.sps: list[tuple[float, int, float]] = []  # (unix time, frames, SPS) after each update

@@ -28,9 +28,9 @@ def test_first_episodes_end_at_staggered_lengths_then_run_full_length():
     done = rollout["next", "done"].squeeze(-1)
     first_end = done.int().argmax(dim=1) + 1
     assert first_end.tolist() == [2, 5, 8, 10]  # round(10 * (i + 1) / 4)
-    for env, first in enumerate(first_end.tolist()):
+    for env in range(4):
         ends = (done[env].nonzero().flatten() + 1).tolist()
-        assert ends[1] - ends[0] == EPISODE  # later episodes have the full length
+        assert ends[0] == first_end[env] and ends[1] - ends[0] == EPISODE  # then full length
 
 
 def test_without_stagger_the_envs_stay_in_phase():

@@ -64,7 +64,7 @@ def seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
 
 
-class _Due:
+class Due:
     """True once every ``interval`` frames (interval <= 0: never)."""
 
     def __init__(self, interval: int, frames: int) -> None:
@@ -78,7 +78,7 @@ class _Due:
         return True
 
 
-class _Throughput:
+class Throughput:
     """Frames/s of this session, measured from the end of the first batch (which includes the
     workers' start-up) on."""
 
@@ -321,9 +321,9 @@ class Trainer:
     def _loop(self, batches: Iterator[TensorDictBase]) -> None:
         cfg = self.cfg
         budget_s = cfg.time_budget_min * 60 if cfg.time_budget_min else math.inf
-        eval_due = _Due(cfg.eval.interval_frames, self.frames)
-        ckpt_due = _Due(cfg.checkpoint.interval_frames, self.frames)
-        throughput = _Throughput()
+        eval_due = Due(cfg.eval.interval_frames, self.frames)
+        ckpt_due = Due(cfg.checkpoint.interval_frames, self.frames)
+        throughput = Throughput()
         self.recent: dict[str, float] = {}
         start = last_console = self.start
         while self.frames < cfg.total_frames and time.monotonic() - start < budget_s:
