@@ -3,7 +3,7 @@ collect (with ``collector.overlap`` a batch takes about max(collection, update +
 
     python scripts/bench_update.py [--threads 1 2] [--minibatch 512 1024] [--repeats 3] [overrides ...]
 
-Collects one batch in-process with the configured layout (default ``experiment=grasp_ppo``), then
+Collects one batch of training's size in-process (default ``experiment=grasp_ppo``), then
 times ``PPOLearner.update`` on it for each torch thread count and minibatch size, with the target-KL
 stop off so that every update runs all its epochs (training stops some updates early: a bound).
 """
@@ -35,7 +35,14 @@ def main() -> None:
     from rlgrasp.train.parts import build_parts
     from rlgrasp.train.ppo import PPOLearner
 
-    cfg = compose_train([*(args.overrides or ["experiment=grasp_ppo"]), "collector=single"])
+    cfg = compose_train(args.overrides or ["experiment=grasp_ppo"])
+    workers = 1 if cfg.collector.backend == "single" else cfg.collector.num_workers
+    # One in-process worker collects the batch training would get from all of them.
+    cfg = compose_train([
+        *(args.overrides or ["experiment=grasp_ppo"]),
+        "collector=single",
+        f"collector.steps_per_env={cfg.collector.steps_per_env * workers}",
+    ])
     torch.manual_seed(0)
     collector = build_parts(cfg).make_collector()
     batch = next(iter(collector))
