@@ -133,7 +133,7 @@ class CollectorConfig:
     envs_per_worker: int = 4
     steps_per_env: int = 128
     torch_threads: int = 1
-    # Collect the next batch while the learner updates (one update of policy lag; rlgrasp/train/batches.py).
+    # Collect the next batch while the learner updates (one update of lag; rlgrasp/train/batches.py, ppo.py).
     overlap: bool = True
     # Cut each env's first episode at a different length so that a worker's envs are not in phase:
     # needed when steps_per_env is short against an episode (rlgrasp/train/collect.py StaggeredStart).

@@ -8,7 +8,7 @@ are idle, between two batches.
 With ``overlap`` the next batch is requested before the learner trains on this one, so the workers
 collect while the learner updates and evaluates (otherwise a 1-thread learner leaves the other cores
 idle for the whole update). That batch is collected with the weights of one update before, so the
-learner then runs PPO with a proximal policy apart from the behaviour policy (``PPOLearner``,
+learner recomputes its log-probs with its own weights before the epochs (``PPOLearner``,
 ``stale_batches``). TorchRL's asynchronous collector overlaps too, but each worker's batch then
 carries whatever weights it had when it started, which depends on timing.
 """
