@@ -61,7 +61,8 @@ class EnvConfig:
     camera_yaw: float = 60.0
     camera_pitch: float = -25.0
     solver_iterations: int = 20
-    robot_urdf: str = "franka_panda/panda.urdf"
+    robot: str = "panda"  # an arm of rlgrasp.envs.robot.ROBOTS
+    robot_urdf: str | None = None  # null: the arm's own model file
     # A set name (the `objects` config group sets it), a list of set names, or a mapping with
     # sets / paths / max_width / scale: see rlgrasp/envs/objects.py.
     objects: Any = "cube"
