@@ -66,6 +66,9 @@ class EnvConfig:
     # A set name (the `objects` config group sets it), a list of set names, or a mapping with
     # sets / paths / max_width / scale: see rlgrasp/envs/objects.py.
     objects: Any = "cube"
+    # null, or a camera (rlgrasp.envs.cameras.CameraSpec keys); the `cameras` config group sets it.
+    camera: Any = None
+    visual: str = "none"  # none | default | wide | heldout (the `visual` config group)
 
 
 @dataclass

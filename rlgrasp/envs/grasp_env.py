@@ -11,12 +11,14 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from rlgrasp.envs.cameras import Camera, CameraSpec
 from rlgrasp.envs.control import CONTROL_MODES, make_control
-from rlgrasp.envs.observation import ObservationLayout, full_parts
+from rlgrasp.envs.observation import PROPRIOCEPTION, ObservationLayout, full_parts
 from rlgrasp.envs.randomization import Randomizer
 from rlgrasp.envs.robot import make_robot
 from rlgrasp.envs.scene import Scene
 from rlgrasp.envs.task import LiftTask, RewardWeights
+from rlgrasp.envs.visuals import VisualRandomizer
 
 
 def _check_args(
@@ -46,6 +48,11 @@ class GraspEnv(gym.Env):
     Action: a Box in [-1, 1]; the last entry is the absolute finger-width target (-1 closed,
     +1 open); the others depend on ``control_mode`` (``rlgrasp.envs.control``): ``ee_delta``,
     ``joint_delta`` or ``joint_torque``.
+
+    With a ``camera`` (``rlgrasp.envs.cameras.CameraSpec`` keys) the observation is a ``Dict``:
+    ``state`` (proprioception only: nothing about the object), ``depth`` and/or ``rgb`` (channel
+    first) and ``privileged`` (the flat state vector above, for a teacher or a critic). ``visual``
+    names a visual randomization preset (``rlgrasp.envs.visuals``).
     """
 
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 20}
@@ -77,8 +84,11 @@ class GraspEnv(gym.Env):
         robot: str = "panda",
         robot_urdf: str | None = None,
         objects: str | list[str] | Mapping[str, Any] | None = "cube",
+        camera: Mapping[str, Any] | None = None,
+        visual: str | None = "none",
     ):
         _check_args(control_mode, render_mode, max_episode_steps, substeps, time_step)
+        camera_spec = CameraSpec.from_config(camera) if camera else None
         self.randomizer = Randomizer(randomization)
         weights = RewardWeights(**(reward_weights or {}))
         self.max_episode_steps, self.substeps = int(max_episode_steps), int(substeps)
@@ -91,7 +101,9 @@ class GraspEnv(gym.Env):
         self.client = self.scene.client
         try:
             self.task = LiftTask(self.scene, objects, reward, weights, success_height)
-            self.robot = make_robot(robot, self.client, robot_urdf)
+            self.robot = make_robot(robot, self.client, robot_urdf, low_poly=camera_spec is not None)
+            self.visuals = VisualRandomizer(visual, self.client)
+            self.camera = Camera(camera_spec, self.client) if camera_spec else None
         except BaseException:
             self.close()
             raise
@@ -102,13 +114,17 @@ class GraspEnv(gym.Env):
             gravity_compensation=gravity_compensation,
         )
         self.robot.reset(self.robot.neutral_pose)
+        if self.camera is not None:
+            self._prepare_rendering()
         self.scene.save()
 
         self.action_dim = self.control.action_dim
         self.action_space = gym.spaces.Box(-1.0, 1.0, (self.action_dim,), np.float32)
         self.layout = ObservationLayout(full_parts(self.robot.arm_dof, self.action_dim))
         self.obs_slices = self.layout.slices
-        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (self.layout.size,), np.float32)
+        self.observation_space = self._observation_space()
+        self._visual_rng: np.random.Generator | None = None
+        self._visual: dict[str, float] = {}
 
         self._idle_action = np.zeros(self.action_dim, np.float32)
         self._idle_action[-1] = 1.0  # fingers open
@@ -131,6 +147,7 @@ class GraspEnv(gym.Env):
         self.control.reset(ep)
         robot.command_fingers(robot.max_finger_width)
         self.task.reset(choice, ep, set(self.randomizer.ranges))  # settles a mesh: after the robot
+        self._randomize_visuals(seed)
 
         self._pending = collections.deque([self._idle_action.copy()] * ep["action_delay"])
         self._prev_action = self._idle_action.copy()
@@ -138,6 +155,22 @@ class GraspEnv(gym.Env):
         self.episode = ep
         obs, readings = self._observe()
         return obs, self._info(readings, success=False)
+
+    def _prepare_rendering(self) -> None:
+        """What cameras render, made cheap: a small ground, and for a wrist camera only the links
+        it can see (the robot is already its low-poly model)."""
+        self.scene.use_compact_ground()
+        if self.camera.spec.mount == "wrist":
+            self.robot.show_only(self.robot.wrist_links())
+
+    def _randomize_visuals(self, seed: int | None) -> None:
+        """Visuals draw from their own generator (derived from the reset seed), so that turning them
+        on leaves the physics episodes of a seed as they are."""
+        if self._visual_rng is None or seed is not None:
+            self._visual_rng = np.random.default_rng(self.np_random.bit_generator.seed_seq.spawn(1)[0])
+        self._visual = self.visuals.sample(self._visual_rng)
+        bodies = {"object": self.scene.object, "ground": self.scene.ground}
+        self.visuals.apply(self._visual, bodies, self.robot, self.camera)
 
     def step(self, action):
         action = np.asarray(action, dtype=np.float32).reshape(self.action_dim)
@@ -170,8 +203,26 @@ class GraspEnv(gym.Env):
             self.scene = None
 
     # --- internals -----------------------------------------------------------------------------
-    def _observe(self) -> tuple[np.ndarray, dict[str, Any]]:
+    def _observation_space(self) -> gym.spaces.Space:
+        flat = gym.spaces.Box(-np.inf, np.inf, (self.layout.size,), np.float32)
+        if self.camera is None:
+            return flat
+        state_size = sum(self.layout.slices[n].stop - self.layout.slices[n].start for n in PROPRIOCEPTION)
+        state = gym.spaces.Box(-np.inf, np.inf, (state_size,), np.float32)
+        return gym.spaces.Dict({"state": state, **self.camera.spec.spaces(), "privileged": flat})
+
+    def _observe(self) -> tuple[Any, dict[str, Any]]:
         """The observation (with this step's sensor noise) and the true readings it came from."""
+        vector, readings = self._state_vector()
+        if self.camera is None:
+            return vector, readings
+        mount = self.robot.camera_mount() if self.camera.spec.mount == "wrist" else None
+        images = self.camera.render(mount)
+        self.visuals.corrupt(images, self._visual, self._visual_rng)
+        return {"state": self.layout.select(vector, PROPRIOCEPTION), **images, "privileged": vector}, readings
+
+    def _state_vector(self) -> tuple[np.ndarray, dict[str, Any]]:
+        """The flat state (with this step's sensor noise) and the true readings it came from."""
         robot = self.robot
         readings = robot.readings()
         readings.update(self.task.readings(readings["grasp_pos"], robot.body, robot.finger_links))
@@ -184,7 +235,7 @@ class GraspEnv(gym.Env):
         return obs, readings
 
     def _info(self, readings: dict[str, Any], success: bool) -> dict[str, Any]:
-        return {**self.task.info(readings, success), "randomization": dict(self.episode)}
+        return {**self.task.info(readings, success), "randomization": {**self.episode, **self._visual}}
 
     # --- what tools read -------------------------------------------------------------------------
     @property

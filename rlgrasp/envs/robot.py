@@ -8,7 +8,10 @@ config entry in ``ROBOTS``: the env, the control modes and the observation size 
 
 from __future__ import annotations
 
+import hashlib
 import math
+import os
+import tempfile
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 
@@ -34,6 +37,9 @@ class Robot(ABC):
     upper: np.ndarray
     max_torque: np.ndarray
     finger_force: float
+    client: BulletClient
+    #: Links cameras may see (``show_only``); visual randomization recolours these.
+    visible_links: list[int]
 
     @property
     def arm_dof(self) -> int:
@@ -52,12 +58,29 @@ class Robot(ABC):
     def grasp_point(self) -> tuple[np.ndarray, np.ndarray]:
         """World position and linear velocity of the point between the fingertips."""
 
+    @abstractmethod
+    def camera_mount(self) -> tuple[np.ndarray, np.ndarray]:
+        """World position and quaternion of the link a wrist camera is fixed to (its z axis points
+        along the fingers)."""
+
     def readings(self) -> dict[str, np.ndarray]:
         """The robot's proprioception, by observation part name."""
         q, qd, width = self.joint_state()
         grasp_pos, grasp_vel = self.grasp_point()
         return {"arm_q": q, "arm_qd": qd, "finger_width": np.array([width]), "grasp_pos": grasp_pos,
                 "grasp_vel": grasp_vel}
+
+    @abstractmethod
+    def wrist_links(self) -> list[int]:
+        """The links a wrist camera can see (the mount and what it carries)."""
+
+    def show_only(self, links: list[int]) -> None:
+        """Hide every other link from cameras: the CPU renderer skips transparent shapes, and a
+        wrist camera never sees the links behind it. Physics is not affected."""
+        for link in range(-1, self.client.getNumJoints(self.body)):
+            if link not in links:
+                self.client.changeVisualShape(self.body, link, rgbaColor=[1.0, 1.0, 1.0, 0.0])
+        self.visible_links = list(links)
 
     # --- dynamics and control ------------------------------------------------------------------
     @abstractmethod
@@ -101,9 +124,15 @@ class Panda(Robot):
     neutral_pose = (0.0, 0.41, 0.0, -1.85, 0.0, 2.26, 0.79)
     max_finger_width = 0.08
 
-    def __init__(self, client: BulletClient, urdf: str = "franka_panda/panda.urdf"):
+    MOUNT_LINK = "panda_hand"
+    MODEL = "franka_panda/panda.urdf"
+
+    def __init__(self, client: BulletClient, urdf: str | None = None, low_poly: bool = False):
         self.client = client
-        self.body = client.loadURDF(data_path(urdf), useFixedBase=True)
+        path = data_path(urdf or self.MODEL)
+        if low_poly and urdf is None:
+            path = low_poly_urdf(path)
+        self.body = client.loadURDF(path, useFixedBase=True)
         joints, links = {}, {}
         for j in range(client.getNumJoints(self.body)):
             info = client.getJointInfo(self.body, j)
@@ -113,6 +142,9 @@ class Panda(Robot):
         self.fingers = [joints[n] for n in self.FINGER_JOINTS]
         self.finger_links = [links[n] for n in self.FINGER_LINKS]
         self.grasp_link = links[self.GRASP_LINK]
+        self.mount_link = links[self.MOUNT_LINK]
+        self.link_names = {j: name for name, j in links.items()}
+        self.visible_links = list(range(-1, client.getNumJoints(self.body)))
         infos = [client.getJointInfo(self.body, j) for j in self.arm]
         self.lower = np.array([i[8] for i in infos])
         self.upper = np.array([i[9] for i in infos])
@@ -142,6 +174,13 @@ class Panda(Robot):
             self.body, self.grasp_link, computeLinkVelocity=1, computeForwardKinematics=1
         )
         return np.array(state[4]), np.array(state[6])
+
+    def wrist_links(self) -> list[int]:
+        return [j for j in range(self.client.getNumJoints(self.body)) if j >= self.mount_link]
+
+    def camera_mount(self) -> tuple[np.ndarray, np.ndarray]:
+        state = self.client.getLinkState(self.body, self.mount_link, computeForwardKinematics=1)
+        return np.array(state[4]), np.array(state[5])
 
     # --- dynamics ------------------------------------------------------------------------------
     def set_dynamics(self, joint_damping: float, finger_friction: float) -> None:
@@ -210,12 +249,35 @@ class Panda(Robot):
         return np.clip(np.array(q[: len(self.arm)]), self.lower, self.upper)
 
 
+def low_poly_urdf(path: str) -> str:
+    """The same URDF with each visual mesh replaced by its collision mesh, for cameras.
+
+    Rendering cost on the CPU follows the robot's visual triangles: the Panda's visual meshes make a
+    64x64 image cost ~16 ms, its collision meshes ~1.5 ms. Physics reads only the collision shapes,
+    so the robot moves exactly as before. Written once per machine into the temp directory (mesh
+    paths made absolute), atomically: several workers may ask at once.
+    """
+    text = open(path).read()
+    folder = os.path.dirname(path)
+    low = text.replace("package://meshes/visual/", os.path.join(folder, "meshes", "collision", ""))
+    low = low.replace("package://", folder + os.sep)
+    digest = hashlib.sha1(low.encode()).hexdigest()[:12]
+    target = os.path.join(tempfile.gettempdir(), f"rlgrasp-lowpoly-{digest}.urdf")
+    if not os.path.isfile(target):
+        fd, scratch = tempfile.mkstemp(suffix=".urdf", dir=tempfile.gettempdir())
+        with os.fdopen(fd, "w") as f:
+            f.write(low)
+        os.replace(scratch, target)
+    return target
+
+
 #: ``env.robot`` names -> the class that loads that arm.
 ROBOTS: dict[str, type[Robot]] = {"panda": Panda}
 
 
-def make_robot(name: str, client: BulletClient, model: str | None = None) -> Robot:
-    """The arm called ``name``; ``model`` overrides its model file (a path or a pybullet_data name)."""
+def make_robot(name: str, client: BulletClient, model: str | None = None, low_poly: bool = False) -> Robot:
+    """The arm called ``name``; ``model`` overrides its model file (a path or a pybullet_data name);
+    ``low_poly`` loads the model cameras render cheaply."""
     if name not in ROBOTS:
         raise ValueError(f"unknown robot {name!r}; valid robots: {', '.join(ROBOTS)}")
-    return ROBOTS[name](client, model) if model else ROBOTS[name](client)
+    return ROBOTS[name](client, model, low_poly=low_poly)
