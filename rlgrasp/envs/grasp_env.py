@@ -101,7 +101,8 @@ class GraspEnv(gym.Env):
         self.client = self.scene.client
         try:
             self.task = LiftTask(self.scene, objects, reward, weights, success_height)
-            self.robot = make_robot(robot, self.client, robot_urdf, low_poly=camera_spec is not None)
+            render = None if camera_spec is None else "wrist" if camera_spec.mount == "wrist" else "low_poly"
+            self.robot = make_robot(robot, self.client, robot_urdf, render)
             self.visuals = VisualRandomizer(visual, self.client)
             self.camera = Camera(camera_spec, self.client) if camera_spec else None
         except BaseException:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+import re
 import tempfile
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
@@ -127,11 +128,15 @@ class Panda(Robot):
     MOUNT_LINK = "panda_hand"
     MODEL = "franka_panda/panda.urdf"
 
-    def __init__(self, client: BulletClient, urdf: str | None = None, low_poly: bool = False):
+    #: The links a wrist camera sees: the hand and what it carries.
+    WRIST_LINKS = ("panda_hand", "panda_leftfinger", "panda_rightfinger", "panda_grasptarget")
+
+    def __init__(self, client: BulletClient, urdf: str | None = None, render: str | None = None):
+        """``render``: None (the model as it is), ``low_poly`` or ``wrist`` (low-poly, wrist links only)."""
         self.client = client
         path = data_path(urdf or self.MODEL)
-        if low_poly and urdf is None:
-            path = low_poly_urdf(path)
+        if render and urdf is None:
+            path = low_poly_urdf(path, self.WRIST_LINKS if render == "wrist" else None)
         self.body = client.loadURDF(path, useFixedBase=True)
         joints, links = {}, {}
         for j in range(client.getNumJoints(self.body)):
@@ -176,7 +181,7 @@ class Panda(Robot):
         return np.array(state[4]), np.array(state[6])
 
     def wrist_links(self) -> list[int]:
-        return [j for j in range(self.client.getNumJoints(self.body)) if j >= self.mount_link]
+        return [j for j, name in self.link_names.items() if name in self.WRIST_LINKS]
 
     def camera_mount(self) -> tuple[np.ndarray, np.ndarray]:
         state = self.client.getLinkState(self.body, self.mount_link, computeForwardKinematics=1)
@@ -249,18 +254,27 @@ class Panda(Robot):
         return np.clip(np.array(q[: len(self.arm)]), self.lower, self.upper)
 
 
-def low_poly_urdf(path: str) -> str:
-    """The same URDF with each visual mesh replaced by its collision mesh, for cameras.
+def low_poly_urdf(path: str, visible_links: Sequence[str] | None = None) -> str:
+    """The same URDF with each visual mesh replaced by its collision mesh, for cameras; with
+    ``visible_links``, the other links lose their visuals altogether (a wrist camera never sees them).
 
     Rendering cost on the CPU follows the robot's visual triangles: the Panda's visual meshes make a
-    64x64 image cost ~16 ms, its collision meshes ~1.5 ms. Physics reads only the collision shapes,
-    so the robot moves exactly as before. Written once per machine into the temp directory (mesh
-    paths made absolute), atomically: several workers may ask at once.
+    64x64 image cost ~16 ms, its collision meshes ~1.5 ms, and every visual shape costs a sync per
+    image even when transparent. Physics reads only the collision shapes, so the robot moves exactly
+    as before. Written once per machine into the temp directory (mesh paths made absolute),
+    atomically: several workers may ask at once.
     """
     text = open(path).read()
     folder = os.path.dirname(path)
     low = text.replace("package://meshes/visual/", os.path.join(folder, "meshes", "collision", ""))
     low = low.replace("package://", folder + os.sep)
+    if visible_links is not None:
+        def strip(link: re.Match) -> str:
+            text = link.group(0)
+            name = re.search(r'<link\s+name="([^"]+)"', text).group(1)
+            return text if name in visible_links else re.sub(r"<visual>.*?</visual>", "", text, flags=re.S)
+
+        low = re.sub(r"<link\s+name=.*?</link>", strip, low, flags=re.S)
     digest = hashlib.sha1(low.encode()).hexdigest()[:12]
     target = os.path.join(tempfile.gettempdir(), f"rlgrasp-lowpoly-{digest}.urdf")
     if not os.path.isfile(target):
@@ -275,9 +289,10 @@ def low_poly_urdf(path: str) -> str:
 ROBOTS: dict[str, type[Robot]] = {"panda": Panda}
 
 
-def make_robot(name: str, client: BulletClient, model: str | None = None, low_poly: bool = False) -> Robot:
+def make_robot(name: str, client: BulletClient, model: str | None = None, render: str | None = None) -> Robot:
     """The arm called ``name``; ``model`` overrides its model file (a path or a pybullet_data name);
-    ``low_poly`` loads the model cameras render cheaply."""
+    ``render`` asks for the model cameras render cheaply (``low_poly``, or ``wrist``: only what a
+    wrist camera sees)."""
     if name not in ROBOTS:
         raise ValueError(f"unknown robot {name!r}; valid robots: {', '.join(ROBOTS)}")
-    return ROBOTS[name](client, model, low_poly=low_poly)
+    return ROBOTS[name](client, model, render=render)
