@@ -18,6 +18,7 @@ this launcher there. Jobs receive the plugin's own SlurmLauncher (``__reduce_ex_
 
 from __future__ import annotations
 
+import copyreg
 import logging
 import math
 import re
@@ -282,7 +283,13 @@ NEVER = {
 }
 #: Pending reasons only an administrator cures (nodes down, drained, reserved for maintenance): said
 #: at once, and the wait ends after BLOCKED_LIMIT_S; the job stays queued.
-BLOCKED = {"ReqNodeNotAvail", "NodeDown", "PartitionDown", "PartitionInactive", "JobHeldAdmin"}
+BLOCKED = {
+    "ReqNodeNotAvail": "nodes it needs are down, drained or reserved",
+    "NodeDown": "a node it needs is down",
+    "PartitionDown": "the partition is down",
+    "PartitionInactive": "the partition is inactive",
+    "JobHeldAdmin": "an administrator holds it",
+}
 BLOCKED_LIMIT_S = 600.0
 #: How long a job that ended may take to show its result (submitit's own allowance for a slow
 #: shared file system), and how often scontrol is asked at least and at most.
@@ -356,6 +363,7 @@ class Watch:
         self.start = self.next_query = clock()
         self.ended: dict[str, float] = {}  # job id -> when first seen ended without a result
         self.blocked: dict[str, float] = {}  # job id -> since when pending for a BLOCKED reason
+        self.warned: set[str] = set()  # BLOCKED reasons already said (once for a whole array)
 
     def check(self) -> bool:
         """True once every job has written its result (submitit's result file)."""
@@ -369,41 +377,60 @@ class Watch:
         low, high = QUERY_EVERY_S
         self.next_query = now + min(high, max(low, (now - self.start) / 10))
         states = self.query([j.job_id for j in left])
-        if states is None:
-            return False
-        never = [j.job_id for j in left if states.get(j.job_id, ("", ""))[1].split(",")[0] in NEVER]
-        for job in left:
-            self._judge(job, states.get(job.job_id), now, never, len(left))
+        if states is not None:
+            self._judge(left, states, now)
         return False
 
-    def _judge(self, job: Any, state: tuple[str, str] | None, now: float, never: list[str],
-               left: int) -> None:
-        jid = job.job_id
-        others = f"; {left - 1} other job(s) of this sweep are still queued or running" if left > 1 else ""
-        if state is None or state[0] not in ALIVE:
-            since = self.ended.setdefault(jid, now)
-            if now - since >= GRACE_S:
-                what = f"ended with JobState={state[0]}" if state else "is no longer known to SLURM (ended)"
-                raise JobLost(f"SLURM job {jid} {what} without writing a result{_log_tail(job)}{others}")
-            return
-        self.ended.pop(jid, None)
-        reason = state[1].replace("_", " ")
-        name = state[1].split(",")[0]
-        if name in NEVER:
-            raise JobLost(f"SLURM job {jid} can never start: pending with Reason={reason} ({NEVER[name]}); "
-                          f"cancelled {', '.join(never)}", cancel=never)
-        if name not in BLOCKED:
+    def _judge(self, left: list[Any], states: States, now: float) -> None:
+        alive = [j for j in left if states.get(j.job_id, ("", ""))[0] in ALIVE]
+        for job in left:
+            if job in alive:
+                self.ended.pop(job.job_id, None)
+            else:
+                self.ended.setdefault(job.job_id, now)
+        lost = [j for j in left if j.job_id in self.ended and now - self.ended[j.job_id] >= GRACE_S]
+        if lost:
+            state = states.get(lost[0].job_id)
+            what = f"ended with JobState={state[0]}" if state else "is no longer known to SLURM (ended)"
+            more = f"; so did {_ids(lost[1:])}" if len(lost) > 1 else ""
+            running = (f"; {len(alive)} other job(s) of this sweep are still queued or running "
+                       f"(squeue -j {alive[0].job_id.split('_')[0]})") if alive else ""
+            raise JobLost(f"SLURM job {lost[0].job_id} {what} without writing a result{_log_tail(lost[0])}"
+                          f"{more}{running}")
+        never = [j for j in alive if _reason(states[j.job_id]) in NEVER]
+        if never:
+            reason = states[never[0].job_id][1]
+            raise JobLost(f"SLURM job {never[0].job_id} can never start: pending with Reason={reason} "
+                          f"({NEVER[_reason(states[never[0].job_id])]}); cancelled {_ids(never)}",
+                          cancel=[j.job_id for j in never])
+        for job in alive:
+            self._blocked(job.job_id, states[job.job_id], now)
+
+    def _blocked(self, jid: str, state: tuple[str, str], now: float) -> None:
+        """Say at once that a job waits for an administrator; stop waiting after BLOCKED_LIMIT_S."""
+        if _reason(state) not in BLOCKED:
             self.blocked.pop(jid, None)
             return
-        if jid not in self.blocked:
-            self.blocked[jid] = now
-            log.warning("SLURM job %s is pending with Reason=%s (nodes it needs are down, drained or "
-                        "reserved); waiting at most %d min for it to start", jid, reason,
-                        BLOCKED_LIMIT_S // 60)
-        elif now - self.blocked[jid] >= BLOCKED_LIMIT_S:
+        reason = state[1].replace("_", " ")
+        self.blocked.setdefault(jid, now)
+        if _reason(state) not in self.warned:
+            self.warned.add(_reason(state))
+            log.warning("SLURM job %s is pending with Reason=%s (%s); waiting at most %d min for it to start",
+                        jid, reason, BLOCKED[_reason(state)], BLOCKED_LIMIT_S // 60)
+        if now - self.blocked[jid] >= BLOCKED_LIMIT_S:
             raise JobLost(f"SLURM job {jid} has been pending with Reason={reason} for "
                           f"{BLOCKED_LIMIT_S / 60:g} min; stopped waiting (it stays queued: "
-                          f"scancel {jid.split('_')[0]} to drop it){others}")
+                          f"scancel {jid.split('_')[0]} to drop it)")
+
+
+def _reason(state: tuple[str, str]) -> str:
+    """The reason's name: ``ReqNodeNotAvail,_UnavailableNodes:n1`` -> ``ReqNodeNotAvail``."""
+    return state[1].split(",")[0]
+
+
+def _ids(jobs: Sequence[Any]) -> str:
+    ids = [j.job_id for j in jobs]
+    return ", ".join(ids[:3]) + (f" and {len(ids) - 3} more" if len(ids) > 3 else "")
 
 
 def _has_result(job: Any) -> bool:
@@ -451,9 +478,7 @@ class CheckedSlurmLauncher(SlurmLauncher):
     def __reduce_ex__(self, protocol: Any) -> Any:
         # Jobs get the plugin's own SlurmLauncher: they only run its __call__ and checkpoint (the
         # requeue), and need neither this class nor the hydra_plugins module that names it.
-        plain = object.__new__(SlurmLauncher)
-        plain.__dict__.update(self.__dict__)
-        return plain.__reduce_ex__(protocol)
+        return copyreg._reconstructor, (SlurmLauncher, object, None), dict(self.__dict__)
 
     def _submit(self, job_overrides: Sequence[Sequence[str]], initial_job_idx: int) -> list[Any]:
         """The plugin's ``launch`` without its wait (it submits and waits through submitit in one

@@ -127,6 +127,265 @@ def test_a_job_slurm_requeued_itself_exits_without_a_result(
 
 
 # ---------------------------------------------------------------------------------------------
+# Can it ever run? (sinfo text, no cluster)
+
+SINFO = """\
+vm|2|21694|debug*|infinite|(null)
+big1|32|257000|long|7-00:00:00|(null)
+big2|32|128000|long|7-00:00:00|(null)
+g1|16|64000|gpu|2:00:00|gpu:a100:4(S:0-1)
+"""
+
+
+def test_sinfo_lines_become_nodes() -> None:
+    from rlgrasp.slurm import Node, parse_sinfo
+
+    nodes = parse_sinfo(SINFO + "garbage line\n")
+    assert nodes[0] == Node("vm", "debug", True, 2, 21694, 0, None)
+    assert nodes[1] == Node("big1", "long", False, 32, 257000, 0, 7 * 1440)
+    assert (nodes[3].gpus, nodes[3].max_time_min, nodes[3].default) == (4, 120, False)
+    assert len(nodes) == 4
+
+
+@pytest.mark.parametrize(("text", "minutes"), [
+    ("infinite", None), ("UNLIMITED", None), ("30", 30), ("30:30", 30.5), ("2:00:00", 120),
+    ("1-12", 36 * 60), ("1-00:30", 1470), ("2-00:00:30", 2880.5),
+])
+def test_slurm_time_limits_in_minutes(text: str, minutes: float | None) -> None:
+    from rlgrasp.slurm import slurm_minutes
+
+    assert slurm_minutes(text) == minutes
+
+
+def _params(**overrides) -> dict:
+    """The launcher parameters slurm.yaml gives the smoke experiment (2 workers + the learner)."""
+    return {"partition": None, "cpus_per_task": 3, "tasks_per_node": 1, "nodes": 1, "mem_per_cpu": "2G",
+            "mem_gb": None, "gpus_per_node": None, "gpus_per_task": None, "gres": None, "timeout_min": 240,
+            **overrides}
+
+
+def test_a_job_bigger_than_any_node_is_refused_in_one_line_naming_the_key_and_the_fix() -> None:
+    from rlgrasp.slurm import refusal
+
+    line = refusal(_params(), SINFO, workers=2)
+    assert line == ("error: SLURM partition debug can never run this job: hydra.launcher.cpus_per_task=3 "
+                    "(collector.num_workers=2 + 1 for the learner) asks for 3 CPUs per node, its nodes have "
+                    "at most 2; use collector.num_workers=1 or hydra.launcher.cpus_per_task=2")
+    # cpus_per_task given as a number: the workers are not what sizes the job, so not the fix
+    line = refusal(_params(), SINFO, workers=None)
+    assert "collector.num_workers" not in line and line.endswith("use hydra.launcher.cpus_per_task=2")
+
+
+@pytest.mark.parametrize(("overrides", "expected"), [
+    # memory judged for the CPUs a node can give; per CPU or in total
+    ({"cpus_per_task": 2, "mem_per_cpu": "12G"},
+     "hydra.launcher.mem_per_cpu=12G x 2 CPUs asks for 24.0 GB per node, its nodes have at most 21.2 GB "
+     "(21694 MB); use hydra.launcher.mem_per_cpu=10847M"),
+    ({"cpus_per_task": 1, "mem_per_cpu": None, "mem_gb": 64},
+     "hydra.launcher.mem_gb=64 asks for 64.0 GB per node, its nodes have at most 21.2 GB (21694 MB); "
+     "use hydra.launcher.mem_gb=21"),
+    ({"cpus_per_task": 1, "gpus_per_node": 1}, "hydra.launcher.gpus_per_node=1 asks for 1 GPU(s) per node, "
+     "its nodes have none; use a partition with GPUs (hydra.launcher.partition=<name>)"),
+    ({"cpus_per_task": 1, "nodes": 2}, "hydra.launcher.nodes=2: only 1 of its nodes have 1 CPUs, 2.0 GB; "
+     "use hydra.launcher.nodes=1"),
+])
+def test_each_resource_is_compared_with_the_partitions_nodes(overrides: dict, expected: str) -> None:
+    from rlgrasp.slurm import refusal
+
+    line = refusal(_params(**overrides), SINFO)
+    assert line == f"error: SLURM partition debug can never run this job: {expected}"
+
+
+def test_partition_names_and_time_limits_are_checked() -> None:
+    from rlgrasp.slurm import refusal
+
+    assert refusal(_params(partition="gpus"), SINFO) == (
+        "error: hydra.launcher.partition=gpus: no SLURM partition gpus; sinfo lists debug, long, gpu")
+    assert refusal(_params(partition="gpu", gpus_per_node=2), SINFO) == (
+        "error: SLURM partition gpu can never run this job: hydra.launcher.timeout_min=240: its time limit "
+        "is 120 min; use hydra.launcher.timeout_min=120")
+    assert "no default partition" in refusal(_params(), SINFO.replace("debug*", "debug"))
+
+
+@pytest.mark.parametrize("overrides", [
+    {"cpus_per_task": 2},                                         # fits the default partition
+    {"partition": "long", "cpus_per_task": 32, "mem_per_cpu": "4000M", "nodes": 2},
+    {"partition": "gpu", "gres": "gpu:a100:4", "timeout_min": 120},
+    {"partition": "debug,long", "cpus_per_task": 8},              # sbatch takes the first that can
+])
+def test_a_job_some_node_can_run_is_not_refused(overrides: dict) -> None:
+    from rlgrasp.slurm import refusal
+
+    assert refusal(_params(**overrides), SINFO) is None
+
+
+def test_a_mixed_partition_needs_one_node_with_everything_at_once() -> None:
+    from rlgrasp.slurm import refusal
+
+    # big1 has the memory, big2 too few; 2 nodes of 200 GB: only one has it
+    line = refusal(_params(partition="long", cpus_per_task=32, mem_per_cpu="6400M", nodes=2), SINFO)
+    assert line.endswith("hydra.launcher.nodes=2: only 1 of its nodes have 32 CPUs, 200.0 GB; "
+                         "use hydra.launcher.nodes=1")
+    assert refusal(_params(), "") is None  # nothing to judge by: submit
+
+
+def test_the_training_config_reaches_the_check() -> None:
+    """slurm.yaml's numbers and the workers a fix can name, as the launcher's setup sees them."""
+    from hydra import compose, initialize_config_dir
+
+    from rlgrasp.config import CONFIG_DIR, register_configs
+    from rlgrasp.slurm import _workers, refusal
+
+    register_configs()
+    with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
+        cfg = compose("train", overrides=["hydra/launcher=slurm", "experiment=smoke"],
+                      return_hydra_config=True)
+        fixed = compose("train", overrides=["hydra/launcher=slurm", "experiment=smoke",
+                                            "hydra.launcher.cpus_per_task=3"], return_hydra_config=True)
+    assert (_workers(cfg), _workers(fixed)) == (2, None)
+    line = refusal(_launcher_params("experiment=smoke"), SINFO, _workers(cfg))
+    assert "use collector.num_workers=1 or hydra.launcher.cpus_per_task=2" in line
+
+
+# ---------------------------------------------------------------------------------------------
+# Waiting for the jobs (scontrol text and a stand-in clock, no cluster)
+
+SCONTROL = """\
+JobId=12 ArrayJobId=12 ArrayTaskId=2-3%32 JobName=train JobState=PENDING Reason=Priority Dependency=(null)
+JobId=13 ArrayJobId=12 ArrayTaskId=0 JobName=train JobState=RUNNING Reason=None
+JobId=14 ArrayJobId=12 ArrayTaskId=1 JobName=train JobState=CANCELLED Reason=None
+JobId=20 JobName=train JobState=PENDING Reason=ReqNodeNotAvail,_UnavailableNodes:vm
+"""
+
+
+def test_scontrol_records_are_keyed_like_submitit_job_ids() -> None:
+    from rlgrasp.slurm import parse_scontrol_jobs
+
+    assert parse_scontrol_jobs(SCONTROL) == {
+        "12_2": ("PENDING", "Priority"), "12_3": ("PENDING", "Priority"), "12_0": ("RUNNING", "None"),
+        "12_1": ("CANCELLED", "None"), "20": ("PENDING", "ReqNodeNotAvail,_UnavailableNodes:vm"),
+    }
+
+
+class _Job:
+    """What the watch reads of a submitit job: its id, tasks and result/log paths."""
+
+    def __init__(self, job_id: str, folder: Path) -> None:
+        self.job_id, self.num_tasks = job_id, 1
+        self.paths = type("Paths", (), {"result_pickle": folder / f"{job_id}_0_result.pkl",
+                                        "stderr": folder / f"{job_id}_0_log.err"})()
+
+    def task(self, i: int) -> _Job:
+        return self
+
+
+class _Clock:
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def _watch(tmp_path: Path, answers: dict, ids=("5_0", "5_1"), results_at: float | None = None):
+    """A Watch over jobs ``ids`` whose scontrol answers ``answers[job id]`` (a callable of the time or a
+    fixed (state, reason)), polled every second of a stand-in clock until it ends; every job's result
+    file appears at ``results_at``. Returns (ended at, the JobLost or None, the jobs)."""
+    from rlgrasp.slurm import JobLost, Watch
+
+    clock, jobs = _Clock(), [_Job(i, tmp_path) for i in ids]
+
+    def query(left: list[str]):
+        return {j: (a(clock.now) if callable(a) else a) for j, a in answers.items() if j in left
+                and (a(clock.now) if callable(a) else a) is not None}
+
+    watch = Watch(jobs, query=query, clock=clock)
+    try:
+        while True:
+            if results_at is not None and clock.now >= results_at:
+                for job in jobs:
+                    job.paths.result_pickle.touch()
+            if watch.check():
+                break
+            clock.now += 1
+            if clock.now > 3600:
+                raise AssertionError("still waiting after an hour")
+    except JobLost as lost:
+        return clock.now, lost, jobs
+    return clock.now, None, jobs
+
+
+def test_a_cancelled_job_ends_the_wait_naming_it_and_its_state(tmp_path: Path) -> None:
+    from rlgrasp.slurm import GRACE_S
+
+    (tmp_path / "5_0_0_log.err").write_text("starting\nslurmstepd: error: *** JOB 5 CANCELLED ***\n")
+    answers = {"5_0": lambda t: ("RUNNING", "None") if t < 30 else ("CANCELLED", "None"),
+               "5_1": ("RUNNING", "None")}
+    ended_at, lost, _ = _watch(tmp_path, answers)
+    assert 30 + GRACE_S <= ended_at <= 30 + 5 + GRACE_S + 1  # seen at the next query, then the grace
+    assert str(lost) == (f"SLURM job 5_0 ended with JobState=CANCELLED without writing a result; log "
+                         f"{tmp_path / '5_0_0_log.err'} ends with: slurmstepd: error: *** JOB 5 CANCELLED "
+                         "***; 1 other job(s) of this sweep are still queued or running (squeue -j 5)")
+    assert lost.cancel == []
+
+
+def test_a_job_slurm_forgot_ends_the_wait_and_a_late_result_does_not(tmp_path: Path) -> None:
+    _, lost, _ = _watch(tmp_path, {"5_0": None, "5_1": ("PENDING", "None")})  # purged: no record
+    assert str(lost).startswith("SLURM job 5_0 is no longer known to SLURM (ended) without writing a result")
+
+    def done(t: float):  # COMPLETED; its result shows on the shared file system 10 s later
+        return ("RUNNING", "None") if t < 30 else ("COMPLETED", "None")
+
+    ended_at, lost, _ = _watch(tmp_path, {"5_0": done, "5_1": done}, results_at=40)
+    assert lost is None and ended_at == 40
+
+
+def test_a_requeued_job_is_not_lost(tmp_path: Path) -> None:
+    """Preempted: ended for a moment, then PENDING again (SLURM requeued it), then its rerun's result."""
+    def requeued(t: float):
+        return ("PREEMPTED", "None") if 20 <= t < 30 else ("PENDING", "BeginTime") if t < 100 else (
+            "RUNNING", "None")
+
+    ended_at, lost, _ = _watch(tmp_path, {"5_0": requeued}, ids=("5_0",), results_at=200)
+    assert lost is None and ended_at == 200
+
+
+def test_a_job_slurm_can_never_start_ends_the_wait_and_is_cancelled(tmp_path: Path) -> None:
+    ended_at, lost, _ = _watch(tmp_path, {"5_0": ("PENDING", "PartitionConfig"),
+                                          "5_1": ("PENDING", "PartitionConfig")})
+    assert ended_at == 0  # the first answer says it
+    assert str(lost) == ("SLURM job 5_0 can never start: pending with Reason=PartitionConfig (it asks for "
+                         "more than the partition's nodes or limits allow); cancelled 5_0, 5_1")
+    assert lost.cancel == ["5_0", "5_1"]
+
+
+def test_a_job_waiting_for_an_administrator_is_said_at_once_and_given_up_later(tmp_path: Path,
+                                                                               caplog) -> None:
+    from rlgrasp.slurm import BLOCKED_LIMIT_S
+
+    with caplog.at_level("WARNING", logger="rlgrasp.slurm"):
+        ended_at, lost, _ = _watch(tmp_path, {"5_0": ("PENDING", "ReqNodeNotAvail,_UnavailableNodes:vm"),
+                                              "5_1": ("PENDING", "ReqNodeNotAvail,_UnavailableNodes:vm")})
+    (warning,) = caplog.messages  # once for the array, when first seen
+    assert warning.startswith("SLURM job 5_0 is pending with Reason=ReqNodeNotAvail, UnavailableNodes:vm")
+    assert BLOCKED_LIMIT_S <= ended_at <= BLOCKED_LIMIT_S + 60
+    assert "has been pending with Reason=ReqNodeNotAvail" in str(lost) and "it stays queued" in str(lost)
+    assert lost.cancel == []
+
+
+def test_no_answer_from_the_controller_is_not_a_verdict(tmp_path: Path) -> None:
+    from rlgrasp.slurm import Watch
+
+    clock = _Clock()
+    watch = Watch([_Job("5_0", tmp_path)], query=lambda left: None, clock=clock)
+    for _ in range(600):
+        assert not watch.check()
+        clock.now += 1
+    (tmp_path / "5_0_0_result.pkl").touch()
+    assert watch.check()
+
+
+# ---------------------------------------------------------------------------------------------
 # On a cluster
 
 
