@@ -9,7 +9,7 @@ Two gaps of the plugin (through submitit) make a sweep wait for ever without a w
 - submitit learns a job's state from ``sacct``, which fails on a cluster without accounting, so a
   cancelled or failed job that left no result is polled for ever. The launcher waits on its own
   loop instead (``Watch``): result files every second, ``scontrol show job`` (which works without
-  accounting) every 5-60 s; a job that ended without a result, or that SLURM can never start, ends
+  accounting) every 5-30 s; a job that ended without a result, or that SLURM can never start, ends
   the wait with one line naming the job and its state.
 
 Hydra takes launchers only from the ``hydra_plugins`` package: ``hydra_plugins.rlgrasp_slurm`` names
@@ -294,7 +294,7 @@ BLOCKED_LIMIT_S = 600.0
 #: How long a job that ended may take to show its result (submitit's own allowance for a slow
 #: shared file system), and how often scontrol is asked at least and at most.
 GRACE_S = 15.0
-QUERY_EVERY_S = (5.0, 60.0)
+QUERY_EVERY_S = (5.0, 30.0)
 
 States = dict[str, tuple[str, str]]  # job id -> (JobState, Reason)
 
@@ -309,7 +309,9 @@ class JobLost(RuntimeError):
 
 def parse_scontrol_jobs(text: str) -> States:
     """``scontrol -o show job`` output as {job id: (JobState, Reason)}; array tasks as ``<array>_<task>``
-    (the ids submitit uses), a not yet started range of tasks expanded."""
+    (the ids submitit uses), a not yet started range of tasks expanded. A record of a whole array
+    without its tasks (``ArrayTaskId=4294967294``, e.g. once cancelled before it started) stays
+    under the array's id: ``Watch`` falls back to it."""
     states: States = {}
     for line in text.splitlines():
         fields: dict[str, str] = {}
@@ -319,7 +321,7 @@ def parse_scontrol_jobs(text: str) -> States:
             continue
         state = (fields["JobState"], fields.get("Reason", "None"))
         array, tasks = fields.get("ArrayJobId"), fields.get("ArrayTaskId", "")
-        if array and re.fullmatch(r"[\d,:-]+(%\d+)?", tasks):
+        if array and re.fullmatch(r"[\d,:-]+(%\d+)?", tasks) and tasks != "4294967294":  # SLURM's NO_VAL
             states.update({f"{array}_{t}": state for t in _expand(tasks.split("%")[0])})
         else:
             states[fields["JobId"]] = state
@@ -376,8 +378,10 @@ class Watch:
             return False
         low, high = QUERY_EVERY_S
         self.next_query = now + min(high, max(low, (now - self.start) / 10))
-        states = self.query([j.job_id for j in left])
-        if states is not None:
+        answer = self.query([j.job_id for j in left])
+        if answer is not None:
+            found = {j.job_id: answer.get(j.job_id) or answer.get(j.job_id.split("_")[0]) for j in left}
+            states = {job_id: state for job_id, state in found.items() if state}
             self._judge(left, states, now)
         return False
 

@@ -11,7 +11,7 @@
 # /etc/slurm/slurm.conf (where sinfo, sbatch and submitit look for it); a slurm.conf this script
 # did not write is never overwritten. State, logs and pid files: $LOCAL_SLURM_DIR
 # (default /var/lib/rlgrasp-slurm). No accounting database: sacct answers "accounting storage is
-# disabled" and submitit falls back to its own job files (it warns about it once per poll).
+# disabled"; hydra/launcher=slurm asks scontrol for its jobs' states instead (rlgrasp/slurm.py).
 set -euo pipefail
 
 STATE_DIR=${LOCAL_SLURM_DIR:-/var/lib/rlgrasp-slurm}

@@ -8,6 +8,7 @@ import os
 import pickle
 import re
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -97,7 +98,6 @@ def test_a_job_slurm_requeued_itself_exits_without_a_result(
     """After `scontrol requeue` SLURM signals a job it already requeued; submitit's own requeue then
     fails ("Job is pending execution"). Returning would write a submitit result with the preempted
     frames, and the sweep would take it for the run's end; exiting leaves the result to the rerun."""
-    import signal
 
     from rlgrasp.train.loop import hand_off_preemption
 
@@ -255,6 +255,7 @@ JobId=12 ArrayJobId=12 ArrayTaskId=2-3%32 JobName=train JobState=PENDING Reason=
 JobId=13 ArrayJobId=12 ArrayTaskId=0 JobName=train JobState=RUNNING Reason=None
 JobId=14 ArrayJobId=12 ArrayTaskId=1 JobName=train JobState=CANCELLED Reason=None
 JobId=20 JobName=train JobState=PENDING Reason=ReqNodeNotAvail,_UnavailableNodes:vm
+JobId=30 ArrayJobId=30 ArrayTaskId=4294967294 ArrayTaskThrottle=2 JobName=train JobState=CANCELLED Reason=None
 """
 
 
@@ -264,6 +265,7 @@ def test_scontrol_records_are_keyed_like_submitit_job_ids() -> None:
     assert parse_scontrol_jobs(SCONTROL) == {
         "12_2": ("PENDING", "Priority"), "12_3": ("PENDING", "Priority"), "12_0": ("RUNNING", "None"),
         "12_1": ("CANCELLED", "None"), "20": ("PENDING", "ReqNodeNotAvail,_UnavailableNodes:vm"),
+        "30": ("CANCELLED", "None"),  # the whole array, cancelled before it started
     }
 
 
@@ -295,9 +297,11 @@ def _watch(tmp_path: Path, answers: dict, ids=("5_0", "5_1"), results_at: float 
 
     clock, jobs = _Clock(), [_Job(i, tmp_path) for i in ids]
 
-    def query(left: list[str]):
-        return {j: (a(clock.now) if callable(a) else a) for j, a in answers.items() if j in left
-                and (a(clock.now) if callable(a) else a) is not None}
+    def query(left: list[str]):  # scontrol is asked about whole arrays
+        arrays = {j.split("_")[0] for j in left}
+        states = {j: (a(clock.now) if callable(a) else a) for j, a in answers.items()
+                  if j.split("_")[0] in arrays}
+        return {j: state for j, state in states.items() if state is not None}
 
     watch = Watch(jobs, query=query, clock=clock)
     try:
@@ -327,6 +331,14 @@ def test_a_cancelled_job_ends_the_wait_naming_it_and_its_state(tmp_path: Path) -
                          f"{tmp_path / '5_0_0_log.err'} ends with: slurmstepd: error: *** JOB 5 CANCELLED "
                          "***; 1 other job(s) of this sweep are still queued or running (squeue -j 5)")
     assert lost.cancel == []
+
+
+def test_an_array_record_without_tasks_stands_for_each_of_them(tmp_path: Path) -> None:
+    def meta(t: float):
+        return ("PENDING", "None") if t < 10 else ("CANCELLED", "None")
+
+    _, lost, _ = _watch(tmp_path, {"5": meta})
+    assert str(lost) == "SLURM job 5_0 ended with JobState=CANCELLED without writing a result; so did 5_1"
 
 
 def test_a_job_slurm_forgot_ends_the_wait_and_a_late_result_does_not(tmp_path: Path) -> None:
@@ -520,3 +532,141 @@ def test_preempted_job_resumes_in_its_run_dir(slurm, tmp_path: Path, how: str) -
     status, value = pickle.loads(result.read_bytes())
     assert status == "success" and isinstance(value.return_value, float)
 
+
+
+def _default_partition_cpus() -> int:
+    """The most CPUs a node of the cluster's default partition has."""
+    from rlgrasp.slurm import SINFO_FORMAT, parse_sinfo
+
+    text = subprocess.run(["sinfo", "-h", "-N", "-o", SINFO_FORMAT], capture_output=True, text=True,
+                          check=True, timeout=30).stdout
+    return max(n.cpus for n in parse_sinfo(text) if n.default)
+
+
+def _queued(name: str) -> list[str]:
+    """Ids of the jobs named ``name`` SLURM still lists."""
+    return subprocess.run(["squeue", "-h", "-r", "-n", name, "-o", "%i"], capture_output=True, text=True,
+                          check=True, timeout=30).stdout.split()
+
+
+def _sweep(tmp_path: Path, name: str, *overrides: str, env: dict[str, str] | None = None,
+           seeds: str = "0,1") -> subprocess.Popen:
+    """A smoke multirun over ``seeds`` through hydra/launcher=slurm, its jobs named ``name``."""
+    return subprocess.Popen(
+        [sys.executable, str(ROOT / "scripts" / "train.py"), "-m", "hydra/launcher=slurm", "experiment=smoke",
+         f"seed={seeds}", f"paths.root_dir={tmp_path}", f"hydra.launcher.name={name}", "logger=none",
+         *overrides],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path, env=env or _job_env(),
+    )
+
+
+def _finish(proc: subprocess.Popen, timeout: float) -> tuple[str, str]:
+    try:
+        return proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, err = proc.communicate()
+        raise AssertionError(f"the launcher still waits after {timeout} s:\n{out[-2000:]}{err[-2000:]}") \
+            from None
+
+
+def test_a_job_no_node_can_run_is_refused_before_submitting(slurm, tmp_path: Path) -> None:
+    """One CPU more than the biggest node: refused in one line, exit code 2, nothing submitted, no
+    sweep directory."""
+    cpus = _default_partition_cpus()
+    name = f"rlgrasp-refused-{os.getpid()}"
+    before = subprocess.run(["squeue", "-h", "-o", "%i"], capture_output=True, text=True, timeout=30).stdout
+    out, err = _finish(_sweep(tmp_path, name, f"collector.num_workers={cpus}"), timeout=120)
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err[-3000:]
+    assert lines[0].startswith("error: SLURM partition ") and "Traceback" not in out + err
+    assert f"hydra.launcher.cpus_per_task={cpus + 1} (collector.num_workers={cpus} + 1" in lines[0]
+    assert f"its nodes have at most {cpus}; use collector.num_workers={cpus - 1} or " \
+           f"hydra.launcher.cpus_per_task={cpus}" in lines[0]
+    assert _queued(name) == []
+    after = subprocess.run(["squeue", "-h", "-o", "%i"], capture_output=True, text=True, timeout=30).stdout
+    assert set(after.split()) <= set(before.split())  # nothing new in the queue
+    assert not (tmp_path / "outputs").exists()
+
+
+def _wait_queued(name: str, proc: subprocess.Popen, state: str, timeout: float = 120) -> list[str]:
+    """The ids of jobs ``name`` once SLURM lists them all in ``state``."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        assert proc.poll() is None, proc.communicate()
+        out = subprocess.run(["squeue", "-h", "-r", "-n", name, "-o", "%i %T"], capture_output=True,
+                             text=True, timeout=30).stdout.split()
+        if out and out[1::2] == [state] * (len(out) // 2):
+            return out[0::2]
+        time.sleep(0.5)
+    raise AssertionError(f"jobs {name} not all {state} after {timeout} s")
+
+
+def test_a_cancelled_job_ends_the_wait_with_its_id_and_state(slurm, tmp_path: Path) -> None:
+    """scancel the sweep's jobs while they pend (held an hour by --begin): without accounting
+    submitit would poll sacct for ever; the launcher ends within a bounded time, naming a job."""
+    name = f"rlgrasp-cancelled-{os.getpid()}"
+    proc = _sweep(tmp_path, name, *IN_PROCESS, "+hydra.launcher.additional_parameters.begin=now+3600")
+    try:
+        ids = _wait_queued(name, proc, "PENDING")
+        subprocess.run(["scancel", "-n", name], check=True, timeout=30)
+        cancelled = time.monotonic()
+        out, err = _finish(proc, timeout=90)
+    finally:
+        proc.kill()
+        subprocess.run(["scancel", "-n", name], timeout=30)
+    assert proc.returncode == 1, out[-2000:] + err[-3000:]
+    (first, second) = sorted(ids)
+    assert err.strip().splitlines()[-1] == (f"error: SLURM job {first} ended with JobState=CANCELLED without "
+                                            f"writing a result; so did {second}"), err[-3000:]
+    assert "Traceback" not in err and "Bypassing sacct error" not in out + err
+    print(f"pending jobs cancelled: the launcher ended {time.monotonic() - cancelled:.1f} s later")
+
+
+@pytest.mark.slow
+def test_a_job_killed_while_it_runs_ends_the_wait_with_its_log(slurm, tmp_path: Path) -> None:
+    """SIGKILL to the job's training process (what the OOM killer does): the job FAILED without a
+    result and the launcher says so, with the end of the job's log. (A plain scancel of a running
+    job is taken by training as a preemption: the job requeues itself and is waited for.)"""
+    name = f"rlgrasp-killed-{os.getpid()}"
+    proc = _sweep(tmp_path, name, *IN_PROCESS, "total_frames=10000000", "hydra.launcher.timeout_min=30",
+                  seeds="0")
+    try:
+        (job_id,) = _wait_queued(name, proc, "RUNNING")
+        task = wait_for(lambda: subprocess.run(["pgrep", "-f", f"submitit.core._submit {tmp_path}"],
+                                               capture_output=True, text=True).stdout.split() or None, 120)
+        os.kill(int(task[0]), signal.SIGKILL)
+        killed = time.monotonic()
+        out, err = _finish(proc, timeout=120)
+    finally:
+        proc.kill()
+        subprocess.run(["scancel", "-n", name], timeout=30)
+    assert proc.returncode == 1, out[-2000:] + err[-3000:]
+    last = err.strip().splitlines()[-1]
+    assert last.startswith(f"error: SLURM job {job_id} ended with JobState=FAILED without writing a result; "
+                           f"log {tmp_path}"), err[-3000:]
+    assert "ends with: " in last and "Traceback" not in err
+    print(f"running job killed: the launcher ended {time.monotonic() - killed:.1f} s later")
+
+
+def test_a_too_big_job_submitted_unchecked_is_cancelled_by_the_launcher(slurm, tmp_path: Path) -> None:
+    """Without sinfo the request is not checked before submitting (a stand-in sinfo that fails): the
+    too big job pends with Reason=PartitionConfig, and the launcher cancels it and says so."""
+    cpus = _default_partition_cpus()
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    (bin_dir / "sinfo").write_text("#!/bin/sh\necho 'sinfo: error: stand-in' >&2\nexit 1\n")
+    (bin_dir / "sinfo").chmod(0o755)
+    env = {**_job_env(), "PATH": f"{bin_dir}{os.pathsep}{os.environ['PATH']}"}
+    name = f"rlgrasp-never-{os.getpid()}"
+    proc = _sweep(tmp_path, name, f"collector.num_workers={cpus}", env=env)
+    try:
+        out, err = _finish(proc, timeout=120)
+    finally:
+        proc.kill()
+        subprocess.run(["scancel", "-n", name], timeout=30)
+    assert proc.returncode == 1, out[-2000:] + err[-3000:]
+    last = err.strip().splitlines()[-1]
+    assert re.fullmatch(r"error: SLURM job \d+_[01] can never start: pending with Reason=PartitionConfig "
+                        r"\(.*\); cancelled \d+_[01], \d+_[01]", last), err[-3000:]
+    assert wait_for(lambda: True if not _queued(name) else None, timeout=30)
