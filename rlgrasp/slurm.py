@@ -109,8 +109,9 @@ def sinfo_text() -> str | None:
     if shutil.which("sinfo") is None:
         return None
     try:
-        proc = subprocess.run(["sinfo", "-h", "-N", "-o", SINFO_FORMAT], capture_output=True, text=True,
-                              timeout=30)
+        # --all: hidden partitions too (a job may name one), or the check would call them unknown
+        proc = subprocess.run(["sinfo", "--all", "-h", "-N", "-o", SINFO_FORMAT], capture_output=True,
+                              text=True, timeout=30)
     except (OSError, subprocess.TimeoutExpired):
         return None
     return proc.stdout if proc.returncode == 0 else None
