@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # A one-node SLURM cluster on 127.0.0.1 (munge + slurmctld + slurmd), to try the cluster path of
-# docs/SCALING.md on one machine before a real cluster; the SLURM tests (tests/test_slurm.py) use it.
+# docs/scaling.md on one machine before a real cluster; the SLURM tests (tests/test_slurm.py) use it.
 #
 #   sudo bash scripts/local_slurm.sh start    # install slurm-wlm + munge with apt if absent, configure, start
 #   sudo bash scripts/local_slurm.sh status   # daemons, node state (exit 0 when jobs can run)
