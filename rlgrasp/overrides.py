@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import os
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -131,6 +132,20 @@ def entry_point(config_name: str, open_env: bool = False) -> Callable[[Main], Ma
         return main
 
     return wrap
+
+
+def unwritable(path: str | Path, folder: bool = False) -> str | None:
+    """Why ``path`` could not be written (``None``: it can), creating nothing: the nearest existing
+    ancestor must be a writable directory (``folder``: and ``path`` itself, if it exists, a folder).
+    Checked before any work, so that a typo in an output path is not a writer's traceback at the end."""
+    target = Path(path).expanduser().absolute()
+    existing = next(p for p in (target, *target.parents) if p.exists())
+    if (existing != target or folder) and not existing.is_dir():
+        return f"{existing} is not a directory"
+    where = existing if existing.is_dir() else existing.parent  # an existing file is replaced
+    if not os.access(where, os.W_OK | os.X_OK):
+        return f"{where} is not writable"
+    return None
 
 
 class OneLineParser(argparse.ArgumentParser):

@@ -29,7 +29,7 @@ from rlgrasp.evaluation.plots import return_histogram, success_by_object_plot, s
 from rlgrasp.evaluation.source import EvaluationError, load_checked_checkpoint, prepare
 from rlgrasp.evaluation.tb_log import log_to_tensorboard
 from rlgrasp.evaluation.video import video_format, write_video
-from rlgrasp.overrides import entry_point
+from rlgrasp.overrides import entry_point, unwritable
 
 log = logging.getLogger("rlgrasp.eval")
 
@@ -125,22 +125,10 @@ def _validate(cfg: DictConfig) -> tuple[Any, str | None, Path]:
     out = output_dir(cfg, source)
     if (out / "metrics.json").exists():
         raise EvaluationError(f"{out} already holds an evaluation; pick another name=")
-    problem = unwritable(out)
+    problem = unwritable(out, folder=True)
     if problem:
         raise EvaluationError(f"cannot write the evaluation to {out}: {problem}")
     return source, fmt, out
-
-
-def unwritable(path: Path) -> str | None:
-    """Why a folder could not be created at ``path`` (``None``: it can), creating nothing: the
-    nearest existing ancestor must be a writable directory."""
-    target = Path(path).absolute()
-    existing = next(p for p in (target, *target.parents) if p.exists())
-    if not existing.is_dir():
-        return f"{existing} is not a directory"
-    if not os.access(existing, os.W_OK | os.X_OK):
-        return f"{existing} is not writable"
-    return None
 
 
 def describe(spec: Any) -> str:
