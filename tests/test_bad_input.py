@@ -15,6 +15,13 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SMOKE = ["experiment=smoke", "logger=none"]
+#: What PyBullet prints on stderr when it is imported, whatever the command: not one of our lines.
+PYBULLET_BANNER = "pybullet build time:"
+
+
+def our_lines(stderr: str) -> list[str]:
+    """The non-empty lines of ``stderr`` without PyBullet's import banner."""
+    return [ln for ln in stderr.splitlines() if ln.strip() and not ln.startswith(PYBULLET_BANNER)]
 
 
 def _make_run(root: Path) -> Path:

@@ -41,7 +41,7 @@ class EvaluationError(RuntimeError):
 def resolve_checkpoint_path(ckpt: str | os.PathLike, kind: str = "best") -> Path:
     """A checkpoint file, or ``<run dir>/checkpoints/<kind>.pt`` for a run directory."""
     if kind not in CKPT_KINDS:
-        raise EvaluationError(f"ckpt_kind must be one of {', '.join(CKPT_KINDS)}, got {kind!r}")
+        raise EvaluationError(f"ckpt_kind={kind}: must be one of {', '.join(CKPT_KINDS)}")
     path = Path(ckpt).expanduser()
     if path.is_dir():
         ckpt_dir = path / "checkpoints"
@@ -156,7 +156,7 @@ def prepare(
 ) -> PolicySource:
     """Resolve, load and validate everything; build one env and one policy call as a dry run."""
     if policy not in POLICIES:
-        raise EvaluationError(f"policy must be one of {', '.join(POLICIES)}, got {policy!r}")
+        raise EvaluationError(f"policy={policy}: must be one of {', '.join(POLICIES)}")
     if policy == "checkpoint":
         if not ckpt:
             raise EvaluationError(
