@@ -62,8 +62,9 @@ def _key_of(override: str) -> str:
 
 
 def _shown(full_key: str, overrides: Sequence[str]) -> str:
-    """The override that set ``full_key`` as typed (``algo.lr=abc``), else the key."""
-    return next((o.lstrip("+~") for o in overrides if _key_of(o) == full_key), full_key)
+    """The override that set ``full_key`` as typed (``algo.lr=abc``; the last one, as Hydra applies
+    them in order), else the key."""
+    return next((o.lstrip("+~") for o in reversed(overrides) if _key_of(o) == full_key), full_key)
 
 
 def explain(exc: BaseException, overrides: Sequence[str] = (), root: str = "the config") -> str:

@@ -26,7 +26,7 @@ def outcome_caption(r: EpisodeResult) -> str:
 def video_format(requested: str = "auto") -> str:
     """``gif``, or ``mp4`` when asked for (or ``auto``) and ffmpeg is installed."""
     if requested not in ("auto", "gif", "mp4"):
-        raise ValueError(f"video_format must be auto, gif or mp4, got {requested!r}")
+        raise ValueError(f"video_format={requested}: must be auto, gif or mp4")
     has_ffmpeg = shutil.which("ffmpeg") is not None
     if requested == "mp4" and not has_ffmpeg:
         raise ValueError("video_format=mp4 needs an ffmpeg binary on PATH; use video_format=gif")
