@@ -31,6 +31,10 @@ from rlgrasp.config import CONFIG_DIR, compose_config
 
 #: Groups whose files set one ``env`` key; a dict (or, for objects, a list) value is that key's value.
 ENV_GROUPS = {"objects": ("{", "["), "randomization": ("{",)}
+#: An option of each group setting a plain name: chosen first, so that the value replaces what an
+#: experiment's option set (Hydra merges a dict into a dict, and refuses one into a list:
+#: experiment=grasp_objects_ppo's objects are a list).
+NEUTRAL = {"objects": "cube", "randomization": "default"}
 #: Hydra's flags after which the command line is not one run's overrides (help, multirun, ...).
 _NOT_A_RUN = ("help", "hydra_help", "cfg", "info", "shell_completion", "multirun", "experimental_rerun",
               "config_path", "config_name", "config_dir")
@@ -42,15 +46,19 @@ class CommandLineError(ValueError):
 
 def rewrite(overrides: Sequence[str], open_env: bool = False) -> list[str]:
     """``objects={...}`` / ``objects=[...]`` (and ``randomization={...}`` where the config has no
-    top-level key of that name) -> ``env.<group>=...``; with ``open_env`` (``env`` is a dict of extra
-    keywords, as in evaluation) ``env.<key>=`` -> ``++env.<key>=``."""
+    top-level key of that name) -> ``env.<group>=...``, which replaces the group's value; with
+    ``open_env`` (``env`` is a dict of extra keywords, as in evaluation) ``env.<key>=`` ->
+    ``++env.<key>=``."""
     out = []
     for item in overrides:
         key, eq, value = item.partition("=")
         name = key.lstrip("+")
         if eq and name in ENV_GROUPS and value.startswith(ENV_GROUPS[name]):
-            if name == "objects" or not open_env:  # evaluation has its own `randomization` key
-                item = f"{'++' if open_env else ''}env.{name}={value}"
+            if open_env and name == "objects":  # nothing to replace: env holds only what is given
+                item = f"++env.{name}={value}"
+            elif not open_env:  # (evaluation has its own `randomization` key)
+                out.append(f"{name}={NEUTRAL[name]}")
+                item = f"env.{name}={value}"
         elif eq and open_env and key.startswith("env."):
             item = f"++{item}"
         out.append(item)

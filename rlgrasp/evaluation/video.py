@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from rlgrasp.evaluation.episodes import EpisodeResult
+from rlgrasp.utils import pyplot
 
 
 def outcome_caption(r: EpisodeResult) -> str:
@@ -37,9 +38,8 @@ def video_format(requested: str = "auto") -> str:
 
 def write_video(r: EpisodeResult, path: Path, fps: int = 20, fmt: str = "gif") -> Path:
     """Render ``r.frames`` with a caption: the outcome (coloured) on top, step and flag below."""
+    # Lazy: matplotlib, which only the videos need (rlgrasp.utils.pyplot is lazy for the same reason).
     from matplotlib.animation import FFMpegWriter, PillowWriter
-
-    from rlgrasp.utils import pyplot
 
     plt = pyplot()
 
