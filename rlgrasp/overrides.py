@@ -1,10 +1,11 @@
-"""The command line every Hydra entry point shares: one spelling for the objects, and a command line
-Hydra refuses ends in one line naming the override and what is allowed.
+"""What every entry point does with its command line before it runs: one spelling for the objects,
+and bad input (a command line Hydra refuses, a flag argparse refuses, an output path that cannot be
+written) in one line naming the override and what is allowed.
 
 ``objects=<set>`` selects a file of the ``objects`` config group, which sets ``env.objects``. Hydra
 treats a dict value for a group's name as a key of the primary config instead (training has no
 top-level ``objects``: "Key 'objects' not in 'TrainConfig'"), and a list value as several files of the
-group, the last one winning: neither reaches the env. So ``objects={paths:[...]}`` and
+group, the last one winning: neither reaches the env as given. So ``objects={paths:[...]}`` and
 ``objects=[a,b]`` are rewritten to ``env.objects=...`` before Hydra reads the command line. In
 evaluation ``env`` holds only the env keywords given over the checkpoint's, so there every
 ``env.<key>=`` becomes ``++env.<key>=`` (add or override): the spelling training uses works as is.
@@ -23,6 +24,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+# The parser hydra.main itself reads sys.argv with (not public API): flags are read exactly as it will.
 from hydra._internal.utils import get_args_parser
 from hydra.errors import HydraException, MissingConfigException, OverrideParseException
 from omegaconf.errors import OmegaConfBaseException
