@@ -16,6 +16,7 @@ import hydra
 from omegaconf import DictConfig
 
 from rlgrasp.config import CONFIG_DIR, FRESH_RUN_DIRS, register_configs
+from rlgrasp.overrides import entry_point
 
 register_configs()
 
@@ -71,6 +72,7 @@ def _remove_what_this_start_wrote(run_dir: Path) -> None:
         shutil.rmtree(run_dir / subdir, ignore_errors=True)
 
 
+@entry_point("train")  # objects={paths:[...]} as in evaluation; a refused command line in one line
 @hydra.main(config_path=CONFIG_DIR, config_name="train", version_base="1.3")
 def main(cfg: DictConfig) -> float:
     return run(cfg)
