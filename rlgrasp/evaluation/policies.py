@@ -113,7 +113,7 @@ class RandomActor(Actor):
     def reset(self, seed: int) -> None:
         self.rng = np.random.default_rng([seed, 0x5EED])
 
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
+    def __call__(self, obs: Any) -> np.ndarray:
         return self.rng.uniform(self.low, self.high).astype(np.float32)
 
 
