@@ -371,3 +371,18 @@ def test_enjoy_plays_a_camera_policy_headless(student: Path) -> None:
     assert 0.75 <= results[0].randomization["visual_object_hue"] <= 0.95
     with pytest.raises(EvaluationError, match="is a camera policy .* and the env has no camera"):
         play(_enjoy_cfg(f"ckpt={student}", "render=none", "cameras=none"), out=lines.append)
+
+
+def bad_input_files(root: Path) -> dict[str, str]:
+    """Camera checkpoints for tests/test_bad_input.py: a good one, one whose recorded teacher is
+    gone, one whose spec asks for images its env does not give."""
+    folder = root / "vision"
+    folder.mkdir(exist_ok=True)
+    student = make_student(folder, spread=False)
+    orphan = make_student(folder, spread=False, name="orphan.pt", teacher=str(folder / "moved.pt"))
+    mismatched = make_student(folder, spread=False, name="mismatched.pt")
+    ckpt = torch.load(mismatched, weights_only=True)
+    ckpt["spec"]["images"] = {"rgb": [3, 64, 64]}
+    torch.save(ckpt, mismatched)
+    return {"student": str(student), "orphan": str(orphan), "mismatched": str(mismatched),
+            "teacher": str(TEACHER)}

@@ -49,8 +49,8 @@ def teacher_path(value: str, source: PolicySource) -> Path | None:
             f"teacher={value}: only a camera policy is compared with a teacher, this is {what}; "
             "use teacher=none"
         )
-    try:
-        return resolve_checkpoint_path(value, "best")
+    try:  # a run directory: its last.pt, the checkpoint distillation loads from one
+        return resolve_checkpoint_path(value, "last")
     except EvaluationError as exc:
         raise EvaluationError(f"teacher={value}: {exc}") from exc
 
