@@ -386,3 +386,15 @@ def bad_input_files(root: Path) -> dict[str, str]:
     torch.save(ckpt, mismatched)
     return {"student": str(student), "orphan": str(orphan), "mismatched": str(mismatched),
             "teacher": str(TEACHER)}
+
+
+@pytest.mark.slow
+def test_camera_evaluation_does_not_depend_on_the_worker_count(student: Path, tmp_path: Path) -> None:
+    """Student and teacher in spawned workers: the same figures as in this process."""
+    out = {}
+    for w in (1, 2):
+        m = evaluate(_cfg(f"ckpt={student}", "episodes=6", f"workers={w}", "video_episodes=1",
+                          "tensorboard=false", f"out_dir={tmp_path / str(w)}"))
+        out[w] = {k: v for k, v in m.items()
+                  if k not in ("timing", "config", "output_dir", "summary_markdown", "files")}
+    assert out[1] == out[2] and out[1]["teacher"]["success_at_end"]["episodes"] == 6
