@@ -164,10 +164,9 @@ def conditions(source: Any) -> dict[str, str]:
     keys = ["objects", "randomization"]
     if source.env_cfg.get("camera"):
         keys += ["camera", "visual"]
-    labels = {}
+    labels, info = {}, source.info or {}
     for key in keys:
         used = describe(source.env_cfg.get(key))
-        info = source.info or {}
         trained = info.get(f"train_{key}")
         if trained is None and f"train_{key}" not in info:
             labels[key] = used

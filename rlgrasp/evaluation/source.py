@@ -168,11 +168,16 @@ def check_layout(spec: dict[str, Any], env: Any, where: str) -> None:
         )
     env_images = {k: tuple(space[k].shape) for k in ("depth", "rgb") if camera_env and k in space.spaces}
     if env_images != images:
-        shown = lambda d: ", ".join(f"{k} {list(v)}" for k, v in d.items()) or "none"  # noqa: E731
-        problems.append(f"image mismatch: checkpoint reads {shown(images)}, env gives {shown(env_images)}")
+        problems.append(
+            f"image mismatch: checkpoint reads {_images(images)}, env gives {_images(env_images)}"
+        )
     problems += _action_problems(spec, env.action_space)
     if problems:
         raise EvaluationError(f"{where}: " + "; ".join(problems))
+
+
+def _images(shapes: dict[str, tuple[int, ...]]) -> str:
+    return ", ".join(f"{k} {list(v)}" for k, v in shapes.items()) or "none"
 
 
 def _action_problems(spec: dict[str, Any], act_space: Any) -> list[str]:
