@@ -6,7 +6,10 @@ on ``sys.path`` and the workers inherit it.
 
 from __future__ import annotations
 
+import multiprocessing
 from typing import Any
+
+import torch
 
 
 class EnvCrash(RuntimeError):
@@ -35,3 +38,13 @@ def crashing_grasp_env(crash_after: int = 100, **env_kwargs: Any) -> Any:
 
     env.step = crashing_step
     return env
+
+
+def unseeded_worker_grasp_env(**env_kwargs: Any) -> Any:
+    """``PandaGraspEnv(**env_kwargs)``; built in a collector worker, it first reseeds the worker's torch
+    RNG from the OS, so the policy's actions there differ run to run: a worker that lost its seed."""
+    from rlgrasp.envs import PandaGraspEnv
+
+    if multiprocessing.parent_process() is not None:  # a spawned worker, not the learner
+        torch.seed()
+    return PandaGraspEnv(**env_kwargs)
