@@ -1,27 +1,25 @@
-"""Every config schema, in one place, and composing the configs outside a command line.
+"""Every config schema, in one place, and the validation of a training config.
 
 The YAML files under ``configs/`` name these schemas in their defaults lists, so a typo, a wrong
 type or an unknown key fails at start with Hydra's message naming the key, instead of deep inside a
 worker process minutes later. Each default is written once, here; the YAML files carry only what
 differs from it. Training (``train.yaml``), evaluation (``eval.yaml``) and sweeps
-(``sweep/<name>.yaml``) are three separate trees.
+(``sweep/<name>.yaml``) are three separate trees; ``rlgrasp.compose`` composes them outside a
+command line.
 """
 
 from __future__ import annotations
 
 import os
-import secrets
-import time
-from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from hydra import compose, initialize_config_dir
+import torch
 from hydra.core.config_store import ConfigStore
-from hydra.experimental.callback import Callback
-from hydra.utils import instantiate
-from omegaconf import MISSING, DictConfig, OmegaConf
+from omegaconf import MISSING, OmegaConf
+
+from rlgrasp.train.rundir import register_resolvers
 
 #: The Hydra config tree (``configs/`` next to the package in a source checkout).
 CONFIG_DIR = os.environ.get("RLGRASP_CONFIG_DIR", str(Path(__file__).resolve().parents[1] / "configs"))
@@ -33,7 +31,7 @@ class EnvConfig:
     """``PandaGraspEnv``'s constructor as a ``_target_`` node: every keyword, with its default.
 
     Built everywhere with ``hydra.utils.instantiate(cfg.env, _partial_=True)`` (see
-    ``rlgrasp.train.collect.env_factory``); a test checks that the fields mirror the constructor.
+    ``rlgrasp.envs.factory.env_factory``); a test checks that the fields mirror the constructor.
     """
 
     _target_: str = "rlgrasp.envs.PandaGraspEnv"
@@ -145,6 +143,21 @@ class CollectorConfig:
 class LoggerConfig:
     backend: str = "tensorboard"  # tensorboard | none
     console_interval_s: float = 5.0
+
+
+@dataclass
+class TrackerLoggerConfig(LoggerConfig):
+    """``logger=wandb`` / ``logger=mlflow``: TensorBoard plus a tracker (``rlgrasp.train.trackers``)."""
+
+    tracker: str = "wandb"  # wandb | mlflow
+    project: str = "rlgrasp"  # W&B project / MLflow experiment
+    entity: str | None = None  # W&B team or user (null: your default)
+    # W&B: online | offline | disabled (null: $WANDB_MODE, else online).
+    mode: str | None = None
+    # MLflow: a server (http://...), a database (sqlite:///...) or a folder (file:...).
+    tracking_uri: str | None = None
+    tags: list[str] = field(default_factory=list)  # run tags in the tracker's UI
+    run_name: str | None = None  # null: <experiment_name>/<run dir name>
 
 
 @dataclass
@@ -285,10 +298,6 @@ class SweepConfig:
 SWEEP_PRIMARY = "rlgrasp_sweep_primary"
 
 
-def _first_not_none(value: Any, fallback: Any) -> Any:
-    return fallback if value is None else value
-
-
 def _sum(*values: int) -> int:
     return sum(values)
 
@@ -297,66 +306,13 @@ class ConfigError(ValueError):
     """A bad training input; the message is one line naming the key, its value and what is allowed."""
 
 
-#: Run directories this process chose that did not exist before (safe to remove on a start-up error).
-FRESH_RUN_DIRS: set[str] = set()
-_RUN_TOKEN = secrets.token_hex(3)  # one per process: every resolution of hydra.run.dir agrees
-
-
-def run_dir(resume: str | None, base: str, seed: int) -> str:
-    """``hydra.run.dir``: a run directory named ``<date>_<time>_s<seed>_<random>`` under ``base``
-    (two runs started in the same second never share one); ``resume=<run dir>`` that directory,
-    ``resume=<run>/checkpoints/<file>.pt`` its run (any other resume: a new directory);
-    ``resume=auto`` the newest run of ``base`` with this seed that holds a checkpoint, else a new one."""
-    chosen = None
-    if resume == "auto":
-        runs = sorted(Path(base).glob(f"*_s{seed}_*/checkpoints/*.pt"), key=lambda p: p.parts[-3])
-        chosen = str(runs[-1].parents[1]) if runs else None
-    elif resume:  # a run, or a file in a run's checkpoints/; anything else fails later, in a new dir
-        path = Path(resume)
-        if path.is_dir() and any((path / "checkpoints").glob("*.pt")):
-            chosen = str(path)
-        elif path.is_file() and path.parent.name == "checkpoints":
-            chosen = str(path.parents[1])
-    if chosen is None:
-        chosen = f"{base}/{time.strftime('%Y-%m-%d_%H-%M-%S')}_s{seed}_{_RUN_TOKEN}"
-    if not Path(chosen).exists():
-        FRESH_RUN_DIRS.add(str(Path(chosen).resolve()))
-    return chosen
-
-
-#: ``hydra.output_subdir`` per run directory, chosen once per Hydra run (Hydra resolves it more than
-#: once, the last time after writing into it); ``RunDirCheck.on_run_start`` forgets earlier runs'.
-_OUTPUT_SUBDIRS: dict[str, str] = {}
-
-
-def output_subdir(output_dir: str) -> str:
-    """``hydra.output_subdir``: ``.hydra`` for the first start in a run directory; every later start
-    there (a resume, a requeued job) ``.hydra/resume_<n>`` (n = 1, 2, ...). Hydra writes config.yaml,
-    hydra.yaml and overrides.yaml into it: in ``.hydra/`` itself a resume would overwrite the launch's."""
-    key = str(Path(output_dir).resolve())
-    if key not in _OUTPUT_SUBDIRS:
-        hydra_dir = Path(key) / ".hydra"
-        n = 0
-        if (hydra_dir / "config.yaml").exists():
-            n = 1
-            while (hydra_dir / f"resume_{n}").exists():
-                n += 1
-        _OUTPUT_SUBDIRS[key] = f".hydra/resume_{n}" if n else ".hydra"
-    return _OUTPUT_SUBDIRS[key]
-
-
 def register_configs() -> None:
-    """Register every schema (idempotent), the resolvers of ``hydra.run.dir`` (``rlgrasp_run_dir``) and
-    ``hydra.output_subdir`` (``rlgrasp_output_subdir``), and ``rlgrasp_sum`` (OmegaConf has no
-    arithmetic; the SLURM launcher asks for workers + 1 CPUs)."""
-    if not OmegaConf.has_resolver("rlgrasp_or"):
-        OmegaConf.register_new_resolver("rlgrasp_or", _first_not_none)
-    if not OmegaConf.has_resolver("rlgrasp_run_dir"):
-        OmegaConf.register_new_resolver("rlgrasp_run_dir", run_dir)
-    if not OmegaConf.has_resolver("rlgrasp_output_subdir"):
-        OmegaConf.register_new_resolver("rlgrasp_output_subdir", output_subdir)
+    """Register every schema (idempotent) and the resolvers the YAML files call: ``rlgrasp_sum``
+    (OmegaConf has no arithmetic; the SLURM launcher asks for workers + 1 CPUs) and the run
+    directory's (``rlgrasp.train.rundir``)."""
     if not OmegaConf.has_resolver("rlgrasp_sum"):
         OmegaConf.register_new_resolver("rlgrasp_sum", _sum)
+    register_resolvers()
     cs = ConfigStore.instance()
     cs.store(name="train_schema", node=TrainConfig)
     cs.store(group="env", name="env_schema", node=EnvConfig)
@@ -364,54 +320,11 @@ def register_configs() -> None:
     cs.store(group="model", name="mlp_schema", node=MLPConfig)
     cs.store(group="collector", name="collector_schema", node=CollectorConfig)
     cs.store(group="logger", name="logger_schema", node=LoggerConfig)
+    cs.store(group="logger", name="tracker_schema", node=TrackerLoggerConfig)
     cs.store(group="paths", name="paths_schema", node=PathsConfig)
     cs.store(name="eval_schema", node=EvalConfig)
     cs.store(group="sweep", name="sweep_schema", node=SweepConfig)
     cs.store(name=SWEEP_PRIMARY, node={"defaults": [{"sweep": "smoke"}, "_self_"]})
-    from rlgrasp.train.trackers import register_tracker_configs  # logger=wandb|mlflow (extends LoggerConfig)
-
-    register_tracker_configs()
-
-
-def compose_config(
-    name: str, overrides: list[str] | tuple[str, ...] = (), config_dir: str | Path = CONFIG_DIR
-) -> DictConfig:
-    """``configs/<name>.yaml`` with ``overrides``, as its script would build it (without Hydra's
-    run-time keys: pass ``paths.output_dir=...`` for training)."""
-    register_configs()
-    with initialize_config_dir(config_dir=str(Path(config_dir).resolve()), version_base="1.3"):
-        return compose(config_name=name, overrides=list(overrides))
-
-
-def compose_train(
-    overrides: list[str] | tuple[str, ...] = (), config_dir: str | Path = CONFIG_DIR
-) -> DictConfig:
-    """A training config as ``scripts/train.py`` would build it."""
-    return compose_config("train", overrides, config_dir)
-
-
-def compose_eval(
-    overrides: list[str] | tuple[str, ...] = (), config_dir: str | Path = CONFIG_DIR
-) -> DictConfig:
-    """An evaluation config as ``scripts/evaluate.py`` would build it."""
-    return compose_config("eval", overrides, config_dir)
-
-
-def compose_sweep(
-    overrides: list[str] | tuple[str, ...] = (), config_dir: str | Path = CONFIG_DIR
-) -> DictConfig:
-    """The ``sweep`` node composed from ``configs/sweep/<name>.yaml`` and ``sweep.*`` overrides."""
-    return compose_config(SWEEP_PRIMARY, overrides, config_dir).sweep
-
-
-def env_factory(env_cfg: DictConfig | Mapping[str, Any]) -> Callable[[], Any]:
-    """The one way to build envs: the ``env`` node's ``_target_`` with its fields as keywords.
-
-    Used by the collector workers, training's evaluation, ``rlgrasp-eval`` and the benchmarks. The
-    partial is picklable, so it travels to spawned workers and Ray actors as it is; ``_convert_``
-    makes the keywords (``randomization`` as a preset name or a mapping) plain Python values.
-    """
-    return instantiate(env_cfg, _partial_=True, _convert_="all")
 
 
 # --- validation of a training config (before any worker starts) -------------------------------
@@ -463,8 +376,6 @@ def _train_problems(cfg: Any) -> list[str]:
 
 
 def _device_problems(device: str) -> list[str]:
-    import torch
-
     if device in ("auto", "cpu"):
         return []
     try:
@@ -492,32 +403,3 @@ def validate_train(cfg: Any) -> None:
     if problems:
         more = f" (and {len(problems) - 1} more: {'; '.join(problems[1:])})" if len(problems) > 1 else ""
         raise ConfigError(problems[0] + more)
-
-
-class RunDirCheck(Callback):
-    """Hydra callback (``configs/hydra/default.yaml``): an output directory that cannot be created
-    ends the command with one line instead of Hydra's traceback from inside its job runner."""
-
-    def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
-        _OUTPUT_SUBDIRS.clear()  # a new start in this process (tests run several): choose afresh
-        self._check(config.hydra.run.dir)
-
-    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
-        self._check(config.hydra.sweep.dir)
-
-    @staticmethod
-    def _check(path: Any) -> None:
-        import sys
-
-        # Creates nothing: hydra.run.dir holds the time, so this resolution may name another second
-        # than the one the job then creates; a directory made here would be left behind empty.
-        target = Path(str(path)).absolute()
-        existing = next(p for p in (target, *target.parents) if p.exists())
-        problem = None
-        if not existing.is_dir():
-            problem = "Not a directory"
-        elif not os.access(existing, os.W_OK | os.X_OK):
-            problem = f"{existing} is not writable"
-        if problem:
-            print(f"error: cannot create the run directory {path}: {problem}", file=sys.stderr)
-            sys.exit(2)

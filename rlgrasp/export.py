@@ -174,8 +174,8 @@ def load_exported(path: str | Path) -> Callable[[np.ndarray], np.ndarray]:
 
 # --- checking against the checkpoint policy ------------------------------------------------------
 def make_env(env_cfg: dict[str, Any]) -> Any:
-    """The checkpoint's env without rendering (``rlgrasp.config.env_factory``, as everywhere)."""
-    from rlgrasp.config import env_factory
+    """The checkpoint's env without rendering (``rlgrasp.envs.factory.env_factory``, as everywhere)."""
+    from rlgrasp.envs.factory import env_factory
     from rlgrasp.evaluation.source import build_env_cfg
 
     cfg = build_env_cfg(env_cfg)

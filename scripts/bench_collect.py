@@ -91,7 +91,7 @@ def bench_collector(cfg, seconds: float) -> float:
 def bench_train(overrides: list[str], frames: int) -> float:
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-    from rlgrasp.config import compose_train
+    from rlgrasp.compose import compose_train
     from rlgrasp.train.loop import train
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -125,7 +125,8 @@ def main() -> None:
 
     from omegaconf import OmegaConf
 
-    from rlgrasp.config import compose_train, env_factory
+    from rlgrasp.compose import compose_train
+    from rlgrasp.envs.factory import env_factory
 
     overrides = args.overrides or ["experiment=grasp_ppo"]
     cfg = compose_train([*overrides, "paths.output_dir=/tmp/unused"])

@@ -188,7 +188,7 @@ def run_sb3(cfg: Any, out_json: Path) -> None:
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
-    from rlgrasp.config import env_factory
+    from rlgrasp.envs.factory import env_factory
     from rlgrasp.train.collect import worker_seed
     from rlgrasp.train.evaluate import periodic_evaluator
     from rlgrasp.train.loop import resolve_device
@@ -217,7 +217,8 @@ def run_sb3(cfg: Any, out_json: Path) -> None:
 
 def sb3_child(args: argparse.Namespace) -> None:
     """``--sb3-child``: compose the config as training would and run the SB3 side in this process."""
-    from rlgrasp.config import compose_train, validate_train
+    from rlgrasp.compose import compose_train
+    from rlgrasp.config import validate_train
 
     run_dir = args.out / f"sb3_seed{args.seed}"
     cfg = compose_train([f"experiment={args.experiment}", f"seed={args.seed}",
@@ -350,7 +351,7 @@ def main() -> None:
     for side in sides:
         results[side] = rlgrasp_side(args) if side == "rlgrasp" else sb3_side(args)
     if "sb3" in results:
-        from rlgrasp.config import compose_train
+        from rlgrasp.compose import compose_train
 
         cfg = compose_train([f"experiment={args.experiment}", f"seed={args.seed}", *args.overrides])
         results["sb3"]["unmatched"] = unmatched(cfg)

@@ -26,7 +26,7 @@ os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
 
 
 def bench(setup: str, batches: int, warmup: int, extra: list[str]) -> list[float]:
-    from rlgrasp.config import compose_train
+    from rlgrasp.compose import compose_train
     from rlgrasp.train.parts import build_parts
 
     tmp = tempfile.mkdtemp()

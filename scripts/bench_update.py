@@ -31,7 +31,7 @@ def main() -> None:
 
     import torch
 
-    from rlgrasp.config import compose_train
+    from rlgrasp.compose import compose_train
     from rlgrasp.train.parts import build_parts
     from rlgrasp.train.ppo import PPOLearner
 

@@ -29,7 +29,7 @@ def main() -> None:
     import torch
     from torchrl.collectors import Collector
 
-    from rlgrasp.config import compose_train
+    from rlgrasp.compose import compose_train
     from rlgrasp.train.collect import make_batched_env
     from rlgrasp.train.parts import build_parts
 

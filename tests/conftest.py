@@ -11,7 +11,7 @@ import pytest
 # tests only ever start Ray on loopback, so keep it there for the whole session.
 os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
 
-from rlgrasp.config import compose_eval, compose_train  # noqa: E402
+from rlgrasp.compose import compose_eval, compose_train  # noqa: E402
 from tests.procs import Started, start_script  # noqa: E402
 
 

@@ -19,7 +19,7 @@ SMOKE = ["experiment=smoke", "logger=none"]
 
 def _make_run(root: Path) -> Path:
     """A run directory holding one real smoke checkpoint (built without starting workers)."""
-    from rlgrasp.config import compose_train
+    from rlgrasp.compose import compose_train
     from rlgrasp.train.loop import Trainer
 
     run = root / "outputs" / "train" / "smoke" / "done_run"

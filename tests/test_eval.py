@@ -13,7 +13,7 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
-from rlgrasp.config import compose_eval, compose_train
+from rlgrasp.compose import compose_eval, compose_train
 from rlgrasp.evaluation import EvaluationError
 from rlgrasp.evaluation.cli import evaluate
 from rlgrasp.evaluation.episodes import run_episodes

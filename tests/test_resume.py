@@ -15,9 +15,11 @@ import numpy as np
 import pytest
 import torch
 
-from rlgrasp.config import ConfigError, compose_train, run_dir
+from rlgrasp.compose import compose_train
+from rlgrasp.config import ConfigError
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.resume import merged_config, prepare_run
+from rlgrasp.train.rundir import run_dir
 from tests.procs import wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -119,7 +121,7 @@ def test_a_truncated_last_falls_back_with_a_warning(tmp_path: Path, run: Path, c
 
 
 def test_run_dirs_are_unique_per_process_and_name_the_seed(tmp_path: Path) -> None:
-    code = "from rlgrasp.config import run_dir; print(run_dir(None, 'base', 7))"
+    code = "from rlgrasp.train.rundir import run_dir; print(run_dir(None, 'base', 7))"
     names = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
                             check=True).stdout.strip() for _ in range(2)}
     assert len(names) == 2

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from rlgrasp.config import compose_train
+from rlgrasp.compose import compose_train
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = ["collector=single", "collector.envs_per_worker=4", "total_frames=1024", "logger=none"]

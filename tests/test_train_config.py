@@ -13,7 +13,8 @@ from hydra.errors import ConfigCompositionException
 from omegaconf import OmegaConf
 from omegaconf.errors import ConfigKeyError, ValidationError
 
-from rlgrasp.config import CONFIG_DIR, EnvConfig, env_factory
+from rlgrasp.config import CONFIG_DIR, EnvConfig
+from rlgrasp.envs.factory import env_factory
 
 EXPERIMENTS = sorted(p.stem for p in (Path(CONFIG_DIR) / "experiment").glob("*.yaml"))
 

@@ -112,7 +112,7 @@ def play(cfg: Any, out: Callable[[str], None] = _print, sleep: Callable[[float],
     """Rebuild, check and play ``cfg.episodes`` episodes, one line per episode; the results."""
     from omegaconf import OmegaConf
 
-    from rlgrasp.config import env_factory
+    from rlgrasp.envs.factory import env_factory
     from rlgrasp.evaluation.episodes import run_episode
     from rlgrasp.evaluation.policies import build_policy
     from rlgrasp.evaluation.source import EvaluationError, prepare

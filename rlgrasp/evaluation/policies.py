@@ -15,7 +15,7 @@ POLICIES = ("checkpoint", "scripted", "random")
 class PolicySource:
     """What the workers need to rebuild the policy and the env, all picklable.
 
-    ``env_cfg`` is the env's ``_target_`` node as a plain dict (``rlgrasp.config.env_factory`` builds
+    ``env_cfg`` is the env's ``_target_`` node as a plain dict (``rlgrasp.envs.factory.env_factory`` builds
     it). ``ckpt`` is trimmed to the entries the policy needs (weights, model config, spec), so that
     each spawned worker receives a few hundred kB rather than the optimizer state.
     """
@@ -28,7 +28,7 @@ class PolicySource:
     info: dict[str, Any] = field(default_factory=dict)
 
     def make_env(self) -> Any:
-        from rlgrasp.config import env_factory
+        from rlgrasp.envs.factory import env_factory
 
         return env_factory(self.env_cfg)()
 

@@ -37,7 +37,7 @@ def run_sweep(
     """Run (or resume, or join) the study until it holds ``n_trials`` finished trials; summarize."""
     import optuna
 
-    from rlgrasp.config import compose_sweep, compose_train
+    from rlgrasp.compose import compose_sweep, compose_train
     from rlgrasp.sweep.objective import Objective
     from rlgrasp.sweep.space import parse_space
     from rlgrasp.sweep.study import (

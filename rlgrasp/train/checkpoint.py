@@ -11,7 +11,7 @@ writes it):
 - ``best_eval_success``, ``last_eval``: evaluation bookkeeping (``last_eval`` may be None)
 - ``rng``: python / numpy / torch RNG states of the learner, as tensors and plain values
 - ``config``: the resolved training config as a plain dict (``config["env"]`` is the env's
-  ``_target_`` node, which ``rlgrasp.config.env_factory`` builds)
+  ``_target_`` node, which ``rlgrasp.envs.factory.env_factory`` builds)
 - ``spec``: ``obs_key``, ``obs_dim``, ``action_dim``, ``action_low``, ``action_high``
 - ``versions``: python, torch, torchrl, tensordict, gymnasium, pybullet, rlgrasp
 - ``run_dir``: the run directory it was written in
@@ -40,6 +40,7 @@ from omegaconf import OmegaConf
 from tensordict.nn import TensorDictModuleBase
 
 from rlgrasp.train.models import OBS_KEY, RunningNorm, build_actor
+from rlgrasp.train.rundir import CHECKPOINTS
 
 FORMAT = 2
 _NUMBERED = re.compile(r"ckpt_(\d+)\.pt$")
@@ -109,7 +110,7 @@ def newest_readable(
 ) -> tuple[Path, dict[str, Any]]:
     """``(path, state)`` of the newest checkpoint of a run that loads; a bad ``last.pt`` (say,
     truncated by a full disk) is skipped with a warning naming it."""
-    ckpt_dir = Path(run_dir) / "checkpoints"
+    ckpt_dir = Path(run_dir) / CHECKPOINTS
     files = checkpoint_files(ckpt_dir)
     if not files:
         raise CheckpointError(f"no checkpoints: {ckpt_dir} holds no last.pt or ckpt_*.pt")

@@ -28,7 +28,7 @@ ERROR_FILE_PREFIX = "env_error_"
 # Info entries copied into the tensordict (those the env provides).
 INFO_DTYPES = {"is_success": torch.bool, "grasped": torch.bool, "lift_height": torch.float32}
 
-#: Builds one gymnasium env: what ``rlgrasp.config.env_factory`` returns (a picklable partial).
+#: Builds one gymnasium env: what ``rlgrasp.envs.factory.env_factory`` returns (a picklable partial).
 EnvFactory = Callable[[], Any]
 
 

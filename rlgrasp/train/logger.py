@@ -12,10 +12,12 @@ import math
 from pathlib import Path
 from typing import Any
 
+from rlgrasp.train.rundir import TEXT_LOG
+
 log = logging.getLogger("rlgrasp.train")
 
 
-def setup_text_log(run_dir: Path, name: str = "train.log") -> None:
+def setup_text_log(run_dir: Path, name: str = TEXT_LOG) -> None:
     """Log to ``run_dir/train.log`` unless a handler (e.g. Hydra's) already writes that file."""
     target = (run_dir / name).resolve()
     root = logging.getLogger()

@@ -35,6 +35,7 @@ from rlgrasp.train.logger import RunLogger, log, progress_line, setup_text_log
 from rlgrasp.train.parts import build_parts
 from rlgrasp.train.ppo import NonFiniteError, PPOLearner
 from rlgrasp.train.resume import prepare_run
+from rlgrasp.train.rundir import CHECKPOINTS, ENV_ERRORS, TENSORBOARD
 from rlgrasp.train.trackers import attach_tracker
 from rlgrasp.utils import flatten
 
@@ -173,7 +174,7 @@ class Trainer:
         self.run_dir = Path(cfg.paths.output_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
         setup_text_log(self.run_dir)
-        self.ckpt_dir, self.error_dir = self.run_dir / "checkpoints", self.run_dir / "env_errors"
+        self.ckpt_dir, self.error_dir = self.run_dir / CHECKPOINTS, self.run_dir / ENV_ERRORS
         self.config = OmegaConf.to_container(cfg, resolve=True)
         self.device = resolve_device(cfg.device)
         torch.set_num_threads(cfg.collector.torch_threads)
@@ -198,7 +199,7 @@ class Trainer:
             log.info("resumed from %s at %s frames", cfg.resume, f"{self.frames:,}")
 
         self.logger = RunLogger(
-            self.run_dir / "tensorboard", cfg.logger.backend, purge_step=self.frames + 1 if resumed else None
+            self.run_dir / TENSORBOARD, cfg.logger.backend, purge_step=self.frames + 1 if resumed else None
         )
         # logger=wandb|mlflow: the same calls also go to that tracker (rlgrasp/train/trackers.py).
         self.logger = attach_tracker(self.logger, cfg.logger, self.run_dir, self.config, resumed is not None)

@@ -10,7 +10,7 @@ from typing import Any
 import torch
 from torchrl.collectors import BaseCollector
 
-from rlgrasp.config import env_factory
+from rlgrasp.envs.factory import env_factory
 from rlgrasp.train.collect import EnvFactory, build_collector, env_spec, frames_per_batch
 from rlgrasp.train.models import RunningNorm, build_models
 

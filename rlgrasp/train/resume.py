@@ -4,7 +4,7 @@
 resolved config is the base and only what the command line changes is applied on top. Keys in
 ``MUTABLE`` may change (and are logged); any other change is refused with one line naming the key
 and both values, before any worker starts. ``resume=auto`` continues the run directory's newest
-readable checkpoint when there is one and starts fresh otherwise (``rlgrasp.config.run_dir`` picks
+readable checkpoint when there is one and starts fresh otherwise (``rlgrasp.train.rundir.run_dir`` picks
 the newest run of the same experiment and seed as the run directory). A job SLURM runs again after a
 requeue (``SLURM_RESTART_COUNT`` > 0) resumes as with ``resume=auto`` when no ``resume`` was given.
 """
@@ -17,10 +17,15 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from hydra import compose
+from hydra.core.global_hydra import GlobalHydra
+from hydra.core.override_parser.overrides_parser import OverridesParser
 from omegaconf import DictConfig, OmegaConf
 
+from rlgrasp.compose import compose_train
 from rlgrasp.config import CONFIG_DIR, ConfigError, validate_train
 from rlgrasp.train import checkpoint as ckpt_lib
+from rlgrasp.train.rundir import CHECKPOINTS
 from rlgrasp.utils import flatten
 
 log = logging.getLogger("rlgrasp.train")
@@ -61,7 +66,7 @@ def prepare_run(cfg: DictConfig, changed: Iterable[str] | None = None) -> tuple[
     """
     run_dir = Path(cfg.paths.output_dir)
     resume = cfg.resume or requeued_resume()
-    has_ckpts = bool(ckpt_lib.checkpoint_files(run_dir / "checkpoints"))
+    has_ckpts = bool(ckpt_lib.checkpoint_files(run_dir / CHECKPOINTS))
     if resume == "auto":
         source = run_dir if has_ckpts else None
         if source is None:
@@ -156,8 +161,6 @@ def _value_around(key: str, old: dict[str, Any]) -> Any:
 def command_line_keys(task_overrides: list[str], cfg: DictConfig) -> set[str]:
     """The config keys a Hydra command line sets: its ``key=value`` keys, plus the keys whose value
     its group choices (``experiment=``, ``collector=``, ...) change from the defaults."""
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-
     keys, groups = set(), []
     for override in OverridesParser.create().parse_overrides(task_overrides):
         name = override.key_or_group
@@ -174,11 +177,6 @@ def command_line_keys(task_overrides: list[str], cfg: DictConfig) -> set[str]:
 
 def _keys_changed_by(groups: list[str], cfg: DictConfig) -> set[str]:
     """Keys whose value differs between the defaults and the defaults with these group choices."""
-    from hydra import compose
-    from hydra.core.global_hydra import GlobalHydra
-
-    from rlgrasp.config import compose_train
-
     fixed = [f"paths.output_dir={cfg.paths.output_dir}"]
     try:
         if GlobalHydra.instance().is_initialized():

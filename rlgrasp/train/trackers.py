@@ -14,37 +14,12 @@ import logging
 import math
 import os
 import uuid
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
-
-from rlgrasp.config import LoggerConfig
 
 log = logging.getLogger("rlgrasp.train")
 TRACKERS = ("wandb", "mlflow")
 ID_FILE = "tracker.json"
-
-
-@dataclass
-class TrackerLoggerConfig(LoggerConfig):
-    """``logger=wandb`` / ``logger=mlflow``: TensorBoard plus a tracker."""
-
-    tracker: str = "wandb"  # wandb | mlflow
-    project: str = "rlgrasp"  # W&B project / MLflow experiment
-    entity: str | None = None  # W&B team or user (null: your default)
-    # W&B: online | offline | disabled (null: $WANDB_MODE, else online).
-    mode: str | None = None
-    # MLflow: a server (http://...), a database (sqlite:///...) or a folder (file:...).
-    tracking_uri: str | None = None
-    tags: list[str] = field(default_factory=list)  # run tags in the tracker's UI
-    run_name: str | None = None  # null: <experiment_name>/<run dir name>
-
-
-def register_tracker_configs() -> None:
-    """Store the schema the ``logger/wandb`` and ``logger/mlflow`` configs extend."""
-    from hydra.core.config_store import ConfigStore
-
-    ConfigStore.instance().store(group="logger", name="tracker_schema", node=TrackerLoggerConfig)
 
 
 class Tracker:
