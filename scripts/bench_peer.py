@@ -142,7 +142,7 @@ class PeriodicEval(BaseCallback):
     when one is due, then the budget check before the next rollout (SB3 stops at its first step)."""
 
     def __init__(self, cfg: Any, evaluator: Any, vecnorm: Any, start: float, budget_s: float) -> None:
-        from rlgrasp.train.loop import Due, Throughput  # the schedule and SPS training itself uses
+        from rlgrasp.train.metrics import Due, Throughput  # the schedule and SPS training itself uses
 
         super().__init__()
         self.cfg, self.evaluator, self.vecnorm = cfg, evaluator, vecnorm

@@ -8,6 +8,7 @@ per-step cost would dominate the physics.
 from __future__ import annotations
 
 import functools
+import logging
 import multiprocessing
 import os
 import re
@@ -24,6 +25,7 @@ from torchrl.collectors import BaseCollector, Collector
 from torchrl.envs import EnvBase, default_info_dict_reader
 from torchrl.envs.transforms import Compose, RewardSum, StepCounter, TransformedEnv
 
+log = logging.getLogger("rlgrasp.train")
 ERROR_FILE_PREFIX = "env_error_"
 # Info entries copied into the tensordict (those the env provides).
 INFO_DTYPES = {"is_success": torch.bool, "grasped": torch.bool, "lift_height": torch.float32}
@@ -278,6 +280,20 @@ def _ray_collector(c: Any, fns: list, policy: torch.nn.Module, common: dict[str,
     )
     collector.update_policy_weights_()  # initialise the weight sync before the first batch
     return collector
+
+
+def shut_down(collector: BaseCollector) -> None:
+    """Stop the workers, then the weight-sync schemes: left to ``__del__`` at interpreter exit, a
+    scheme's shutdown starts a queue feeder thread during finalization and the process never ends."""
+    try:
+        collector.shutdown()
+    except Exception as exc:  # noqa: BLE001 - a dead worker can make shutdown complain
+        log.warning("collector shutdown: %s", exc)
+    for scheme in (getattr(collector, "_weight_sync_schemes", None) or {}).values():
+        try:
+            scheme.shutdown()
+        except Exception as exc:  # noqa: BLE001
+            log.warning("weight sync shutdown: %s", exc)
 
 
 def read_env_errors(error_dir: str | os.PathLike) -> list[str]:
