@@ -1,4 +1,4 @@
-"""scripts/bench_peer.py's mapping from an rlgrasp training config to Stable-Baselines3's PPO: the
+"""benchmarks/bench_peer.py's mapping from an rlgrasp training config to Stable-Baselines3's PPO: the
 peer comparison is only fair if SB3 gets rlgrasp's settings, and SB3 must accept them as given."""
 
 import runpy
@@ -13,7 +13,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(scope="module")
 def peer():
-    return runpy.run_path(str(ROOT / "scripts" / "bench_peer.py"))
+    return runpy.run_path(str(ROOT / "benchmarks" / "bench_peer.py"))
 
 
 def test_sb3_gets_grasp_ppo_settings(peer, train_cfg):

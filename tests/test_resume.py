@@ -218,8 +218,8 @@ def test_a_resume_keeps_the_launch_config_in_dot_hydra(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_soak_three_kill_9_cycles(tmp_path: Path) -> None:
-    """scripts/soak_resume.py: 3 x (start or resume, random wait, kill -9 of the group), every check."""
-    proc = subprocess.run([sys.executable, str(ROOT / "scripts" / "soak_resume.py"), "--cycles", "3",
+    """benchmarks/soak_resume.py: 3 x (start or resume, random wait, kill -9 of the group), every check."""
+    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "soak_resume.py"), "--cycles", "3",
                            "--out", str(tmp_path), "--wait", "15", "35"], capture_output=True, text=True,
                           cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=1800)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-2000:]

@@ -5,9 +5,9 @@ the whole machine), under a wall-clock budget, then reads each run's ``eval/succ
 TensorBoard and writes a CSV and a PNG. Minutes count from the launch of the training process, so
 start-up time is charged to the run.
 
-    python scripts/bench_learning.py --seeds 0 1 2 --minutes 5 --out outputs/bench_learning
-    python scripts/bench_learning.py --minutes 30 --tag joint_delta -- env.control_mode=joint_delta
-    python scripts/bench_learning.py --experiment grasp_objects_ppo --tag grasp_objects_ppo --minutes 20 \
+    python benchmarks/bench_learning.py --seeds 0 1 2 --minutes 5 --out outputs/bench_learning
+    python benchmarks/bench_learning.py --minutes 30 --tag joint_delta -- env.control_mode=joint_delta
+    python benchmarks/bench_learning.py --experiment grasp_objects_ppo --tag grasp_objects_ppo --minutes 20 \
         --eval-objects random_urdfs_test train_mix --eval-episodes 200
 
 ``--eval-objects`` evaluates each run's last checkpoint after training with ``scripts/evaluate.py``

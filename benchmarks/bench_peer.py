@@ -3,8 +3,8 @@
 Both run one after the other on the same machine, on the same wall-clock budget.
 
     pip install -c constraints.txt -e ".[peer]"
-    python scripts/bench_peer.py --minutes 5 --seed 0
-    python scripts/bench_peer.py --minutes 5 --only sb3 -- env.control_mode=ee_delta
+    python benchmarks/bench_peer.py --minutes 5 --seed 0
+    python benchmarks/bench_peer.py --minutes 5 --only sb3 -- env.control_mode=ee_delta
 
 rlgrasp runs as ``scripts/train.py experiment=<experiment>`` and is read back from its TensorBoard.
 SB3 runs PPO over a ``SubprocVecEnv`` of the same env (SB3's layout: one process per env) behind
@@ -37,7 +37,7 @@ from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a checkout, uninstalled
-sys.path.insert(0, str(ROOT / "scripts"))  # bench_learning, also when this file is loaded by path
+sys.path.insert(0, str(ROOT / "benchmarks"))  # bench_learning, also when this file is loaded by path
 
 INSTALL_HINT = 'Stable-Baselines3 is not installed: pip install -c constraints.txt -e ".[peer]"'
 

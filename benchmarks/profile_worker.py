@@ -1,7 +1,7 @@
 """Where a collector worker's time goes: one process, one batch of envs and the PPO actor under
 TorchRL's ``Collector``, profiled with cProfile, then a plain ``env.step`` loop for comparison.
 
-    python scripts/profile_worker.py [--envs 8] [--batches 8] [--top 30] [hydra overrides ...]
+    python benchmarks/profile_worker.py [--envs 8] [--batches 8] [--top 30] [hydra overrides ...]
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """What one PPO update costs the learner, per frame: the ceiling on frames/s however many workers
 collect (with ``collector.overlap`` a batch takes about max(collection, update + evaluation)).
 
-    python scripts/bench_update.py [--threads 1 2] [--minibatch 512 1024] [--repeats 3] [overrides ...]
+    python benchmarks/bench_update.py [--threads 1 2] [--minibatch 512 1024] [--repeats 3] [overrides ...]
 
 Collects one batch of training's size in-process (default ``experiment=grasp_ppo``), then
 times ``PPOLearner.update`` on it for each torch thread count and minibatch size, with the target-KL

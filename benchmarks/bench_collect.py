@@ -1,6 +1,6 @@
 """Collection throughput, side by side: raw env vs gymnasium AsyncVectorEnv vs rlgrasp's collector.
 
-    python scripts/bench_collect.py [--seconds 20] [--train-frames 20480] [hydra overrides ...]
+    python benchmarks/bench_collect.py [--seconds 20] [--train-frames 20480] [hydra overrides ...]
 
 1. raw: one process per core, each stepping one env with random actions in a plain gymnasium loop
    (no torch in the loop) -- the ceiling for this machine;

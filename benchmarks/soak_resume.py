@@ -1,7 +1,7 @@
 """Kill -9 soak of resume: N cycles of start-or-resume, a random wait, ``kill -9`` of the whole process
 group (learner and collector workers); then every check, and a final resume that runs to the end.
 
-    python scripts/soak_resume.py --cycles 3 [--out /tmp/soak] [--seed 0] [--wait 15 40] [--total-frames N]
+    python benchmarks/soak_resume.py --cycles 3 [--out /tmp/soak] [--seed 0] [--wait 15 40] [--total-frames N]
 
 Checks after each kill: the command was still running when killed (a cycle that reaches the end tests
 nothing); no process of the group is left; every file under ``checkpoints/`` loads
@@ -28,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 PROGRESS = re.compile(r"frames ([\d,]+)/")
 
-from rlgrasp.utils import processes_in_group  # noqa: E402
+from tests.procs import processes_in_group  # noqa: E402
 
 
 def train_command(out: Path, seed: int, total: int, interval: int) -> list[str]:

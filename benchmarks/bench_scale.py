@@ -1,8 +1,8 @@
 """Frames/s of the collector backends side by side: process vs Ray (local, and a two-node Ray
 cluster on loopback). Same env, MLP actor, batch layout (grasp_ppo: 2 workers x 8 envs x 64 steps).
 
-    python scripts/bench_scale.py [--batches 8] [--warmup 2] [--setups process ray ray_2nodes]
-    python scripts/bench_scale.py --workers 1 2 4 8 [--setups process]
+    python benchmarks/bench_scale.py [--batches 8] [--warmup 2] [--setups process ray ray_2nodes]
+    python benchmarks/bench_scale.py --workers 1 2 4 8 [--setups process]
 
 Prints one markdown row per setup (and worker count, with ``--workers``): median and IQR of
 frames/s over the timed batches (each batch also pays the weight broadcast that training does after
