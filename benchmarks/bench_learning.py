@@ -27,10 +27,11 @@ from pathlib import Path
 from omegaconf import OmegaConf
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))  # run from a checkout, uninstalled
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout, uninstalled
+from rlgrasp.stats import wilson_interval
+from rlgrasp.utils import pyplot
 
-from rlgrasp.stats import wilson_interval  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def run_seed(out: Path, tag: str, seed: int, minutes: float, experiment: str, overrides: list[str]) -> dict:
@@ -140,8 +141,6 @@ def main() -> None:
 
 
 def plot(rows: list[tuple], path: Path, title: str) -> None:
-    from rlgrasp.utils import pyplot
-
     plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.5))
     for seed in sorted({r[1] for r in rows}):

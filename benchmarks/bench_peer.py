@@ -127,7 +127,7 @@ def unmatched(cfg: Any) -> list[str]:
 def eval_policy(model: Any, vecnorm: Any) -> Any:
     """SB3's deterministic action (the mean, clipped to the bounds) on VecNormalize's view of the
     observation, as the TensorDict module rlgrasp's ``Evaluator`` rolls out."""
-    import torch
+    import torch  # imports inside functions: SB3's env workers re-run this file's top level
     from tensordict.nn import TensorDictModule
 
     def act(obs: torch.Tensor) -> torch.Tensor:
@@ -142,7 +142,8 @@ class PeriodicEval(BaseCallback):
     when one is due, then the budget check before the next rollout (SB3 stops at its first step)."""
 
     def __init__(self, cfg: Any, evaluator: Any, vecnorm: Any, start: float, budget_s: float) -> None:
-        from rlgrasp.train.metrics import Due, Throughput  # the schedule and SPS training itself uses
+        # the schedule and SPS training itself uses (imported here: see the module docstring)
+        from rlgrasp.train.metrics import Due, Throughput
 
         super().__init__()
         self.cfg, self.evaluator, self.vecnorm = cfg, evaluator, vecnorm
@@ -184,7 +185,7 @@ class PeriodicEval(BaseCallback):
 def run_sb3(cfg: Any, out_json: Path) -> None:
     """Train SB3 PPO on ``cfg`` until its frames or time budget run out, then the final evaluation,
     as ``Trainer.finish`` does; writes the curve to ``out_json``."""
-    import torch
+    import torch  # imports inside functions: SB3's env workers re-run this file's top level
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 

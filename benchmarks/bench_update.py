@@ -17,6 +17,11 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout, uninstalled
+import torch
+
+from rlgrasp.compose import compose_train
+from rlgrasp.train.parts import build_parts
+from rlgrasp.train.ppo import PPOLearner
 
 
 def main() -> None:
@@ -28,12 +33,6 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3, help="timed updates per setting, after a warm-up")
     parser.add_argument("overrides", nargs="*", help="Hydra overrides (default experiment=grasp_ppo)")
     args = parser.parse_args()
-
-    import torch
-
-    from rlgrasp.compose import compose_train
-    from rlgrasp.train.parts import build_parts
-    from rlgrasp.train.ppo import PPOLearner
 
     cfg = compose_train(args.overrides or ["experiment=grasp_ppo"])
     workers = 1 if cfg.collector.backend == "single" else cfg.collector.num_workers

@@ -14,6 +14,12 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout, uninstalled
+import torch
+from torchrl.collectors import Collector
+
+from rlgrasp.compose import compose_train
+from rlgrasp.train.collect import make_batched_env
+from rlgrasp.train.parts import build_parts
 
 
 def main() -> None:
@@ -25,13 +31,6 @@ def main() -> None:
     parser.add_argument("--top", type=int, default=30, help="functions printed, by cumulative time")
     parser.add_argument("overrides", nargs="*", help="Hydra overrides (default experiment=grasp_ppo)")
     args = parser.parse_args()
-
-    import torch
-    from torchrl.collectors import Collector
-
-    from rlgrasp.compose import compose_train
-    from rlgrasp.train.collect import make_batched_env
-    from rlgrasp.train.parts import build_parts
 
     cfg = compose_train([*(args.overrides or ["experiment=grasp_ppo"]), "paths.output_dir=/tmp/unused"])
     torch.manual_seed(0)

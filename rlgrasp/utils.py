@@ -35,6 +35,8 @@ def markdown_table(head: Sequence[Any], rows: Sequence[Sequence[Any]]) -> str:
 
 def pyplot() -> Any:
     """``matplotlib.pyplot`` drawing to files only (no display on workers, clusters or CI)."""
+    # Imported here: only plots need matplotlib, and choosing its backend when rlgrasp.utils is
+    # imported would take the display away from any program that imports it.
     import matplotlib
 
     matplotlib.use("Agg")

@@ -4,7 +4,9 @@ peer comparison is only fair if SB3 gets rlgrasp's settings, and SB3 must accept
 import runpy
 from pathlib import Path
 
+import gymnasium as gym
 import pytest
+import torch
 
 sb3 = pytest.importorskip("stable_baselines3")
 
@@ -17,9 +19,7 @@ def peer():
 
 
 def test_sb3_gets_grasp_ppo_settings(peer, train_cfg):
-    import gymnasium as gym
-    import torch
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize  # optional: skipped without it
 
     cfg = train_cfg("experiment=grasp_ppo")
     a, m, c = cfg.algo, cfg.model, cfg.collector

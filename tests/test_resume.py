@@ -11,13 +11,17 @@ import sys
 import time
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
 
+import rlgrasp
 from rlgrasp.compose import compose_train
 from rlgrasp.config import ConfigError
+from rlgrasp.evaluation.source import EvaluationError, load_checked_checkpoint
 from rlgrasp.train import checkpoint as ckpt_lib
+from rlgrasp.train.loop import Trainer
 from rlgrasp.train.resume import merged_config, prepare_run
 from rlgrasp.train.rundir import run_dir
 from tests.procs import wait_for
@@ -29,8 +33,6 @@ SMOKE = ["experiment=smoke", "logger=none"]
 @pytest.fixture(scope="module")
 def run(tmp_path_factory) -> Path:
     """A run directory with one real smoke checkpoint at frame 0 (no workers started)."""
-    from rlgrasp.train.loop import Trainer
-
     run = tmp_path_factory.mktemp("resume") / "run"
     Trainer(compose_train([*SMOKE, f"paths.output_dir={run}"])).save()
     return run
@@ -55,8 +57,6 @@ class _Evil:
 
 
 def test_a_checkpoint_that_would_run_code_is_refused_and_runs_nothing(tmp_path: Path, run: Path) -> None:
-    from rlgrasp.evaluation.source import EvaluationError, load_checked_checkpoint
-
     marker = tmp_path / "pwned"
     state = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
     state["payload"] = _Evil(str(marker))
@@ -140,10 +140,6 @@ def test_resume_auto_picks_the_newest_run_of_the_seed(tmp_path: Path, run: Path)
 
 
 def test_gym_make_honours_max_episode_steps() -> None:
-    import gymnasium as gym
-
-    import rlgrasp
-
     for kwargs, want in (({}, 50), ({"max_episode_steps": 80}, 80)):
         env = gym.make(rlgrasp.ENV_ID, randomization="none", **kwargs)
         env.reset(seed=0)

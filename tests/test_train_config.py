@@ -14,6 +14,7 @@ from omegaconf import OmegaConf
 from omegaconf.errors import ConfigKeyError, ValidationError
 
 from rlgrasp.config import CONFIG_DIR, EnvConfig
+from rlgrasp.envs import PandaGraspEnv
 from rlgrasp.envs.factory import env_factory
 
 EXPERIMENTS = sorted(p.stem for p in (Path(CONFIG_DIR) / "experiment").glob("*.yaml"))
@@ -52,8 +53,6 @@ def test_grasp_ppo_defaults(train_cfg) -> None:
 
 def test_env_schema_mirrors_the_constructor() -> None:
     """Every keyword of PandaGraspEnv, with the same default: a new one is a new EnvConfig field."""
-    from rlgrasp.envs import PandaGraspEnv
-
     params = inspect.signature(PandaGraspEnv.__init__).parameters
     ctor = {k: p.default for k, p in params.items() if k != "self"}
     fields = [f.name for f in dataclasses.fields(EnvConfig) if f.name != "_target_"]

@@ -22,7 +22,8 @@ import numpy as np
 import torch
 from tensordict import TensorDictBase
 from torchrl.collectors import BaseCollector, Collector
-from torchrl.envs import EnvBase, default_info_dict_reader
+from torchrl.data import Composite, Unbounded
+from torchrl.envs import EnvBase, GymWrapper, default_info_dict_reader
 from torchrl.envs.transforms import Compose, RewardSum, StepCounter, TransformedEnv
 
 log = logging.getLogger("rlgrasp.train")
@@ -152,9 +153,6 @@ def make_vector_env(
     final observation of an episode is kept. Vector infos arrive as arrays, which TorchRL's
     ``default_info_dict_reader`` reads directly. ``stagger``: see ``StaggeredStart``.
     """
-    from torchrl.data import Composite, Unbounded
-    from torchrl.envs import GymWrapper
-
     fns = [
         functools.partial(
             _guarded_env, make_env, f"worker {worker} env {i}", error_dir, i, num_envs if stagger else 0

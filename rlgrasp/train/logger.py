@@ -12,6 +12,8 @@ import math
 from pathlib import Path
 from typing import Any
 
+from torch.utils.tensorboard import SummaryWriter
+
 from rlgrasp.train.rundir import TEXT_LOG
 
 log = logging.getLogger("rlgrasp.train")
@@ -39,8 +41,6 @@ class RunLogger:
     def __init__(self, log_dir: Path, backend: str, purge_step: int | None = None) -> None:
         self.writer = None
         if backend == "tensorboard":
-            from torch.utils.tensorboard import SummaryWriter
-
             self.writer = SummaryWriter(str(log_dir), purge_step=purge_step)
         elif backend != "none":
             raise ValueError(f"logger.backend must be 'tensorboard' or 'none', got {backend!r}")

@@ -13,6 +13,7 @@ import json
 import logging
 import math
 import os
+import time
 import uuid
 from pathlib import Path
 from typing import Any
@@ -61,7 +62,7 @@ class WandbTracker(Tracker):
     run's steps may go back to the checkpoint's frames without W&B dropping them."""
 
     def __init__(self, cfg: Any, name: str, run_dir: Path, config: dict[str, Any], run_id: str | None):
-        import wandb
+        import wandb  # an optional extra: imported only when logger=wandb
 
         self.run = wandb.init(
             project=cfg.project,
@@ -96,7 +97,7 @@ class MlflowTracker(Tracker):
     """An MLflow run (client API: no process-global active run, so sweeps in one process are safe)."""
 
     def __init__(self, cfg: Any, name: str, run_dir: Path, config: dict[str, Any], run_id: str | None):
-        from mlflow.tracking import MlflowClient
+        from mlflow.tracking import MlflowClient  # an optional extra: imported only when logger=mlflow
 
         uri = cfg.tracking_uri or os.environ.get("MLFLOW_TRACKING_URI") or "outputs/mlruns"
         if "://" not in uri or uri.startswith("file:"):
@@ -115,15 +116,13 @@ class MlflowTracker(Tracker):
         have = client.get_run(run_id).data.params
         params = {k: str(v)[:6000] for k, v in _flat(config).items() if k not in have}
         if params:
-            from mlflow.entities import Param
+            from mlflow.entities import Param  # optional extra, as above
 
             client.log_batch(run_id, params=[Param(k, v) for k, v in params.items()])
         self.id = {"mlflow": {"run_id": run_id, "tracking_uri": uri, "experiment": cfg.project}}
 
     def scalars(self, metrics: dict[str, float], step: int) -> None:
-        import time
-
-        from mlflow.entities import Metric
+        from mlflow.entities import Metric  # optional extra, as above
 
         now = int(time.time() * 1000)
         batch = [Metric(k, v, now, step) for k, v in _finite(metrics).items()]
