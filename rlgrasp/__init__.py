@@ -1,4 +1,4 @@
-"""rlgrasp: parallel PPO training of a Franka Panda grasp-and-lift task in PyBullet."""
+"""rlgrasp: parallel RL training of robot grasp-and-lift tasks in PyBullet."""
 
 import gymnasium
 
@@ -11,10 +11,11 @@ def make_registered_env(**kwargs):
     """The entry point of ``ENV_ID``: gymnasium's ``TimeLimit`` ends the episodes (at
     ``gymnasium.make``'s ``max_episode_steps``), so the env's own limit is set out of its way unless
     the keyword is given to the env itself."""
-    from rlgrasp.envs import PandaGraspEnv
+    # Lazy: `import rlgrasp` (configs, tools) must not load PyBullet and the env modules.
+    from rlgrasp.envs import GraspEnv
 
     kwargs.setdefault("max_episode_steps", 2**31 - 1)
-    return PandaGraspEnv(**kwargs)
+    return GraspEnv(**kwargs)
 
 
 if ENV_ID not in gymnasium.registry:

@@ -59,10 +59,14 @@ class EnvConfig:
     camera_yaw: float = 60.0
     camera_pitch: float = -25.0
     solver_iterations: int = 20
-    robot_urdf: str = "franka_panda/panda.urdf"
+    robot: str = "panda"  # an arm of rlgrasp.envs.robot.ROBOTS
+    robot_urdf: str | None = None  # null: the arm's own model file
     # A set name (the `objects` config group sets it), a list of set names, or a mapping with
     # sets / paths / max_width / scale: see rlgrasp/envs/objects.py.
     objects: Any = "cube"
+    # null, or a camera (rlgrasp.envs.cameras.CameraSpec keys); the `cameras` config group sets it.
+    camera: Any = None
+    visual: str = "none"  # none | default | wide | heldout (the `visual` config group)
 
 
 @dataclass

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # A one-node SLURM cluster on 127.0.0.1 (munge + slurmctld + slurmd), to try the cluster path of
-# docs/SCALING.md on one machine before a real cluster; the SLURM tests (tests/test_slurm.py) use it.
+# docs/scaling.md on one machine before a real cluster; the SLURM tests (tests/test_slurm.py) use it.
 #
 #   sudo bash scripts/local_slurm.sh start    # install slurm-wlm + munge with apt if absent, configure, start
 #   sudo bash scripts/local_slurm.sh status   # daemons, node state (exit 0 when jobs can run)
@@ -11,7 +11,7 @@
 # /etc/slurm/slurm.conf (where sinfo, sbatch and submitit look for it); a slurm.conf this script
 # did not write is never overwritten. State, logs and pid files: $LOCAL_SLURM_DIR
 # (default /var/lib/rlgrasp-slurm). No accounting database: sacct answers "accounting storage is
-# disabled" and submitit falls back to its own job files (it warns about it once per poll).
+# disabled"; hydra/launcher=slurm asks scontrol for its jobs' states instead (rlgrasp/slurm.py).
 set -euo pipefail
 
 STATE_DIR=${LOCAL_SLURM_DIR:-/var/lib/rlgrasp-slurm}

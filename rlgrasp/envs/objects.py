@@ -27,7 +27,9 @@ from functools import lru_cache
 from typing import Any
 
 import numpy as np
+import pybullet
 import pybullet_data
+from pybullet_utils.bullet_client import BulletClient
 
 SIZE_SCALES = (0.8, 0.9, 1.0, 1.1, 1.2)
 HAND_OPENING = 0.08  # m, the Panda's maximal finger width
@@ -308,9 +310,6 @@ def _check_fits(path: str, native: Geometry, scale: float) -> None:
 @lru_cache(maxsize=256)
 def urdf_geometry(path: str) -> Geometry:
     """Load a URDF once in a private client and read its bounding box, mass and friction."""
-    import pybullet
-    from pybullet_utils.bullet_client import BulletClient
-
     if not os.path.isfile(path):
         raise FileNotFoundError(f"object file not found: {path}")
     client = BulletClient(connection_mode=pybullet.DIRECT)

@@ -10,14 +10,17 @@ from __future__ import annotations
 
 import os
 
+import numpy as np
 import pybullet
 import pybullet_data
 from pybullet_utils.bullet_client import BulletClient
 
-from rlgrasp.envs.objects import ObjectChoice
+from rlgrasp.envs.objects import ObjectChoice, obj_bounds
 
 PRIMITIVE_COLOUR = (0.85, 0.45, 0.2, 1.0)
 MESH_COLOUR = (0.57, 0.85, 0.78, 1.0)
+GROUND_COLOUR = (0.8, 0.8, 0.8, 1.0)
+VIEWER_TARGET = (0.45, 0.0, 0.2)  # the viewer looks a little in front of the object's nominal place
 
 
 def data_path(name: str) -> str:
@@ -44,8 +47,30 @@ class Scene:
         )
         self.time_step = time_step
         self.plane = c.loadURDF(data_path("plane.urdf"))
+        self.ground = self.plane  # the body cameras see as the ground
         self.object: int | None = None
         self._shapes: dict[tuple, tuple[int, int]] = {}
+        self._saved: int | None = None
+
+    def use_compact_ground(self, half_size: float = 1.0) -> None:
+        """Show the ground to cameras as a 2 m square instead of the URDF's 200 m plane, which the CPU
+        renderer rasterizes at ~0.9 ms an image (its collision box, and so the physics, stay)."""
+        self.client.changeVisualShape(self.plane, -1, rgbaColor=[1.0, 1.0, 1.0, 0.0])
+        visual = self.client.createVisualShape(
+            pybullet.GEOM_BOX, halfExtents=[half_size, half_size, 0.0005], rgbaColor=GROUND_COLOUR
+        )
+        self.ground = self.client.createMultiBody(0.0, -1, visual, [VIEWER_TARGET[0], 0.0, -0.0005])
+
+    def save(self) -> None:
+        """Remember the world as it is now (robot loaded, no object): each reset restores it."""
+        self._saved = self.client.saveState()
+
+    def restore(self, gravity_z: float) -> None:
+        """Back to the saved world, with this episode's gravity. Restoring is bit-reproducible where
+        resetting joint states alone is not (gymnasium's determinism check fails on that)."""
+        self.remove_object()  # the saved state holds no object: restoring needs the same bodies
+        self.client.restoreState(self._saved)
+        self.client.setGravity(0, 0, gravity_z)
 
     def remove_object(self) -> None:
         """Remove the episode's object; call before restoring a state saved without it."""
@@ -74,8 +99,6 @@ class Scene:
     def _build_shape(self, choice: ObjectChoice, scale: float) -> tuple[int, int]:
         c = self.client
         if choice.kind == "mesh":
-            from rlgrasp.envs.objects import obj_bounds
-
             low, high = obj_bounds(choice.path)
             centre = [-(lo + h) / 2 * scale for lo, h in zip(low, high)]  # bounding-box centre at the base
             mesh = dict(fileName=choice.path, meshScale=[scale] * 3)
@@ -101,6 +124,22 @@ class Scene:
             shape, radius=d[0], length=d[1], visualFrameOrientation=frame, rgbaColor=PRIMITIVE_COLOUR
         )
         return collision, visual
+
+    def viewer_image(self, width: int, height: int, distance: float, yaw: float, pitch: float) -> np.ndarray:
+        """An RGB picture of the scene for people (videos, the GUI), from an orbiting camera."""
+        view = self.client.computeViewMatrixFromYawPitchRoll(
+            cameraTargetPosition=[VIEWER_TARGET[0], VIEWER_TARGET[1], VIEWER_TARGET[2]],
+            distance=distance,
+            yaw=yaw,
+            pitch=pitch,
+            roll=0.0,
+            upAxisIndex=2,
+        )
+        projection = self.client.computeProjectionMatrixFOV(60.0, width / height, 0.05, 5.0)
+        image = self.client.getCameraImage(
+            width, height, view, projection, renderer=pybullet.ER_TINY_RENDERER
+        )[2]
+        return np.asarray(image, dtype=np.uint8).reshape(height, width, 4)[:, :, :3]
 
     def close(self) -> None:
         try:

@@ -1,0 +1,162 @@
+"""Cameras a robot could carry: depth in metres and RGB, from the wrist or from a fixed mount.
+
+Rendered with PyBullet's TinyRenderer (CPU, no display), once per control step. The cost is the
+robot's visual meshes, not the pixels, so a camera renders the robot's low-poly model
+(``Robot.render_model``); docs/cameras.md has the figures.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pybullet
+from pybullet_utils.bullet_client import BulletClient
+
+MOUNTS = ("wrist", "fixed")
+MODALITIES = ("depth", "rgb", "rgbd")
+MAX_SIZE = 512
+#: Where each mount looks from by default: for ``wrist`` in the hand's frame (its z axis points
+#: along the fingers), for ``fixed`` in the world frame.
+MOUNT_DEFAULTS = {
+    "wrist": {"eye": (0.06, 0.0, 0.0), "target": (0.0, 0.0, 0.3), "up": (1.0, 0.0, 0.0)},
+    "fixed": {"eye": (1.05, 0.0, 0.55), "target": (0.6, 0.0, 0.0), "up": (0.0, 0.0, 1.0)},
+}
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    """One camera: where it is, what it sees, what it returns. ``None`` pose entries take the mount's
+    defaults (``MOUNT_DEFAULTS``)."""
+
+    mount: str = "wrist"
+    modality: str = "depth"
+    width: int = 64
+    height: int = 64
+    fov: float = 70.0  # vertical field of view, degrees
+    near: float = 0.02  # m; depth is clipped to [near, far]
+    far: float = 1.0
+    eye: tuple[float, float, float] | None = None
+    target: tuple[float, float, float] | None = None
+    up: tuple[float, float, float] | None = None
+
+    @staticmethod
+    def from_config(cfg: Mapping[str, Any]) -> CameraSpec:
+        """A spec from a config mapping; an unknown key or a bad value fails in one line naming it."""
+        known = {f.name for f in fields(CameraSpec)}
+        unknown = sorted(set(cfg) - known)
+        if unknown:
+            raise ValueError(f"camera: unknown key {unknown[0]!r}; valid keys: {', '.join(sorted(known))}")
+        values = {k: tuple(float(x) for x in v) if k in ("eye", "target", "up") and v is not None else v
+                  for k, v in cfg.items()}
+        spec = CameraSpec(**values)
+        spec.validate()
+        return spec
+
+    def validate(self) -> None:
+        if self.mount not in MOUNTS:
+            raise ValueError(f"camera.mount={self.mount!r}: valid mounts: {', '.join(MOUNTS)}")
+        if self.modality not in MODALITIES:
+            raise ValueError(f"camera.modality={self.modality!r}: valid modalities: {', '.join(MODALITIES)}")
+        for key in ("width", "height"):
+            value = getattr(self, key)
+            if not (isinstance(value, int) and 1 <= value <= MAX_SIZE):
+                raise ValueError(f"camera.{key}={value!r}: must be an integer from 1 to {MAX_SIZE}")
+        if not 0 < self.fov < 180:
+            raise ValueError(f"camera.fov={self.fov!r}: must be between 0 and 180 degrees")
+        if not 0 < self.near < self.far:
+            raise ValueError(f"camera.near={self.near!r}, camera.far={self.far!r}: need 0 < near < far")
+        for key in ("eye", "target", "up"):
+            value = getattr(self, key)
+            if value is not None and (len(value) != 3 or not all(map(math.isfinite, value))):
+                raise ValueError(f"camera.{key}={list(value)!r}: must be three finite numbers")
+
+    def pose(self) -> dict[str, np.ndarray]:
+        defaults = MOUNT_DEFAULTS[self.mount]
+        return {k: np.array(getattr(self, k) or defaults[k], dtype=float) for k in ("eye", "target", "up")}
+
+    @property
+    def keys(self) -> tuple[str, ...]:
+        """The observation entries this camera fills."""
+        return {"depth": ("depth",), "rgb": ("rgb",), "rgbd": ("depth", "rgb")}[self.modality]
+
+    def spaces(self) -> dict[str, gym.spaces.Box]:
+        """Channel-first image spaces: depth float32 metres in [near, far] (0: no reading, as depth
+        sensors report a missing pixel), RGB uint8."""
+        out = {}
+        if "depth" in self.keys:
+            out["depth"] = gym.spaces.Box(0.0, self.far, (1, self.height, self.width), np.float32)
+        if "rgb" in self.keys:
+            out["rgb"] = gym.spaces.Box(0, 255, (3, self.height, self.width), np.uint8)
+        return out
+
+
+@dataclass
+class Lighting:
+    """TinyRenderer's light for one episode (``getCameraImage`` keywords)."""
+
+    direction: tuple[float, float, float] = (0.3, 0.3, 1.0)
+    colour: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    ambient: float = 0.6
+    diffuse: float = 0.35
+    specular: float = 0.05
+
+    def keywords(self) -> dict[str, Any]:
+        return {
+            "lightDirection": list(self.direction),
+            "lightColor": list(self.colour),
+            "lightAmbientCoeff": self.ambient,
+            "lightDiffuseCoeff": self.diffuse,
+            "lightSpecularCoeff": self.specular,
+        }
+
+
+class Camera:
+    """Renders one ``CameraSpec`` in one client; ``render`` returns channel-first arrays by key."""
+
+    def __init__(self, spec: CameraSpec, client: BulletClient):
+        self.spec, self.client = spec, client
+        self.base_pose = spec.pose()
+        self.fov = spec.fov
+        self.offset = np.zeros(3)  # per-episode pose jitter (m), in the mount's frame
+        self.tilt = np.zeros(3)  # per-episode aim jitter (m at the target), in the mount's frame
+        self.lighting = Lighting()
+
+    def jitter(self, offset: np.ndarray, tilt: np.ndarray, fov_delta: float, lighting: Lighting) -> None:
+        """This episode's deviations from the nominal camera (visual randomization)."""
+        self.offset, self.tilt = np.asarray(offset, float), np.asarray(tilt, float)
+        self.fov = float(np.clip(self.spec.fov + fov_delta, 1.0, 179.0))
+        self.lighting = lighting
+
+    def view_matrix(self, mount_pose: tuple[np.ndarray, np.ndarray] | None) -> list[float]:
+        """``mount_pose`` is the wrist's (position, quaternion); None for a fixed camera."""
+        eye = self.base_pose["eye"] + self.offset
+        target = self.base_pose["target"] + self.tilt
+        up = self.base_pose["up"]
+        if mount_pose is not None:
+            position, quat = mount_pose
+            rotation = np.array(self.client.getMatrixFromQuaternion(quat)).reshape(3, 3)
+            eye, target, up = position + rotation @ eye, position + rotation @ target, rotation @ up
+        return self.client.computeViewMatrix(eye.tolist(), target.tolist(), up.tolist())
+
+    def render(self, mount_pose: tuple[np.ndarray, np.ndarray] | None) -> dict[str, np.ndarray]:
+        s = self.spec
+        projection = self.client.computeProjectionMatrixFOV(self.fov, s.width / s.height, s.near, s.far)
+        _, _, rgba, depth_buffer, _ = self.client.getCameraImage(
+            s.width, s.height, self.view_matrix(mount_pose), projection,
+            renderer=pybullet.ER_TINY_RENDERER, flags=pybullet.ER_NO_SEGMENTATION_MASK,
+            **self.lighting.keywords(),
+        )
+        out = {}
+        if "depth" in s.keys:
+            z = np.asarray(depth_buffer, np.float32).reshape(1, s.height, s.width)
+            metres = s.far * s.near / (s.far - (s.far - s.near) * z)  # OpenGL depth buffer -> distance
+            out["depth"] = np.clip(metres, s.near, s.far).astype(np.float32)
+        if "rgb" in s.keys:
+            image = np.asarray(rgba, np.uint8).reshape(s.height, s.width, 4)[:, :, :3]
+            out["rgb"] = np.ascontiguousarray(image.transpose(2, 0, 1))
+        return out

@@ -1,0 +1,131 @@
+"""Control modes: how an action in [-1, 1] becomes motor commands for a ``Robot``.
+
+Every mode's last action entry is the absolute finger-width target (-1 closed, +1 open), so a
+policy always keeps squeezing while it holds. A mode owns what it remembers between steps (the
+commanded yaw of ``EEDelta``) and resets it with the episode.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from rlgrasp.envs.robot import Robot
+
+WORKSPACE_LOW = np.array([0.3, -0.35, 0.005])  # grasp-point targets are clipped to this box;
+WORKSPACE_HIGH = np.array([0.85, 0.35, 0.45])  # the z floor keeps the fingertips off the ground
+
+
+class ControlMode(ABC):
+    """Turns one action into the robot's commands for the ``substeps`` physics steps of a control step."""
+
+    def __init__(self, robot: Robot):
+        self.robot = robot
+
+    @property
+    @abstractmethod
+    def motion_dim(self) -> int:
+        """Action entries before the finger target."""
+
+    @property
+    def action_dim(self) -> int:
+        return self.motion_dim + 1
+
+    def reset(self, episode: dict[str, Any]) -> None:
+        """Position control at the episode's gains, holding the start pose."""
+        self.robot.use_position_control(episode["position_gain_scale"], episode["finger_force"])
+        self.robot.command_arm(self.robot.joint_state()[0])
+
+    def apply(self, action: np.ndarray, substeps: int, step: Callable[[], None]) -> None:
+        robot = self.robot
+        robot.command_fingers((action[-1] + 1.0) / 2.0 * robot.max_finger_width)
+        robot.command_arm(self.arm_target(action))
+        for _ in range(substeps):
+            step()
+
+    def arm_target(self, action: np.ndarray) -> np.ndarray:  # pragma: no cover - position modes
+        raise NotImplementedError
+
+
+class EEDelta(ControlMode):
+    """Grasp-point (dx, dy, dz[, dyaw]) x ``ee_step`` m (``yaw_step`` rad), solved by IK, gripper down."""
+
+    def __init__(self, robot: Robot, ee_step: float = 0.04, ee_yaw: bool = False, yaw_step: float = 0.2):
+        super().__init__(robot)
+        self.ee_step, self.ee_yaw, self.yaw_step = ee_step, ee_yaw, yaw_step
+        self.yaw = 0.0
+
+    @property
+    def motion_dim(self) -> int:
+        return 3 + int(self.ee_yaw)
+
+    def reset(self, episode: dict[str, Any]) -> None:
+        super().reset(episode)
+        self.yaw = 0.0
+
+    def arm_target(self, action: np.ndarray) -> np.ndarray:
+        robot = self.robot
+        grasp_pos, _ = robot.grasp_point()
+        target = np.clip(grasp_pos + action[:3] * self.ee_step, WORKSPACE_LOW, WORKSPACE_HIGH)
+        if not self.ee_yaw:
+            return robot.inverse_kinematics(target)
+        self.yaw = float(np.clip(self.yaw + action[3] * self.yaw_step, -math.pi / 2, math.pi / 2))
+        return robot.inverse_kinematics(target, robot.client.getQuaternionFromEuler((math.pi, 0.0, self.yaw)))
+
+
+class JointDelta(ControlMode):
+    """Arm joint deltas x ``joint_step`` rad, within the joint limits."""
+
+    def __init__(self, robot: Robot, joint_step: float = 0.05):
+        super().__init__(robot)
+        self.joint_step = joint_step
+
+    @property
+    def motion_dim(self) -> int:
+        return self.robot.arm_dof
+
+    def arm_target(self, action: np.ndarray) -> np.ndarray:
+        q, _, _ = self.robot.joint_state()
+        return np.clip(q + action[: self.motion_dim] * self.joint_step, self.robot.lower, self.robot.upper)
+
+
+class JointTorque(ControlMode):
+    """Torques x ``torque_fraction`` of each joint's effort limit, re-sent every physics substep
+    (a torque lapses after one step), plus gravity compensation unless disabled."""
+
+    def __init__(self, robot: Robot, torque_fraction: float = 0.3, gravity_compensation: bool = True):
+        super().__init__(robot)
+        self.torque_fraction, self.gravity_compensation = torque_fraction, gravity_compensation
+
+    @property
+    def motion_dim(self) -> int:
+        return self.robot.arm_dof
+
+    def reset(self, episode: dict[str, Any]) -> None:
+        self.robot.use_torque_control(episode["finger_force"])
+
+    def apply(self, action: np.ndarray, substeps: int, step: Callable[[], None]) -> None:
+        robot = self.robot
+        robot.command_fingers((action[-1] + 1.0) / 2.0 * robot.max_finger_width)
+        tau = action[: self.motion_dim] * self.torque_fraction * robot.max_torque
+        for _ in range(substeps):
+            robot.apply_torques(tau + robot.gravity_torques() if self.gravity_compensation else tau)
+            step()
+
+
+CONTROL_MODES = ("ee_delta", "joint_delta", "joint_torque")
+
+
+def make_control(mode: str, robot: Robot, **settings: Any) -> ControlMode:
+    """The control mode called ``mode``, given the env's settings (each mode takes its own)."""
+    if mode == "ee_delta":
+        return EEDelta(robot, settings["ee_step"], settings["ee_yaw"], settings["yaw_step"])
+    if mode == "joint_delta":
+        return JointDelta(robot, settings["joint_step"])
+    if mode == "joint_torque":
+        return JointTorque(robot, settings["torque_fraction"], settings["gravity_compensation"])
+    raise ValueError(f"unknown control_mode {mode!r}; valid modes: {', '.join(CONTROL_MODES)}")

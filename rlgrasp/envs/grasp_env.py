@@ -1,0 +1,248 @@
+"""GraspEnv: the gymnasium env, built from a scene, a robot, a control mode, a task, a randomizer
+and an observation layout. Each part owns its bodies and state; the env only sequences them."""
+
+from __future__ import annotations
+
+import collections
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from rlgrasp.envs.cameras import Camera, CameraSpec
+from rlgrasp.envs.control import CONTROL_MODES, make_control
+from rlgrasp.envs.observation import PROPRIOCEPTION, ObservationLayout, full_parts
+from rlgrasp.envs.randomization import Randomizer
+from rlgrasp.envs.robot import make_robot
+from rlgrasp.envs.scene import Scene
+from rlgrasp.envs.task import LiftTask, RewardWeights
+from rlgrasp.envs.visuals import VisualRandomizer
+
+
+def _check_args(
+    control_mode: str, render_mode: str | None, max_episode_steps: int, substeps: int, time_step: float
+) -> None:
+    """Bad constructor values fail here, naming the argument, before a physics client exists."""
+    if control_mode not in CONTROL_MODES:
+        raise ValueError(f"unknown control_mode {control_mode!r}; valid modes: {', '.join(CONTROL_MODES)}")
+    modes = GraspEnv.metadata["render_modes"]
+    if render_mode is not None and render_mode not in modes:
+        raise ValueError(f"unknown render_mode {render_mode!r}; valid: {', '.join(modes)}")
+    for name, value in (("max_episode_steps", max_episode_steps), ("substeps", substeps)):
+        if int(value) != value or value < 1:
+            raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    if not (time_step > 0 and math.isfinite(time_step)):
+        raise ValueError(f"time_step must be a positive number, got {time_step!r}")
+
+
+class GraspEnv(gym.Env):
+    """A robot arm grasps an object on the ground and lifts it.
+
+    ``objects`` says which objects episodes draw (``rlgrasp.envs.objects``; default the cube),
+    ``robot`` which arm (``rlgrasp.envs.robot.ROBOTS``). Observation: one float32 vector of named
+    parts (``obs_slices``; ``rlgrasp.envs.observation``): ``object_pos``/``object_quat`` are the
+    object's base (centre of mass) pose, ``object_minus_grasp`` is its bounding-box centre minus the
+    grasp point and ``object_extents`` the bounding box's size in the object's own frame.
+    Action: a Box in [-1, 1]; the last entry is the absolute finger-width target (-1 closed,
+    +1 open); the others depend on ``control_mode`` (``rlgrasp.envs.control``): ``ee_delta``,
+    ``joint_delta`` or ``joint_torque``.
+
+    With a ``camera`` (``rlgrasp.envs.cameras.CameraSpec`` keys) the observation is a ``Dict``:
+    ``state`` (proprioception only: nothing about the object), ``depth`` and/or ``rgb`` (channel
+    first) and ``privileged`` (the flat state vector above, for a teacher or a critic). ``visual``
+    names a visual randomization preset (``rlgrasp.envs.visuals``).
+    """
+
+    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 20}
+
+    def __init__(
+        self,
+        control_mode: str = "ee_delta",
+        randomization: str | Mapping[str, Any] | None = "default",
+        max_episode_steps: int = 50,
+        time_step: float = 1.0 / 240.0,
+        substeps: int = 12,
+        reward: str = "dense",
+        reward_weights: Mapping[str, float] | None = None,
+        success_height: float = 0.05,
+        terminate_on_success: bool = False,
+        ee_step: float = 0.04,
+        ee_yaw: bool = False,
+        yaw_step: float = 0.2,
+        joint_step: float = 0.05,
+        torque_fraction: float = 0.3,
+        gravity_compensation: bool = True,
+        render_mode: str | None = None,
+        render_width: int = 320,
+        render_height: int = 240,
+        camera_distance: float = 1.1,
+        camera_yaw: float = 60.0,
+        camera_pitch: float = -25.0,
+        solver_iterations: int = 20,
+        robot: str = "panda",
+        robot_urdf: str | None = None,
+        objects: str | list[str] | Mapping[str, Any] | None = "cube",
+        camera: Mapping[str, Any] | None = None,
+        visual: str | None = "none",
+    ):
+        _check_args(control_mode, render_mode, max_episode_steps, substeps, time_step)
+        camera_spec = CameraSpec.from_config(camera) if camera else None
+        self.randomizer = Randomizer(randomization)
+        weights = RewardWeights(**(reward_weights or {}))
+        self.max_episode_steps, self.substeps = int(max_episode_steps), int(substeps)
+        self.terminate_on_success, self.render_mode = terminate_on_success, render_mode
+        self.viewer = dict(width=render_width, height=render_height, distance=camera_distance,
+                           yaw=camera_yaw, pitch=camera_pitch)
+        self.metadata = {**self.metadata, "render_fps": round(1.0 / (time_step * substeps))}
+
+        self.scene = Scene(time_step, gui=render_mode == "human", solver_iterations=solver_iterations)
+        self.client = self.scene.client
+        try:
+            self.task = LiftTask(self.scene, objects, reward, weights, success_height)
+            render = None if camera_spec is None else "wrist" if camera_spec.mount == "wrist" else "low_poly"
+            self.robot = make_robot(robot, self.client, robot_urdf, render)
+            self.visuals = VisualRandomizer(visual, self.client)
+            self.camera = Camera(camera_spec, self.client) if camera_spec else None
+        except BaseException:
+            self.close()
+            raise
+        self.control_mode = control_mode
+        self.control = make_control(
+            control_mode, self.robot, ee_step=ee_step, ee_yaw=ee_yaw, yaw_step=yaw_step,
+            joint_step=joint_step, torque_fraction=torque_fraction,
+            gravity_compensation=gravity_compensation,
+        )
+        self.robot.reset(self.robot.neutral_pose)
+        if self.camera is not None:
+            self._prepare_rendering()
+        self.scene.save()
+
+        self.action_dim = self.control.action_dim
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (self.action_dim,), np.float32)
+        self.layout = ObservationLayout(full_parts(self.robot.arm_dof, self.action_dim))
+        self.obs_slices = self.layout.slices
+        self.observation_space = self._observation_space()
+        self._visual_rng: np.random.Generator | None = None
+        self._visual: dict[str, float] = {}
+
+        self._idle_action = np.zeros(self.action_dim, np.float32)
+        self._idle_action[-1] = 1.0  # fingers open
+        self._steps = 0
+        self.episode: dict[str, float] = {}
+
+    # --- gymnasium API -------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        rng, robot = self.np_random, self.robot
+        ep = self.randomizer.sample(rng)
+        arm_q = np.add(robot.neutral_pose, rng.normal(0.0, ep["arm_pose_noise"], robot.arm_dof))
+        self._action_offset = rng.normal(0.0, ep["action_noise_episode"], self.action_dim)
+        self._obs_offset = rng.normal(0.0, ep["obs_noise_episode"], self.layout.noisy_size)
+        choice = self.task.objects.draw(rng)  # last: a cube-only env draws the values it always has
+
+        self.scene.restore(ep["gravity_z"])
+        robot.set_dynamics(ep["joint_damping"], ep["finger_friction"])
+        robot.reset(np.clip(arm_q, robot.lower, robot.upper))
+        self.control.reset(ep)
+        robot.command_fingers(robot.max_finger_width)
+        self.task.reset(choice, ep, set(self.randomizer.ranges))  # settles a mesh: after the robot
+        self._randomize_visuals(seed)
+
+        self._pending = collections.deque([self._idle_action.copy()] * ep["action_delay"])
+        self._prev_action = self._idle_action.copy()
+        self._steps = 0
+        self.episode = ep
+        obs, readings = self._observe()
+        return obs, self._info(readings, success=False)
+
+    def _prepare_rendering(self) -> None:
+        """What cameras render, made cheap: a small ground, and for a wrist camera only the links
+        it can see (the robot is already its low-poly model)."""
+        self.scene.use_compact_ground()
+        if self.camera.spec.mount == "wrist":
+            self.robot.show_only(self.robot.wrist_links())
+
+    def _randomize_visuals(self, seed: int | None) -> None:
+        """Visuals draw from their own generator (derived from the reset seed), so that turning them
+        on leaves the physics episodes of a seed as they are."""
+        if self._visual_rng is None or seed is not None:
+            self._visual_rng = np.random.default_rng(self.np_random.bit_generator.seed_seq.spawn(1)[0])
+        self._visual = self.visuals.sample(self._visual_rng)
+        bodies = {"object": self.scene.object, "ground": self.scene.ground}
+        self.visuals.apply(self._visual, bodies, self.robot, self.camera)
+
+    def step(self, action):
+        action = np.asarray(action, dtype=np.float32).reshape(self.action_dim)
+        if not np.all(np.isfinite(action)):
+            raise ValueError(f"action must be finite, got {action.tolist()}")
+        action = np.clip(action, -1.0, 1.0)
+        # Action delay: the arm executes what the agent chose `action_delay` steps ago.
+        self._pending.append(action)
+        applied = self._pending.popleft()
+        step_noise = self.np_random.normal(0.0, self.episode["action_noise_step"], self.action_dim)
+        noise = self._action_offset + step_noise
+        self.control.apply(np.clip(applied + noise, -1.0, 1.0), self.substeps, self.client.stepSimulation)
+        self._prev_action = action
+        self._steps += 1
+
+        obs, readings = self._observe()
+        reward, success = self.task.evaluate(readings, readings["grasp_pos"])
+        terminated = bool(success and self.terminate_on_success)
+        truncated = self._steps >= self.max_episode_steps
+        return obs, reward, terminated, truncated, self._info(readings, success)
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        return self.scene.viewer_image(**self.viewer)
+
+    def close(self):
+        if getattr(self, "scene", None) is not None:
+            self.scene.close()
+            self.scene = None
+
+    # --- internals -----------------------------------------------------------------------------
+    def _observation_space(self) -> gym.spaces.Space:
+        flat = gym.spaces.Box(-np.inf, np.inf, (self.layout.size,), np.float32)
+        if self.camera is None:
+            return flat
+        state_size = sum(self.layout.slices[n].stop - self.layout.slices[n].start for n in PROPRIOCEPTION)
+        state = gym.spaces.Box(-np.inf, np.inf, (state_size,), np.float32)
+        return gym.spaces.Dict({"state": state, **self.camera.spec.spaces(), "privileged": flat})
+
+    def _observe(self) -> tuple[Any, dict[str, Any]]:
+        """The observation (with this step's sensor noise) and the true readings it came from."""
+        vector, readings = self._state_vector()
+        if self.camera is None:
+            return vector, readings
+        mount = self.robot.camera_mount() if self.camera.spec.mount == "wrist" else None
+        images = self.camera.render(mount)
+        self.visuals.corrupt(images, self._visual, self._visual_rng)
+        return {"state": self.layout.select(vector, PROPRIOCEPTION), **images, "privileged": vector}, readings
+
+    def _state_vector(self) -> tuple[np.ndarray, dict[str, Any]]:
+        """The flat state (with this step's sensor noise) and the true readings it came from."""
+        robot = self.robot
+        readings = robot.readings()
+        readings.update(self.task.readings(readings["grasp_pos"], robot.body, robot.finger_links))
+        readings["prev_action"] = self._prev_action
+        obs = self.layout.assemble(readings)
+        ep = self.episode
+        if ep["obs_noise_step"] > 0 or ep["obs_noise_episode"] > 0:
+            step_noise = self.np_random.normal(0.0, ep["obs_noise_step"], self.layout.noisy_size)
+            self.layout.add_noise(obs, self._obs_offset + step_noise)
+        return obs, readings
+
+    def _info(self, readings: dict[str, Any], success: bool) -> dict[str, Any]:
+        return {**self.task.info(readings, success), "randomization": {**self.episode, **self._visual}}
+
+    # --- what tools read -------------------------------------------------------------------------
+    @property
+    def object_name(self) -> str:
+        return self.task.object_name
+
+    @property
+    def object_extents(self) -> np.ndarray:
+        return self.task.object_extents

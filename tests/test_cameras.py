@@ -1,0 +1,137 @@
+"""Cameras and visual randomization: spaces, determinism, what is recorded, and the held-out set."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+from rlgrasp.envs import GraspEnv
+from rlgrasp.envs.cameras import CameraSpec
+from rlgrasp.envs.visuals import TRAIN_TEXTURES, VISUAL_PRESETS
+
+WRIST_DEPTH = {"mount": "wrist", "modality": "depth"}
+
+
+@pytest.fixture
+def cam_env():
+    envs = []
+
+    def make(**kwargs):
+        envs.append(GraspEnv(**kwargs))
+        return envs[-1]
+
+    yield make
+    for env in envs:
+        env.close()
+
+
+@pytest.mark.parametrize(
+    "modality, keys", [("depth", {"depth"}), ("rgb", {"rgb"}), ("rgbd", {"depth", "rgb"})]
+)
+def test_dict_observation_spaces_and_shapes(modality, keys, cam_env):
+    env = cam_env(camera={"mount": "wrist", "modality": modality, "width": 48, "height": 40})
+    assert set(env.observation_space.spaces) == {"state", "privileged"} | keys
+    obs, _ = env.reset(seed=0)
+    assert env.observation_space.contains(obs)
+    if "depth" in keys:
+        assert obs["depth"].shape == (1, 40, 48) and obs["depth"].dtype == np.float32
+    if "rgb" in keys:
+        assert obs["rgb"].shape == (3, 40, 48) and obs["rgb"].dtype == np.uint8
+    # proprioception only: arm q, qd, finger width, grasp pos, vel, previous action
+    assert obs["state"].shape == (7 + 7 + 1 + 3 + 3 + env.action_dim,)
+
+
+def test_camera_env_passes_gymnasiums_checker(cam_env):
+    check_env(cam_env(camera=WRIST_DEPTH, visual="default"), skip_render_check=True)
+
+
+def test_state_part_holds_nothing_about_the_object(cam_env):
+    env = cam_env(camera=WRIST_DEPTH)
+    obs, _ = env.reset(seed=1)
+    names = ("arm_q", "arm_qd", "finger_width", "grasp_pos", "grasp_vel", "prev_action")
+    expected = np.concatenate([obs["privileged"][env.obs_slices[n]] for n in names])
+    assert np.array_equal(obs["state"], expected)
+
+
+def test_cameras_and_visuals_leave_the_physics_of_a_seed_alone(cam_env):
+    """The low-poly render model, the compact ground and the visual draws change no physics."""
+    plain = cam_env(control_mode="joint_delta")
+    seen = cam_env(control_mode="joint_delta", camera=WRIST_DEPTH, visual="default")
+    a, _ = plain.reset(seed=5)
+    b, _ = seen.reset(seed=5)
+    rng = np.random.default_rng(0)
+    for _ in range(15):
+        action = rng.uniform(-1, 1, plain.action_dim)
+        a = plain.step(action)[0]
+        b = seen.step(action)[0]
+    assert np.array_equal(a, b["privileged"])
+
+
+def test_same_seed_same_images_and_visuals(cam_env):
+    runs = []
+    for _ in range(2):
+        env = cam_env(camera={"mount": "wrist", "modality": "rgbd"}, visual="default")
+        obs, info = env.reset(seed=3)
+        obs2 = env.step(np.zeros(env.action_dim))[0]
+        runs.append((obs, obs2, info["randomization"]))
+    (o1, s1, r1), (o2, s2, r2) = runs
+    for key in ("depth", "rgb"):
+        assert np.array_equal(o1[key], o2[key]) and np.array_equal(s1[key], s2[key])
+    assert r1 == r2
+
+
+def test_visual_randomization_is_recorded_and_varies(cam_env):
+    env = cam_env(camera={"mount": "wrist", "modality": "rgb"}, visual="default")
+    draws = [env.reset(seed=s)[1]["randomization"] for s in range(4)]
+    visual_keys = {k for k in draws[0] if k.startswith("visual_")}
+    expected = {"visual_object_hue", "visual_light_elevation", "visual_depth_noise", "visual_fov_delta"}
+    assert expected <= visual_keys
+    assert len({d["visual_object_hue"] for d in draws}) == 4
+    images = [env.reset(seed=s)[0]["rgb"] for s in range(2)]
+    assert not np.array_equal(images[0], images[1])
+
+
+def test_no_visual_randomization_adds_nothing_to_info(cam_env):
+    info = cam_env(camera=WRIST_DEPTH, visual="none").reset(seed=0)[1]
+    assert not any(k.startswith("visual_") for k in info["randomization"])
+
+
+def test_heldout_visuals_are_disjoint_from_training():
+    held = VISUAL_PRESETS["heldout"]
+    for name in ("default", "wide"):
+        train = VISUAL_PRESETS[name]
+        assert set(train.textures) <= set(TRAIN_TEXTURES) and not set(held.textures) & set(train.textures)
+        assert held.hues.low > train.hues.high
+        assert held.light_elevation.high < train.light_elevation.low
+
+
+def test_depth_is_in_metres_and_sees_the_ground(cam_env):
+    env = cam_env(camera=WRIST_DEPTH, randomization="none")
+    depth = env.reset(seed=0)[0]["depth"]
+    grasp_height = env.robot.grasp_point()[0][2]
+    # the ground fills most of the image, about as far below the camera as the hand is high
+    assert 0.02 <= float(np.median(depth)) <= 1.0
+    assert float(np.median(depth)) > grasp_height
+
+
+@pytest.mark.parametrize(
+    "camera, match",
+    [
+        ({"mount": "elbow"}, "camera.mount='elbow': valid mounts: wrist, fixed"),
+        ({"modality": "thermal"}, "camera.modality='thermal'"),
+        ({"width": 0}, "camera.width=0: must be an integer from 1 to 512"),
+        ({"height": 513}, "camera.height=513"),
+        ({"near": 0.5, "far": 0.5}, "need 0 < near < far"),
+        ({"fov": 200}, "camera.fov=200"),
+        ({"lens": 3}, "camera: unknown key 'lens'"),
+    ],
+)
+def test_bad_camera_config_names_the_key(camera, match):
+    with pytest.raises(ValueError, match=match.replace("(", r"\(").replace("[", r"\[")):
+        CameraSpec.from_config(camera)
+
+
+def test_unknown_visual_preset_names_the_valid_ones(cam_env):
+    with pytest.raises(ValueError, match="unknown visual preset 'bright'; valid presets: none, default"):
+        cam_env(camera=WRIST_DEPTH, visual="bright")
