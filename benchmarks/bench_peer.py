@@ -63,9 +63,9 @@ class LinearLR:
 
 def n_envs(cfg: Any) -> int:
     """SB3's env count: rlgrasp's workers x envs per worker (same frames per batch)."""
-    from rlgrasp.train.collect import frames_per_batch
+    from rlgrasp.train.collectors import collector_backend
 
-    return frames_per_batch(cfg) // cfg.collector.steps_per_env
+    return collector_backend(cfg.collector).frames_per_batch // cfg.collector.steps_per_env
 
 
 def sb3_kwargs(cfg: Any) -> dict[str, Any]:

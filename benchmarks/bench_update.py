@@ -20,6 +20,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a check
 import torch
 
 from rlgrasp.compose import compose_train
+from rlgrasp.train.collectors import collector_backend
 from rlgrasp.train.parts import build_parts
 from rlgrasp.train.ppo import PPOLearner
 
@@ -35,12 +36,12 @@ def main() -> None:
     args = parser.parse_args()
 
     cfg = compose_train(args.overrides or ["experiment=grasp_ppo"])
-    workers = 1 if cfg.collector.backend == "single" else cfg.collector.num_workers
     # One in-process worker collects the batch training would get from all of them.
+    frames = collector_backend(cfg.collector).frames_per_batch
     cfg = compose_train([
         *(args.overrides or ["experiment=grasp_ppo"]),
         "collector=single",
-        f"collector.steps_per_env={cfg.collector.steps_per_env * workers}",
+        f"collector.steps_per_env={frames // cfg.collector.envs_per_worker}",
     ])
     torch.manual_seed(0)
     collector = build_parts(cfg).make_collector()

@@ -11,12 +11,14 @@ command line.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import torch
 from hydra.core.config_store import ConfigStore
+from hydra.utils import instantiate
 from omegaconf import MISSING, OmegaConf
 
 from rlgrasp.train.rundir import register_resolvers
@@ -110,8 +112,28 @@ class MLPConfig:
 
 
 @dataclass
+class CollectorConfig:
+    """How frames are collected: ``_target_`` is the backend, a class of ``rlgrasp.train.collectors``
+    built from the other keys (``collector=process``: TorchRL's collector over worker processes;
+    ``single``: in-process; ``ray``: collector actors on a Ray cluster). Each worker steps one
+    gymnasium ``SyncVectorEnv`` of ``envs_per_worker`` envs and runs the actor on the whole batch;
+    frames per batch = workers x envs_per_worker x steps_per_env."""
+
+    _target_: str = "rlgrasp.train.collectors.ProcessCollector"
+    num_workers: int = 2  # 0: in-process
+    envs_per_worker: int = 4
+    steps_per_env: int = 128
+    torch_threads: int = 1
+    # Collect the next batch while the learner updates (one update of lag; rlgrasp/train/batches.py, ppo.py).
+    overlap: bool = True
+    # Cut each env's first episode at a different length so that a worker's envs are not in phase:
+    # needed when steps_per_env is short against an episode (rlgrasp/train/collect.py StaggeredStart).
+    stagger_starts: bool = False
+
+
+@dataclass
 class RayConfig:
-    """Where ``collector.backend=ray`` runs its collector actors (one per worker)."""
+    """Where ``collector=ray`` runs its collector actors (one per worker)."""
 
     # null: start a private local Ray bound to node_ip_address; "auto" or "host:6379": join a cluster.
     address: str | None = None
@@ -124,44 +146,46 @@ class RayConfig:
 
 
 @dataclass
-class CollectorConfig:
-    """How frames are collected: ``backend=process`` (TorchRL Collector over worker processes),
-    ``ray`` (collector actors on a Ray cluster) or ``single`` (in-process). Each worker steps one
-    gymnasium ``SyncVectorEnv`` of ``envs_per_worker`` envs and runs the actor on the whole batch;
-    frames per batch = workers x envs_per_worker x steps_per_env."""
+class RayCollectorConfig(CollectorConfig):
+    """``collector=ray``: the process backend's keys plus where Ray runs (``collector.ray.*``)."""
 
-    backend: str = "process"
-    num_workers: int = 2
-    envs_per_worker: int = 4
-    steps_per_env: int = 128
-    torch_threads: int = 1
-    # Collect the next batch while the learner updates (one update of lag; rlgrasp/train/batches.py, ppo.py).
-    overlap: bool = True
-    # Cut each env's first episode at a different length so that a worker's envs are not in phase:
-    # needed when steps_per_env is short against an episode (rlgrasp/train/collect.py StaggeredStart).
-    stagger_starts: bool = False
+    _target_: str = "rlgrasp.train.collectors.RayCollector"
     ray: RayConfig = field(default_factory=RayConfig)
 
 
 @dataclass
 class LoggerConfig:
-    backend: str = "tensorboard"  # tensorboard | none
-    console_interval_s: float = 5.0
+    """Where the run's curves go: ``_target_`` is a class of ``rlgrasp.train.logger`` (``logger=
+    tensorboard``; ``none``: the console only) or ``rlgrasp.train.trackers`` (``wandb``, ``mlflow``:
+    TensorBoard plus the tracker), built from the other keys."""
+
+    _target_: str = "rlgrasp.train.logger.TensorBoardLogger"
+    console_interval_s: float = 5.0  # the console's progress line at most this often
 
 
 @dataclass
 class TrackerLoggerConfig(LoggerConfig):
     """``logger=wandb`` / ``logger=mlflow``: TensorBoard plus a tracker (``rlgrasp.train.trackers``)."""
 
-    tracker: str = "wandb"  # wandb | mlflow
     project: str = "rlgrasp"  # W&B project / MLflow experiment
-    entity: str | None = None  # W&B team or user (null: your default)
-    # W&B: online | offline | disabled (null: $WANDB_MODE, else online).
-    mode: str | None = None
-    # MLflow: a server (http://...), a database (sqlite:///...) or a folder (file:...).
-    tracking_uri: str | None = None
     tags: list[str] = field(default_factory=list)  # run tags in the tracker's UI
     run_name: str | None = None  # null: <experiment_name>/<run dir name>
+
+
+@dataclass
+class WandbLoggerConfig(TrackerLoggerConfig):
+    _target_: str = "rlgrasp.train.trackers.WandbLogger"
+    entity: str | None = None  # W&B team or user (null: your default)
+    # online | offline | disabled (null: $WANDB_MODE, else online).
+    mode: str | None = None
+
+
+@dataclass
+class MlflowLoggerConfig(TrackerLoggerConfig):
+    _target_: str = "rlgrasp.train.trackers.MlflowLogger"
+    # A server (http://...), a database (sqlite:///...) or a folder (file:...); null: $MLFLOW_TRACKING_URI,
+    # else the folder outputs/mlruns.
+    tracking_uri: str | None = None
 
 
 @dataclass
@@ -323,8 +347,10 @@ def register_configs() -> None:
     cs.store(group="algo", name="ppo_schema", node=PPOConfig)
     cs.store(group="model", name="mlp_schema", node=MLPConfig)
     cs.store(group="collector", name="collector_schema", node=CollectorConfig)
+    cs.store(group="collector", name="ray_collector_schema", node=RayCollectorConfig)
     cs.store(group="logger", name="logger_schema", node=LoggerConfig)
-    cs.store(group="logger", name="tracker_schema", node=TrackerLoggerConfig)
+    cs.store(group="logger", name="wandb_schema", node=WandbLoggerConfig)
+    cs.store(group="logger", name="mlflow_schema", node=MlflowLoggerConfig)
     cs.store(group="paths", name="paths_schema", node=PathsConfig)
     cs.store(name="eval_schema", node=EvalConfig)
     cs.store(group="sweep", name="sweep_schema", node=SweepConfig)
@@ -336,17 +362,14 @@ def _positive(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0
 
 
-def _train_problems(cfg: Any) -> list[str]:
-    """Each bad value of a composed training config as ``key=value: what is allowed``."""
+def _train_problems(cfg: Any, batch: int) -> list[str]:
+    """Each bad value of a composed training config as ``key=value: what is allowed``; ``batch``: the
+    collector's frames per batch."""
     c, a, m, e, k = cfg.collector, cfg.algo, cfg.model, cfg.eval, cfg.checkpoint
-    workers = 1 if c.backend == "single" or c.num_workers == 0 else c.num_workers
-    batch = workers * c.envs_per_worker * c.steps_per_env
     checks = [
         ("total_frames", cfg.total_frames, cfg.total_frames > 0, "must be > 0"),
         ("time_budget_min", cfg.time_budget_min, cfg.time_budget_min is None or cfg.time_budget_min > 0,
          "must be > 0 or null"),
-        ("collector.backend", c.backend, c.backend in ("process", "ray", "single"),
-         "must be process, ray or single"),
         ("collector.num_workers", c.num_workers, c.num_workers >= 0, "must be >= 0 (0: in-process)"),
         ("collector.envs_per_worker", c.envs_per_worker, c.envs_per_worker >= 1, "must be >= 1"),
         ("collector.steps_per_env", c.steps_per_env, c.steps_per_env >= 1, "must be >= 1"),
@@ -371,8 +394,6 @@ def _train_problems(cfg: Any) -> list[str]:
         ("checkpoint.keep_last", k.keep_last, k.keep_last >= 1, "must be >= 1"),
         ("checkpoint.interval_frames", k.interval_frames, k.interval_frames >= 0,
          "must be >= 0 (0: only at the end)"),
-        ("logger.backend", cfg.logger.backend, cfg.logger.backend in ("tensorboard", "none"),
-         "must be tensorboard or none"),
     ]
     return [f"{key}={value!r}: {allowed}" for key, value, ok, allowed in checks if not ok] + _device_problems(
         cfg.device
@@ -395,6 +416,15 @@ def _device_problems(device: str) -> list[str]:
     return []
 
 
+def _built(key: str, node: Any, build: Callable[[Any], Any]) -> Any:
+    """``build(node)`` for a ``_target_`` node; ``ConfigError`` naming the target when it fails."""
+    try:
+        return build(node)
+    except Exception as exc:  # noqa: BLE001 - Hydra wraps whatever the target raised
+        reason = " ".join(str(exc).split(", set env var HYDRA_FULL_ERROR")[0].split())[:300]
+        raise ConfigError(f"{key}._target_={node.get('_target_')!r} cannot be built: {reason}") from None
+
+
 def validate_train(cfg: Any) -> None:
     """Refuse a training config with a bad value: ``ConfigError`` naming the first (and how many
     more). The env's own keywords are checked by the env when the learner builds it, before workers."""
@@ -403,7 +433,9 @@ def validate_train(cfg: Any) -> None:
             OmegaConf.merge(OmegaConf.structured(EnvConfig), cfg.env)
         except Exception as exc:  # noqa: BLE001 - OmegaConf's validation errors
             raise ConfigError(f"env: {str(exc).splitlines()[0]}") from None
-    problems = _train_problems(cfg)
+    collector = _built("collector", cfg.collector, lambda node: instantiate(node, _convert_="all"))
+    _built("logger", cfg.logger, lambda node: instantiate(node, _partial_=True))  # built with the run dir
+    problems = _train_problems(cfg, collector.frames_per_batch)
     if problems:
         more = f" (and {len(problems) - 1} more: {'; '.join(problems[1:])})" if len(problems) > 1 else ""
         raise ConfigError(problems[0] + more)

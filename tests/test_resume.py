@@ -15,10 +15,11 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from omegaconf import OmegaConf
 
 import rlgrasp
 from rlgrasp.compose import compose_train
-from rlgrasp.config import ConfigError
+from rlgrasp.config import ConfigError, validate_train
 from rlgrasp.evaluation.source import EvaluationError, load_checked_checkpoint
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.loop import Trainer
@@ -28,6 +29,7 @@ from tests.procs import wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 SMOKE = ["experiment=smoke", "logger=none"]
+COLLECTORS, LOGGERS = "rlgrasp.train.collectors", "rlgrasp.train.logger"
 
 
 @pytest.fixture(scope="module")
@@ -91,6 +93,42 @@ def test_resume_refuses_a_change_of_a_fixed_key_naming_both_values(run: Path) ->
     cfg = compose_train([*SMOKE, f"paths.output_dir={run}", "randomization=wide"])
     with pytest.raises(ConfigError, match="env.randomization"):
         merged_config(cfg, saved, {"env.randomization"})
+
+
+def test_resume_may_switch_the_collector_and_logger_classes(run: Path) -> None:
+    """collector=ray on a process run brings the Ray keys; back to process drops them again (the
+    process backend would refuse them); logger=none replaces TensorBoard."""
+    saved = ckpt_lib.load_checkpoint(run)["config"]
+    cfg = compose_train([*SMOKE, f"paths.output_dir={run}", "collector=ray", "collector.ray.address=auto"])
+    to_ray = merged_config(cfg, saved, {"collector._target_", "collector.ray.address"})
+    assert to_ray.collector._target_ == "rlgrasp.train.collectors.RayCollector"
+    assert to_ray.collector.ray.address == "auto"
+    cfg = compose_train([*SMOKE, f"paths.output_dir={run}", "collector=process", "logger=tensorboard"])
+    back = merged_config(cfg, OmegaConf.to_container(to_ray), {"collector._target_", "logger._target_"})
+    assert back.collector._target_.endswith("ProcessCollector") and "ray" not in back.collector
+    assert back.logger._target_.endswith("TensorBoardLogger")
+    validate_train(back)
+
+
+def test_a_checkpoint_with_string_backends_resumes(tmp_path: Path, run: Path) -> None:
+    """Checkpoints from before the _target_ nodes (policies/*.pt among them) name the collector and
+    the logger with strings; read, they come in today's shape, and resume."""
+    state = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
+    collector = {k: v for k, v in state["config"]["collector"].items() if k != "_target_"}
+    state["config"]["collector"] = {"backend": "process", **collector, "ray": {"address": None}}
+    state["config"]["logger"] = {"backend": "none", "console_interval_s": 5.0}
+    old = tmp_path / "old" / "checkpoints" / "last.pt"
+    ckpt_lib.save_checkpoint(old, state)
+    cfg = compose_train([f"paths.output_dir={old.parents[1]}", f"resume={old}"])
+    merged, resumed = prepare_run(cfg, {"resume"})
+    assert resumed is not None
+    assert dict(merged.collector) == {"_target_": f"{COLLECTORS}.ProcessCollector", **collector}
+    assert dict(merged.logger) == {"_target_": f"{LOGGERS}.ConsoleLogger", "console_interval_s": 5.0}
+    for shipped in sorted((ROOT / "policies").glob("*.pt")):
+        config = ckpt_lib.read_checkpoint(shipped)["config"]
+        assert config["collector"]["_target_"] == f"{COLLECTORS}.ProcessCollector"
+        assert "backend" not in config["collector"] and "ray" not in config["collector"]
+        assert config["logger"] == {"_target_": f"{LOGGERS}.TensorBoardLogger", "console_interval_s": 5.0}
 
 
 def test_a_requeued_slurm_job_resumes_its_run_dir_without_resume_given(run: Path, monkeypatch) -> None:

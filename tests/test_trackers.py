@@ -3,6 +3,7 @@ tracker, and ``resume=`` continues the same tracker run. Short in-process runs o
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import time
 from pathlib import Path
@@ -10,8 +11,8 @@ from typing import Any
 
 import pytest
 
+from rlgrasp.config import ConfigError
 from rlgrasp.train.loop import train
-from rlgrasp.train.trackers import attach_tracker
 
 STAND_IN = {"_target_": "tests.standins.pendulum", "max_episode_steps": 20}
 TAGS = ("charts/SPS", "losses/policy_loss", "losses/value_loss", "eval/mean_reward", "time/collect_s")
@@ -127,7 +128,13 @@ def test_wandb_offline_gets_tags_config_and_resumes_the_same_run(tmp_path: Path,
     assert {1024, 2048} <= frames
 
 
-def test_unknown_tracker_is_refused(tmp_path: Path, train_cfg) -> None:
-    cfg = train_cfg("logger=wandb", "logger.tracker=comet")
-    with pytest.raises(ValueError, match="logger.tracker must be one of wandb, mlflow"):
-        attach_tracker(object(), cfg.logger, tmp_path, {}, resumed=False)
+def test_a_tracker_without_its_extra_is_refused_in_one_line(
+    tmp_path: Path, train_cfg, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Before any worker starts, and naming the extra to install."""
+    find_spec = importlib.util.find_spec
+    hidden = lambda name, *args: None if name == "wandb" else find_spec(name, *args)  # noqa: E731
+    monkeypatch.setattr(importlib.util, "find_spec", hidden)
+    with pytest.raises(ConfigError, match=r'logger=wandb needs its extra: pip install -e "\.\[wandb\]"'):
+        _train(train_cfg, tmp_path / "run", 1024, "logger=wandb")
+    assert not (tmp_path / "run" / "tracker.json").exists()

@@ -155,7 +155,8 @@ def test_a_seed_gives_one_run_on_this_machine(tmp_path: Path, train_cfg) -> None
     bit for bit. Not across machines: another CPU's kernels round differently."""
     overrides = ("collector.steps_per_env=128",)  # 512-frame batches: 4 updates in 2,048 frames
     cfg = train_cfg("experiment=smoke", *overrides)
-    assert cfg.collector.backend == "process" and cfg.collector.num_workers == 2 and cfg.collector.overlap
+    assert cfg.collector._target_ == "rlgrasp.train.collectors.ProcessCollector"
+    assert cfg.collector.num_workers == 2 and cfg.collector.overlap
     first, second = _twice(train_cfg, tmp_path, *overrides)
     assert len(first["curves"]["losses/policy_loss"]) == 4 and len(first["checkpoints"]) >= 3
     assert {"eval/mean_reward", "losses/approx_kl", "charts/episodic_return"} <= set(first["curves"])
@@ -180,11 +181,9 @@ algo: {name: ppo, gamma: 0.9, gae_lambda: 0.9, epochs: 2, minibatch_size: 256, l
        gae_every_epoch: true}
 model: {name: mlp, hidden_sizes: [64, 64], activation: tanh, init_log_std: -0.5, min_std: 0.05,
         obs_norm: true, obs_clip: 10.0}
-collector: {backend: process, num_workers: 2, envs_per_worker: 2, steps_per_env: 256, torch_threads: 1,
-            overlap: true, stagger_starts: false,
-            ray: {address: null, node_ip_address: 127.0.0.1, num_cpus: null, cpus_per_worker: 1.0,
-                  memory_per_worker_gb: 1.0, include_dashboard: false}}
-logger: {backend: tensorboard, console_interval_s: 0.0}
+collector: {_target_: rlgrasp.train.collectors.ProcessCollector, num_workers: 2, envs_per_worker: 2,
+            steps_per_env: 256, torch_threads: 1, overlap: true, stagger_starts: false}
+logger: {_target_: rlgrasp.train.logger.TensorBoardLogger, console_interval_s: 0.0}
 eval: {interval_frames: 1024, episodes: 4, final_episodes: 8, num_envs: 4, seed_offset: 1000000}
 checkpoint: {interval_frames: 1024, keep_last: 2}
 paths: {root_dir: .}

@@ -18,23 +18,24 @@ from typing import Any
 
 import numpy as np
 import torch
+from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDictBase
 
 from rlgrasp.config import ConfigError
 from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
-from rlgrasp.train.batches import Batches, collects_ahead
-from rlgrasp.train.collect import read_env_errors, shut_down
+from rlgrasp.train.batches import Batches
+from rlgrasp.train.collect import read_env_errors
+from rlgrasp.train.collectors import shut_down
 from rlgrasp.train.evaluate import periodic_evaluator
-from rlgrasp.train.logger import RunLogger, log, progress_line, setup_text_log
+from rlgrasp.train.logger import log, progress_line, setup_text_log
 from rlgrasp.train.metrics import Due, Throughput, finished_episodes
 from rlgrasp.train.parts import build_parts
 from rlgrasp.train.ppo import NonFiniteError, PPOLearner
 from rlgrasp.train.preemption import StopSignals
 from rlgrasp.train.resume import prepare_run
-from rlgrasp.train.rundir import CHECKPOINTS, ENV_ERRORS, TENSORBOARD
-from rlgrasp.train.trackers import attach_tracker
+from rlgrasp.train.rundir import CHECKPOINTS, ENV_ERRORS
 from rlgrasp.utils import flatten
 
 #: Called after each evaluation with (frames, metrics); see ``train``.
@@ -87,7 +88,8 @@ class Trainer:
             raise ConfigError(f"env: {exc}".splitlines()[0]) from exc
         self.actor = self.parts.actor
         self.learner = PPOLearner(
-            self.actor, self.parts.critic, self.parts.norm, cfg.algo, self.device, collects_ahead(cfg)
+            self.actor, self.parts.critic, self.parts.norm, cfg.algo, self.device,
+            stale_batches=self.parts.collector.collects_ahead,
         )
 
         # --- counters, possibly resumed
@@ -97,11 +99,10 @@ class Trainer:
             self.load_state_dict(resumed)
             log.info("resumed from %s at %s frames", cfg.resume, f"{self.frames:,}")
 
-        self.logger = RunLogger(
-            self.run_dir / TENSORBOARD, cfg.logger.backend, purge_step=self.frames + 1 if resumed else None
+        # The class logger._target_ names (rlgrasp.train.logger, .trackers), given the run's own arguments.
+        self.logger = instantiate(cfg.logger, _partial_=True, _convert_="all")(
+            run_dir=self.run_dir, config=self.config, resumed_frames=None if resumed is None else self.frames
         )
-        # logger=wandb|mlflow: the same calls also go to that tracker (rlgrasp/train/trackers.py).
-        self.logger = attach_tracker(self.logger, cfg.logger, self.run_dir, self.config, resumed is not None)
         if resumed is None:
             self.logger.text("config", OmegaConf.to_yaml(self.config), 0)
         self.evaluator = periodic_evaluator(self.parts.make_env, cfg)
@@ -160,7 +161,7 @@ class Trainer:
                 self.run_dir,
                 self.device,
                 self.parts.frames_per_batch,
-                self.cfg.collector.backend,
+                type(self.parts.collector).__name__,
                 self.parts.spec,
             )
             self.start = time.monotonic()  # the time budget includes the workers' start-up
@@ -192,7 +193,7 @@ class Trainer:
         loop ends."""
         behaviour = copy.deepcopy(self.actor)
         collector = self.parts.make_collector(self.generation, str(self.error_dir), behaviour)
-        batches = Batches(collector, self.actor, behaviour, collects_ahead(self.cfg))
+        batches = Batches(collector, self.actor, behaviour, self.parts.collector.collects_ahead)
         try:
             yield batches
         finally:
@@ -206,7 +207,7 @@ class Trainer:
         ckpt_due = Due(cfg.checkpoint.interval_frames, self.frames)
         throughput = Throughput()
         self.recent: dict[str, float] = {}
-        start = last_console = self.start
+        start = self.start
         while self.frames < cfg.total_frames and time.monotonic() - start < budget_s:
             self._check_stop()
             t0 = time.perf_counter()
@@ -223,9 +224,7 @@ class Trainer:
                 is_best = self.evaluate()
             if ckpt_due(self.frames) or is_best:
                 self.save(is_best)
-            if time.monotonic() - last_console >= cfg.logger.console_interval_s:
-                last_console = time.monotonic()
-                self.console(sps, budget_s - (last_console - start))
+            self.logger.progress(self.progress(sps, budget_s - (time.monotonic() - start)))
 
     def collect(self, batches: Iterator[TensorDictBase]) -> TensorDictBase:
         """The next batch, flattened to ``[envs * workers, time]`` (not yet counted in ``frames``: the
@@ -259,28 +258,26 @@ class Trainer:
 
     def episode_metrics(self, batch: TensorDictBase) -> dict[str, float]:
         """Return, length and success of the episodes that ended in this batch (for the console too)."""
-        stagger = self.cfg.collector.get("stagger_starts", False)
+        stagger = self.parts.collector.stagger_starts
         ep = finished_episodes(batch, self.cfg.env.get("max_episode_steps") if stagger else None)
         for key in ("charts/episodic_return", "charts/success_rate"):
             if key in ep:
                 self.recent[key] = ep[key]
         return ep
 
-    def console(self, sps: float, budget_left_s: float) -> None:
+    def progress(self, sps: float, budget_left_s: float) -> str:
+        """The console's progress line (the logger shows it every ``logger.console_interval_s``)."""
         eta = min((self.cfg.total_frames - self.frames) / max(sps, 1e-9), budget_left_s)
         eval_success = self.last_eval.get("success_rate") if self.last_eval else None
-        log.info(
-            progress_line(
-                self.frames,
-                self.cfg.total_frames,
-                sps,
-                self.recent.get("charts/success_rate"),
-                self.recent.get("charts/episodic_return"),
-                eval_success,
-                eta,
-            )
+        return progress_line(
+            self.frames,
+            self.cfg.total_frames,
+            sps,
+            self.recent.get("charts/success_rate"),
+            self.recent.get("charts/episodic_return"),
+            eval_success,
+            eta,
         )
-        self.logger.flush()
 
     def evaluate(self, final: bool = False) -> bool:
         """Deterministic evaluation; logs it, reports it to ``on_eval``; returns whether it is the best.

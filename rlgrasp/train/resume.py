@@ -3,7 +3,8 @@
 ``resume=<run dir>`` (or a checkpoint file) continues the run as it was launched: the checkpoint's
 resolved config is the base and only what the command line changes is applied on top. Keys in
 ``MUTABLE`` may change (and are logged); any other change is refused with one line naming the key
-and both values, before any worker starts. ``resume=auto`` continues the run directory's newest
+and both values, before any worker starts. A ``_target_`` node whose class changes (``collector=ray``
+on a process run) keeps only the keys of its new class. ``resume=auto`` continues the run directory's newest
 readable checkpoint when there is one and starts fresh otherwise (``rlgrasp.train.rundir.run_dir`` picks
 the newest run of the same experiment and seed as the run directory). A job SLURM runs again after a
 requeue (``SLURM_RESTART_COUNT`` > 0) resumes as with ``resume=auto`` when no ``resume`` was given.
@@ -44,7 +45,7 @@ MUTABLE = (
     "checkpoint.keep_last",
     "logger.",
     "collector.num_workers",
-    "collector.backend",
+    "collector._target_",
     "collector.torch_threads",
     "collector.overlap",
     "collector.ray.",
@@ -138,7 +139,22 @@ def merged_config(cfg: DictConfig, saved: dict[str, Any], changed: Iterable[str]
             f"cannot change on resume: {refused[0]}{more}; on resume only these may change: "
             + ", ".join(m.rstrip(".") for m in MUTABLE if m not in _QUIET)
         )
+    for key in sorted(k for k in keys if k.endswith("._target_") and given[k] != old.get(k, given[k])):
+        _drop_keys_of_the_old_class(base, key.removesuffix("._target_"), old, given)
     return base
+
+
+def _drop_keys_of_the_old_class(
+    base: DictConfig, node: str, old: dict[str, Any], given: dict[str, Any]
+) -> None:
+    """Remove from ``base``'s ``node`` the keys (first level) the command line's node does not have:
+    the old class's own keys, which the new class would refuse."""
+    def children(flat: dict[str, Any]) -> set[str]:
+        return {k[len(node) + 1 :].split(".")[0] for k in flat if k.startswith(node + ".")}
+
+    target = OmegaConf.select(base, node)
+    for child in children(old) - children(given):
+        del target[child]
 
 
 def _reshaped(key: str, old: dict[str, Any]) -> bool:
