@@ -252,7 +252,8 @@ class EvalConfig:
     #   'randomization={preset:default,object_mass:[0.5,1.0],finger_force:[5,10]}'
     # (randomization=wide alone selects the training config group, which sets env.randomization.)
     randomization: Any = None
-    # Env keywords over the checkpoint's env config, e.g. +env.max_episode_steps=80.
+    # Env keywords over the checkpoint's env config, e.g. env.max_episode_steps=80 (as in training;
+    # rlgrasp.overrides adds the `+`). objects=random_urdfs_test or objects={paths:[...]} set env.objects.
     env: dict[str, Any] = field(default_factory=dict)
     # Worker processes (1 = in this process); results do not depend on it. A spawned worker pays
     # the imports first: use 2+ for long evaluations.

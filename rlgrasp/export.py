@@ -12,20 +12,38 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import importlib.util
 import io
 import json
 import logging
 import re
 import sys
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import hydra
 import numpy as np
 import torch
+from hydra.core.config_store import ConfigStore
 from torch import nn
+
+from rlgrasp.config import CONFIG_DIR
+from rlgrasp.envs.factory import env_factory
+from rlgrasp.evaluation.policies import CheckpointActor
+from rlgrasp.evaluation.source import (
+    CKPT_KINDS,
+    ENV_ERRORS,
+    EvaluationError,
+    build_env_cfg,
+    check_layout,
+    load_checked_checkpoint,
+    resolve_checkpoint_path,
+)
+from rlgrasp.overrides import entry_point, unwritable
+from rlgrasp.train.checkpoint import package_versions, policy_from_checkpoint
 
 log = logging.getLogger("rlgrasp.export")
 
@@ -55,8 +73,6 @@ class ExportConfig:
 
 def register_export_config() -> None:
     """Register ``ExportConfig`` as ``export_schema`` (idempotent; called by the entry point)."""
-    from hydra.core.config_store import ConfigStore
-
     ConfigStore.instance().store(name="export_schema", node=ExportConfig)
 
 
@@ -96,8 +112,6 @@ class DeployPolicy(nn.Module):
 
 def deploy_module(ckpt: dict[str, Any]) -> DeployPolicy:
     """The ``DeployPolicy`` of a loaded checkpoint, built from the very modules training uses."""
-    from rlgrasp.train.checkpoint import policy_from_checkpoint
-
     actor = policy_from_checkpoint(ckpt, "cpu")
     net = actor.module[0].module
     spec = ckpt["spec"]
@@ -107,30 +121,40 @@ def deploy_module(ckpt: dict[str, Any]) -> DeployPolicy:
 # --- writing and loading the three formats ------------------------------------------------------
 def write_format(module: DeployPolicy, fmt: str, path: Path, obs_dim: int) -> Path:
     """Serialize ``module`` as ``fmt`` to ``path``, with a dynamic batch dimension."""
-    path.parent.mkdir(parents=True, exist_ok=True)
+    if fmt not in FORMATS:
+        raise ExportError(f"format={fmt}: must be one of {', '.join(FORMATS)} or all")
+    with _writing(path):
+        path.parent.mkdir(parents=True, exist_ok=True)
     example = torch.zeros(2, obs_dim)
     with warnings.catch_warnings():
         # TorchScript and the dynamic-axes bridge warn about their own deprecation on every call.
         warnings.simplefilter("ignore")
         if fmt == "torchscript":
-            torch.jit.save(torch.jit.script(module), str(path))
+            scripted = torch.jit.script(module)
+            with _writing(path):
+                torch.jit.save(scripted, str(path))
         elif fmt == "pt2":
             batch = torch.export.Dim("batch", min=1)
             program = torch.export.export(module, (example,), dynamic_shapes={"observation": {0: batch}})
-            torch.export.save(program, str(path))
-        elif fmt == "onnx":
-            _write_onnx(module, example, path)
+            with _writing(path):
+                torch.export.save(program, str(path))
         else:
-            raise ExportError(f"format must be one of {', '.join(FORMATS)} or all, got {fmt!r}")
+            _write_onnx(module, example, path)
     return path
+
+
+@contextlib.contextmanager
+def _writing(path: Path) -> Iterator[None]:
+    """A file system refusing a write (full disk, permissions changed since ``check_request``) is one
+    line naming the file, not the writer's traceback (torch's writers raise RuntimeError for it)."""
+    try:
+        yield
+    except (OSError, RuntimeError) as exc:
+        raise ExportError(f"cannot write {path}: {str(exc).splitlines()[0]}") from exc
 
 
 def _write_onnx(module: DeployPolicy, example: torch.Tensor, path: Path) -> None:
     """The torch.export-based exporter (the legacy TorchScript one is deprecated); needs onnxscript."""
-    try:
-        import onnxscript  # noqa: F401
-    except ImportError as exc:
-        raise ExportError('format=onnx needs the export extra: pip install -e ".[export]"') from exc
     batch = torch.export.Dim("batch", min=1)
     # The exporter prints its optimization passes and warns about torchvision's ops: not ours.
     for name in ("torch.onnx", "onnxscript", "onnx_ir"):
@@ -146,7 +170,8 @@ def _write_onnx(module: DeployPolicy, example: torch.Tensor, path: Path) -> None
             external_data=False,  # one self-contained file, whatever the model's size
             verbose=False,
         )
-        program.save(str(path))
+        with _writing(path):
+            program.save(str(path))
 
 
 def load_exported(path: str | Path) -> Callable[[np.ndarray], np.ndarray]:
@@ -156,7 +181,7 @@ def load_exported(path: str | Path) -> Callable[[np.ndarray], np.ndarray]:
     """
     path = Path(path)
     if path.suffix == ".onnx":
-        import onnxruntime
+        import onnxruntime  # lazy: an optional dependency (the export extra), for ONNX files only
 
         session = onnxruntime.InferenceSession(str(path), providers=["CPUExecutionProvider"])
         return lambda obs: session.run(None, {"observation": np.asarray(obs, np.float32)})[0]
@@ -175,9 +200,6 @@ def load_exported(path: str | Path) -> Callable[[np.ndarray], np.ndarray]:
 # --- checking against the checkpoint policy ------------------------------------------------------
 def make_env(env_cfg: dict[str, Any]) -> Any:
     """The checkpoint's env without rendering (``rlgrasp.envs.factory.env_factory``, as everywhere)."""
-    from rlgrasp.envs.factory import env_factory
-    from rlgrasp.evaluation.source import build_env_cfg
-
     cfg = build_env_cfg(env_cfg)
     cfg["render_mode"] = None
     return env_factory(cfg)()
@@ -187,8 +209,6 @@ def record(ckpt: dict[str, Any], n: int, seed: int) -> tuple[np.ndarray, np.ndar
     """``n`` observations from seeded episodes of the checkpoint's env driven by the checkpoint's
     deterministic policy, and that policy's actions: evaluation's own ``CheckpointActor``, one
     observation at a time, so the reference is exactly what ``rlgrasp-eval`` would do."""
-    from rlgrasp.evaluation.policies import CheckpointActor
-
     actor = CheckpointActor(ckpt, deterministic=True)
     env = make_env(ckpt["config"]["env"])
     observations, actions = [], []
@@ -238,8 +258,6 @@ def action_meaning(env_cfg: dict[str, Any]) -> list[str]:
 
 
 def versions() -> dict[str, str]:
-    from rlgrasp.train.checkpoint import package_versions
-
     names = ("torch", "numpy", "gymnasium", "pybullet", "onnx", "onnxruntime", "rlgrasp")
     return package_versions(names, missing=None)
 
@@ -281,11 +299,13 @@ def describe(ckpt: dict[str, Any], ckpt_path: Path, env: Any) -> dict[str, Any]:
 def output_paths(fmt: str, out: str | None, ckpt_path: Path) -> dict[str, Path]:
     """Format -> file: ``out`` as a file (one format) or a folder; default ``<run>/export/``."""
     formats = list(FORMATS) if fmt == "all" else [fmt]
-    unknown = [f for f in formats if f not in FORMATS]
-    if unknown:
-        raise ExportError(f"format must be one of {', '.join(FORMATS)} or all, got {fmt!r}")
-    if out and len(formats) == 1 and Path(out).suffix:
-        return {fmt: Path(out).expanduser()}
+    if any(f not in FORMATS for f in formats):
+        raise ExportError(f"format={fmt}: must be one of {', '.join(FORMATS)} or all")
+    if out and len(formats) == 1 and Path(out).suffix and not Path(out).expanduser().is_dir():
+        path = Path(out).expanduser()
+        if path.suffix != FORMATS[fmt]:  # loaders (load_exported, the example) go by the extension
+            raise ExportError(f"out={out}: a {fmt} file must end in {FORMATS[fmt]}")
+        return {fmt: path}
     if out:
         folder = Path(out).expanduser()
     else:  # <run>/checkpoints/x.pt -> <run>/export; a loose file -> export/ beside it
@@ -296,8 +316,6 @@ def output_paths(fmt: str, out: str | None, ckpt_path: Path) -> dict[str, Path]:
 
 def load_source(ckpt: str | None, kind: str) -> tuple[dict[str, Any], Path]:
     """The checkpoint, checked like evaluation checks it (its messages, as ``ExportError``)."""
-    from rlgrasp.evaluation.source import EvaluationError, load_checked_checkpoint, resolve_checkpoint_path
-
     if not ckpt:
         raise ExportError("ckpt=<run dir or checkpoint file> is required")
     try:
@@ -307,15 +325,37 @@ def load_source(ckpt: str | None, kind: str) -> tuple[dict[str, Any], Path]:
         raise ExportError(str(exc)) from exc
 
 
+def check_request(cfg: Any, paths: dict[str, Path]) -> None:
+    """Everything about the request that can be wrong, before any work: the numbers, the packages
+    ONNX needs, and that every file can be written."""
+    if cfg.verify and cfg.verify_obs < 1:
+        raise ExportError(f"verify_obs={cfg.verify_obs}: must be at least 1 (or verify=false)")
+    if not cfg.tolerance >= 0:
+        raise ExportError(f"tolerance={cfg.tolerance}: must be >= 0")
+    if "onnx" in paths:
+        needed = ["onnxscript", *(["onnxruntime"] if cfg.verify else [])]
+        missing = [m for m in needed if importlib.util.find_spec(m) is None]
+        if missing:
+            raise ExportError(f"format=onnx needs {', '.join(missing)}: pip install -e \".[export]\"")
+    for path in paths.values():
+        problem = unwritable(path)
+        if problem:
+            raise ExportError(f"cannot write {path}: {problem}")
+
+
 def export(cfg: Any) -> dict[str, dict[str, Any]]:
     """Write the file(s) and their JSON; verify each on recorded observations. Returns, per format,
     the file and the largest action difference (``None`` with ``verify=false``)."""
-    from rlgrasp.evaluation.source import EvaluationError, check_layout
-
+    if cfg.ckpt_kind not in CKPT_KINDS:
+        raise ExportError(f"ckpt_kind={cfg.ckpt_kind}: must be one of {', '.join(CKPT_KINDS)}")
     ckpt, ckpt_path = load_source(cfg.ckpt, cfg.ckpt_kind)
     paths = output_paths(cfg.format, cfg.out, ckpt_path)
+    check_request(cfg, paths)
     module = deploy_module(ckpt)
-    env = make_env(ckpt["config"]["env"])
+    try:
+        env = make_env(ckpt["config"]["env"])
+    except ENV_ERRORS as exc:
+        raise ExportError(f"cannot build the env of checkpoint {ckpt_path}: {exc}") from exc
     try:
         check_layout(ckpt["spec"], env, f"checkpoint {ckpt_path}")
         info = describe(ckpt, ckpt_path.resolve(), env)
@@ -360,10 +400,7 @@ def run(cfg: Any) -> dict[str, dict[str, Any]]:
 
 def main() -> None:
     """Console entry point ``rlgrasp-export`` (same as ``python scripts/export.py``)."""
-    import hydra
-
-    from rlgrasp.config import CONFIG_DIR
-
     register_export_config()
     logging.basicConfig(level=logging.INFO, format="[%(levelname)s] %(message)s")
-    hydra.main(config_path=CONFIG_DIR, config_name="export", version_base="1.3")(run)()
+    hydra_main = hydra.main(config_path=CONFIG_DIR, config_name="export", version_base="1.3")(run)
+    entry_point("export")(hydra_main)()

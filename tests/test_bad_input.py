@@ -1,35 +1,79 @@
-"""Bad input to ``scripts/train.py``: each gives one line naming the key or file, no traceback, and
-leaves no run directory behind. The cases run the real entry point (Hydra included) in-process.
+"""Bad input to every entry point: each gives one line naming the key or file and what is allowed, a
+non-zero exit code, no traceback, and leaves nothing behind (no run, evaluation or export folder).
+The cases run the real entry points (Hydra and argparse included) in-process: scripts/train.py,
+scripts/evaluate.py (rlgrasp-eval), scripts/export.py, scripts/enjoy.py (without a display: the
+checks come before the display's), scripts/sweep.py and rlgrasp-demo.
 
-``python tests/test_bad_input.py`` prints the table of docs/FAULTS.md from these cases.
+``python tests/test_bad_input.py`` prints the bad-input table of the docs from these cases.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
+import logging
+import os
 import pickle
 import runpy
 import sys
+import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from hydra.core.global_hydra import GlobalHydra
+from omegaconf import OmegaConf
+
+from rlgrasp import demo
+from rlgrasp.compose import compose_train
+from rlgrasp.train.loop import Trainer
+from rlgrasp.utils import markdown_table
 
 ROOT = Path(__file__).resolve().parents[1]
 SMOKE = ["experiment=smoke", "logger=none"]
+#: What PyBullet prints on stderr when it is imported, whatever the command: not one of our lines.
+PYBULLET_BANNER = "pybullet build time:"
+SCRIPTS = {"train": "train.py", "eval": "evaluate.py", "export": "export.py", "enjoy": "enjoy.py",
+           "sweep": "sweep.py"}
+#: Each entry point's command before a case's arguments (placeholders filled by _fill).
+BASE = {
+    "train": [*SMOKE, "paths.root_dir={root}"],
+    "eval": ["ckpt={run}", "ckpt_kind=last", "episodes=2", "video=false", "plots=false"],
+    "export": ["ckpt={run}", "ckpt_kind=last", "verify_obs=20"],
+    "enjoy": ["ckpt={run}", "ckpt_kind=last"],
+    "sweep": ["experiment=smoke", "sweep.root_dir={root}/sweeps"],
+    "demo": ["--out", "{root}/demo", "--episodes", "1"],
+}
+COMMANDS = {
+    "train": "scripts/train.py experiment=smoke logger=none",
+    "eval": "rlgrasp-eval ckpt=<run> ckpt_kind=last episodes=2 video=false plots=false",
+    "export": "rlgrasp-export ckpt=<run> ckpt_kind=last verify_obs=20",
+    "enjoy": "rlgrasp-enjoy ckpt=<run> ckpt_kind=last (no display)",
+    "sweep": "rlgrasp-sweep experiment=smoke",
+    "demo": "rlgrasp-demo --out <dir> --episodes 1",
+}
+
+
+def our_lines(stderr: str) -> list[str]:
+    """The non-empty lines of ``stderr`` without PyBullet's import banner."""
+    return [ln for ln in stderr.splitlines() if ln.strip() and not ln.startswith(PYBULLET_BANNER)]
 
 
 def _make_run(root: Path) -> Path:
-    """A run directory holding one real smoke checkpoint (built without starting workers)."""
-    from rlgrasp.compose import compose_train
-    from rlgrasp.train.loop import Trainer
-
+    """A run directory as a launch leaves it (its ``.hydra/config.yaml``) holding one real smoke
+    checkpoint (built without starting workers)."""
     run = root / "outputs" / "train" / "smoke" / "done_run"
     if not (run / "checkpoints" / "last.pt").exists():
-        Trainer(compose_train([*SMOKE, f"paths.output_dir={run}"])).save()
+        cfg = compose_train([*SMOKE, f"paths.output_dir={run}"])
+        Trainer(cfg).save()
+        (run / ".hydra").mkdir()
+        (run / ".hydra" / "config.yaml").write_text(OmegaConf.to_yaml(cfg))
     return run
 
 
 def _files(root: Path) -> dict[str, str]:
-    """Inputs that are files: a run, an empty dir, a truncated checkpoint, a foreign pickle."""
+    """Inputs that are files: a run, an empty dir, a truncated checkpoint, a foreign pickle, a file
+    where a folder should be, a mesh that is not one, a file that is no mesh at all."""
     run = _make_run(root)
     empty = root / "empty_run"
     empty.mkdir(exist_ok=True)
@@ -40,15 +84,22 @@ def _files(root: Path) -> dict[str, str]:
     foreign.write_bytes(pickle.dumps({"weights": [1, 2, 3]}))
     unwritable = root / "a_file"
     unwritable.write_text("not a directory")
+    notamesh = root / "notamesh.obj"
+    notamesh.write_text("this is not a mesh\n")
+    notes = root / "notes.txt"
+    notes.write_text("not a model")
     return {"run": str(run), "empty": str(empty), "truncated": str(truncated), "foreign": str(foreign),
-            "unwritable": str(unwritable / "out")}
+            "unwritable": str(unwritable / "out"), "notamesh": str(notamesh), "notes": str(notes)}
 
 
-# (what, overrides (with {run} etc. filled from _files), a fragment of the one-line message)
-CASES = [
-    ("unknown key", ["algo.lrr=1"], "Could not override 'algo.lrr'"),
-    ("wrong type", ["algo.lr=abc"], "algo.lr"),
-    ("unknown group option", ["collector=bogus"], "Could not find 'collector/bogus'"),
+# (entry point, what, arguments after BASE (placeholders filled by _fill), a fragment of the one line)
+TRAIN = [
+    ("unknown key", ["algo.lrr=1"], "algo.lrr=1: unknown key 'lrr'; algo has name, gamma"),
+    ("wrong type", ["algo.lr=abc"], "algo.lr=abc: Value 'abc' of type 'str' could not be converted"),
+    ("unknown group option", ["collector=bogus"],
+     "collector=bogus: no such option; collector is one of process, ray, single"),
+    ("unknown objects option", ["objects=random_urdfs_tset"],
+     "objects=random_urdfs_tset: no such option; objects is one of cube, primitives"),
     ("no frames", ["total_frames=0"], "total_frames=0: must be > 0"),
     ("negative frames", ["total_frames=-5"], "total_frames=-5: must be > 0"),
     ("negative workers", ["collector.num_workers=-1"], "collector.num_workers=-1: must be >= 0"),
@@ -60,12 +111,15 @@ CASES = [
     ("zero learning rate", ["algo.lr=0"], "algo.lr=0.0: must be > 0"),
     ("negative learning rate", ["algo.lr=-0.001"], "algo.lr=-0.001: must be > 0"),
     ("no substeps", ["env.substeps=0"], "env: substeps must be a positive integer, got 0"),
-    ("unknown control mode", ["env.control_mode=fly"], "env:"),
+    ("unknown control mode", ["env.control_mode=fly"], "env: unknown control_mode 'fly'; valid modes"),
     ("no hidden layers", ["model.hidden_sizes=[]"], "model.hidden_sizes=[]: must be a non-empty list"),
     ("inverted randomization range", ["env.randomization={object_mass:[1.0,0.5]}"],
      "'object_mass': low (1.0) is greater than high (0.5)"),
-    ("negative randomization range", ["env.randomization={object_mass:[-1.0,0.5]}"],
+    ("negative randomization range", ["randomization={object_mass:[-1.0,0.5]}"],
      "'object_mass': range [-1.0, 0.5] is outside the allowed"),
+    ("own objects: nothing matches", ["objects={paths:[{root}/nowhere/*.obj]}"],
+     "nowhere/*.obj' matches no .urdf or .obj file"),
+    ("own objects: not a mesh", ["env.objects={paths:[{notamesh}]}"], "has no usable vertices"),
     ("CUDA on a machine without it", ["device=cuda"], "device='cuda': CUDA is not available"),
     ("no eval episodes", ["eval.episodes=0"], "eval.episodes=0: must be >= 1"),
     ("keep no checkpoints", ["checkpoint.keep_last=0"], "checkpoint.keep_last=0: must be >= 1"),
@@ -80,41 +134,135 @@ CASES = [
     ("a fresh run into a run dir with checkpoints", ["hydra.run.dir={run}"], "already holds checkpoints"),
     ("an unwritable output directory", ["hydra.run.dir={unwritable}"], "cannot create the run directory"),
 ]
+EVAL = [
+    ("unknown objects option (a typo of random_urdfs_test)", ["objects=random_urdfs_tset"],
+     "objects=random_urdfs_tset: no such option; objects is one of cube, primitives"),
+    ("unknown randomization option", ["randomization=widee"],
+     "randomization=widee: no such option; randomization is one of default, none, wide"),
+    ("own objects: nothing matches", ["objects={paths:[{root}/nowhere/*.obj]}"],
+     "nowhere/*.obj' matches no .urdf or .obj file"),
+    ("own objects: not a mesh", ["objects={paths:[{notamesh}]}"], "notamesh.obj has no usable vertices"),
+    ("own objects: not a mesh file (training's spelling)", ["env.objects={paths:[{notes}]}"],
+     "notes.txt' matches no .urdf or .obj file"),
+    ("unknown key", ["episdoes=5"], "episdoes=5: unknown key 'episdoes'; the config has policy, ckpt"),
+    ("wrong type", ["episodes=abc"], "episodes=abc: Value 'abc' of type 'str' could not be converted"),
+    ("no episodes", ["episodes=0"], "episodes=0: must be at least 1"),
+    ("no workers", ["workers=0"], "workers=0: must be at least 1"),
+    ("missing checkpoint", ["ckpt={root}/nowhere.pt"], "missing checkpoint: "),
+    ("truncated checkpoint", ["ckpt={truncated}"], "corrupt checkpoint: "),
+    ("unknown env keyword", ["env.grip=1"], "env.grip: unknown key 'grip'; env has _target_, control_mode"),
+    ("env the checkpoint cannot act in", ["env.control_mode=joint_delta"], "action layout mismatch"),
+    ("unknown video format", ["video=true", "video_format=avi"],
+     "video_format=avi: must be auto, gif or mp4"),
+    ("an unwritable output directory", ["out_dir={unwritable}"], "cannot write the evaluation to"),
+]
+EXPORT = [
+    ("unknown format", ["format=tflite"], "format=tflite: must be one of torchscript, onnx, pt2 or all"),
+    ("an unwritable output path", ["out={unwritable}/policy.pt"], "cannot write "),
+    ("a file name for another format", ["format=pt2", "out={root}/policy.onnx"],
+     "a pt2 file must end in .pt2"),
+    ("nothing to verify on", ["verify_obs=0"], "verify_obs=0: must be at least 1 (or verify=false)"),
+    ("negative tolerance", ["tolerance=-1"], "tolerance=-1.0: must be >= 0"),
+    ("missing checkpoint", ["ckpt={root}/nowhere.pt"], "missing checkpoint: "),
+    ("a file that is not a checkpoint", ["ckpt={foreign}"], "corrupt checkpoint: "),
+    ("unknown checkpoint kind", ["ckpt_kind=worst"], "ckpt_kind=worst: must be one of best, last"),
+    ("unknown key", ["formatt=onnx"], "formatt=onnx: unknown key 'formatt'; the config has ckpt"),
+]
+ENJOY = [
+    ("no episodes", ["episodes=0"], "episodes=0: must be at least 1"),
+    ("negative speed", ["speed=-1"], "speed=-1.0: must be at least 0"),
+    ("unknown render mode", ["render=vr"], "render=vr: must be human or none"),
+    ("unknown objects option", ["objects=random_urdfs_tset"],
+     "objects=random_urdfs_tset: no such option; objects is one of cube"),
+    ("own objects: nothing matches", ["objects={paths:[{root}/nowhere/*.obj]}"],
+     "matches no .urdf or .obj file"),
+    ("missing checkpoint", ["ckpt={root}/nowhere.pt"], "missing checkpoint: "),
+    ("unknown key", ["episdoes=5"], "episdoes=5: unknown key 'episdoes'"),
+]
+SWEEP = [
+    ("unknown sweep", ["sweep=bogus"], "sweep=bogus: no such option; sweep is one of grasp_ppo, smoke"),
+    ("unknown sweep key", ["sweep.n_trial=3"], "sweep.n_trial=3: unknown key 'n_trial'; sweep has"),
+    ("no trials", ["sweep.n_trials=0"], "sweep.n_trials=0: must be >= 1"),
+    ("a metric training does not report", ["sweep.metric=accuracy"],
+     "sweep.metric=accuracy: must be one of success_rate, mean_reward"),
+    ("unknown direction", ["sweep.direction=up"], "sweep.direction=up: must be one of maximize, minimize"),
+    ("unknown sampler", ["sweep.sampler.name=grid"], "sweep.sampler.name=grid: must be one of tpe"),
+    ("unknown training key", ["algo.lrr=1"], "algo.lrr=1: unknown key 'lrr'; algo has"),
+    ("bad training value", ["algo.lr=-1"], "a trial's training config: algo.lr=-1.0: must be > 0"),
+    ("a parameter naming no training key", ["+sweep.params.algo.lrr={type:float,low:0.1,high:0.2}"],
+     "sweep.params: algo.lrr=0.1: unknown key 'lrr'"),
+    ("unknown distribution", ["sweep.params.algo.lr={type:gauss}"],
+     "sweep.params.algo.lr: type must be float, int or categorical"),
+    ("own objects: nothing matches", ["objects={paths:[{root}/nowhere/*.obj]}"],
+     "a trial's env: object path"),
+    ("an unwritable study directory", ["sweep.root_dir={unwritable}"], "cannot create"),
+    ("a summary of no study", ["--summary"], "no study to summarize: "),
+]
+DEMO = [
+    ("no episodes", ["--episodes", "0"], "--episodes 0: must be at least 1"),
+    ("wrong type", ["--episodes", "abc"], "argument --episodes: invalid int value: 'abc'"),
+    ("unknown randomization preset", ["--randomization", "widee"],
+     "--randomization widee: unknown randomization preset 'widee'; valid presets: none, default, wide"),
+    ("unknown object set", ["--objects", "random_urdfs_tset"],
+     "--objects random_urdfs_tset: unknown object set 'random_urdfs_tset'; valid sets: cube"),
+    ("an unwritable output directory", ["--out", "{unwritable}"], "cannot write there"),
+    ("negative seed", ["--seed", "-1"], "--seed -1: must be at least 0"),
+    ("unknown flag", ["--bogus"], "unrecognized arguments: --bogus"),
+]
+CASES = [(entry, *case) for entry, cases in (("train", TRAIN), ("eval", EVAL), ("export", EXPORT),
+                                              ("enjoy", ENJOY), ("sweep", SWEEP), ("demo", DEMO))
+         for case in cases]
 
 
-def _fill(overrides: list[str], root: Path, paths: dict[str, str]) -> list[str]:
+def _fill(args: list[str], root: Path, paths: dict[str, str]) -> list[str]:
     out = []
-    for o in overrides:
+    for a in args:
         for name, value in {"root": str(root), **paths}.items():
-            o = o.replace("{" + name + "}", value)
-        out.append(o)
+            a = a.replace("{" + name + "}", value)
+        out.append(a)
     return out
 
 
-def run_train(argv: list[str], cwd: Path, capsys) -> tuple[int, str]:
-    """``scripts/train.py argv`` in this process: (exit code, everything printed)."""
-    import logging
+@contextlib.contextmanager
+def _no_display() -> Iterator[None]:
+    """rlgrasp-enjoy as on a headless machine: its checks must not need the GUI."""
+    saved = {k: os.environ.pop(k) for k in ("DISPLAY", "WAYLAND_DISPLAY") if k in os.environ}
+    try:
+        yield
+    finally:
+        os.environ.update(saved)
 
-    from hydra.core.global_hydra import GlobalHydra
 
+def run_entry(entry: str, argv: list[str], cwd: Path) -> int:
+    """One entry point with ``argv`` in this process, as its command would run it; the exit code."""
+    script = str(ROOT / "scripts" / SCRIPTS[entry]) if entry in SCRIPTS else "rlgrasp-demo"
     old_argv, old_cwd = sys.argv, Path.cwd()
-    sys.argv = [str(ROOT / "scripts" / "train.py"), *argv]
-    code = 0
-    import os
-
+    sys.argv = [script, *argv]
     os.chdir(cwd)
     try:
-        runpy.run_path(str(ROOT / "scripts" / "train.py"), run_name="__main__")
+        with _no_display():
+            if entry == "demo":
+                demo.main()
+            else:
+                runpy.run_path(script, run_name="__main__")
+        return 0
     except SystemExit as exc:
-        code = exc.code if isinstance(exc.code, int) else 1
+        return exc.code if isinstance(exc.code, int) else 1
     finally:
         sys.argv = old_argv
         os.chdir(old_cwd)
         GlobalHydra.instance().clear()
         for handler in logging.getLogger().handlers[:]:
             logging.getLogger().removeHandler(handler)
-    out = capsys.readouterr()
-    return code, out.out + out.err
+
+
+def error_lines(out: str, err: str) -> list[str]:
+    """The error lines printed: ``error: ...`` on stderr, or training's logged ``[ERROR]`` line."""
+    return [ln for ln in our_lines(out + "\n" + err) if ln.startswith("error:") or "[ERROR]" in ln]
+
+
+def _snapshot(root: Path) -> list[Path]:
+    return sorted(root.rglob("*"))
 
 
 @pytest.fixture(scope="module")
@@ -123,51 +271,43 @@ def files(tmp_path_factory) -> tuple[Path, dict[str, str]]:
     return root, _files(root)
 
 
-@pytest.mark.parametrize(("what", "overrides", "message"), CASES, ids=[c[0] for c in CASES])
-def test_bad_input_gives_one_line_and_leaves_nothing(files, capsys, what, overrides, message) -> None:
+@pytest.mark.parametrize(("entry", "what", "args", "message"), CASES,
+                         ids=[f"{c[0]}: {c[1]}" for c in CASES])
+def test_bad_input_gives_one_line_and_leaves_nothing(files, capsys, entry, what, args, message) -> None:
     root, paths = files
-    argv = _fill([*SMOKE, *overrides], root, paths)
-    before = sorted(p for p in root.rglob("*") if "done_run" not in p.parts)
-    code, out = run_train([*argv, f"paths.root_dir={root}"], root, capsys)
-    assert code != 0, out
-    assert "Traceback" not in out, out
-    assert message in out, out
-    after = sorted(p for p in root.rglob("*") if "done_run" not in p.parts)
+    before = _snapshot(root)
+    code = run_entry(entry, _fill([*BASE[entry], *args], root, paths), root)
+    out = capsys.readouterr()
+    shown = out.out + out.err
+    assert code != 0, shown
+    assert "Traceback" not in shown, shown
+    errors = error_lines(out.out, out.err)
+    assert len(errors) == 1 and message in errors[0], shown
+    if entry != "train":  # training logs its refusal (to stdout, as the rest of its log)
+        assert our_lines(out.err) == errors, shown
+    after = _snapshot(root)
     assert after == before, f"left behind: {set(after) - set(before)}"
-    # the run that inputs pointed at is untouched
-    assert sorted(p.name for p in (Path(paths["run"]) / "checkpoints").iterdir()) == [
-        "ckpt_0000000000.pt", "last.pt"]
 
 
 def _table() -> str:
-    """The docs/FAULTS.md table: each case and the line it prints (run: python tests/test_bad_input.py)."""
-    import tempfile
-
-    from rlgrasp.utils import markdown_table
-
-    class _Capture:
-        def readouterr(self):
-            return type("O", (), {"out": "", "err": ""})
-
-    rows = []
+    """The bad-input table of the docs: each case and the line it prints, per entry point."""
+    sections = []
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         paths = _files(root)
-        for what, overrides, _ in CASES:
-            argv = _fill([*SMOKE, *overrides], root, paths)
-            import contextlib
-            import io
-
-            buf = io.StringIO()
-            with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(buf):
-                code, _ = run_train([*argv, f"paths.root_dir={root}"], root, _Capture())
-            lines = [ln for ln in buf.getvalue().splitlines()
-                     if ln.strip() and not ln.startswith(("argv", "Set the environment"))]
-            errors = [ln for ln in lines if "ERROR" in ln] or lines
-            line = errors[0].split(" - ", 1)[-1]
-            shown = " ".join(overrides).replace(tmp, "...")
-            rows.append((what, f"`{shown}`", code, line.replace(tmp, "...").replace("|", "\\|")))
-    return markdown_table(["input", "command line (after `experiment=smoke`)", "exit", "message"], rows)
+        for entry, script in COMMANDS.items():
+            rows = []
+            for _, what, args, _ in (c for c in CASES if c[0] == entry):
+                out, err = io.StringIO(), io.StringIO()
+                with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+                    code = run_entry(entry, _fill([*BASE[entry], *args], root, paths), root)
+                lines = error_lines(out.getvalue(), err.getvalue()) or ["(no error line)"]
+                line = lines[0].split("[ERROR] - ", 1)[-1].replace(tmp, "...").replace("|", "\\|")
+                shown = " ".join(_fill(args, root, paths)).replace(tmp, "...")
+                rows.append((what, f"`{shown}`", code, line))
+            sections.append(f"### `{script}`\n\n" + markdown_table(["input", "arguments", "exit", "message"],
+                                                                    rows))
+    return "\n\n".join(sections)
 
 
 if __name__ == "__main__":

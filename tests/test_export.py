@@ -100,7 +100,7 @@ def test_bad_input_says_what(tmp_path: Path) -> None:
     with pytest.raises(ExportError, match="does not exist"):
         export(_cfg(f"ckpt={tmp_path / 'nope.pt'}"))
     run = make_run(tmp_path)
-    with pytest.raises(ExportError, match="format must be one of"):
+    with pytest.raises(ExportError, match="format=tflite: must be one of"):
         export(_cfg(f"ckpt={run}", "format=tflite"))
     (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
     with pytest.raises(ExportError, match="corrupt checkpoint"):

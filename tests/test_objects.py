@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import warnings
 
@@ -9,7 +10,9 @@ import numpy as np
 import pybullet_data
 import pytest
 from gymnasium.utils.env_checker import check_env
+from omegaconf import OmegaConf
 
+from rlgrasp.compose import compose_eval, compose_train
 from rlgrasp.envs import PandaGraspEnv, ScriptedExpert
 from rlgrasp.envs.objects import (
     BROKEN_RANDOM_URDFS,
@@ -18,6 +21,8 @@ from rlgrasp.envs.objects import (
     random_urdf_choice,
     random_urdf_numbers,
 )
+from rlgrasp.overrides import rewrite
+from tests.test_bad_input import run_entry
 
 SETS = list(SET_NAMES) + [["primitives", "random_urdfs_train"]]
 
@@ -197,3 +202,43 @@ def test_object_too_large_for_the_hand(tmp_path):
         PandaGraspEnv(objects={"paths": [path], "scale": 1.0})
     with pytest.raises(ValueError, match="max_width"):
         PandaGraspEnv(objects={"paths": [path], "max_width": 0.075})
+
+
+# --- one spelling on every command line: objects=<set> or objects={paths:[...]} ----------------
+
+
+def test_objects_spelling_reaches_env_objects_in_training_and_evaluation(tmp_path):
+    """A dict or list for the `objects` group's name is the env's `objects` value, in training
+    (env.objects exists) as in evaluation (env holds only the keywords given: ++ adds them)."""
+    own = "objects={paths:[/my/meshes]}"
+    assert rewrite([own, "env.objects=toys"]) == ["objects=cube", "env.objects={paths:[/my/meshes]}",
+                                                  "env.objects=toys"]
+    assert rewrite([own, "env.max_episode_steps=80", "randomization={preset:wide}"], open_env=True) == [
+        "++env.objects={paths:[/my/meshes]}", "++env.max_episode_steps=80", "randomization={preset:wide}"]
+    out = f"paths.output_dir={tmp_path}"
+    mixed = compose_train([*rewrite(["objects=[primitives,toys]", "randomization={object_mass:0.2}"]), out])
+    assert OmegaConf.to_container(mixed.env.objects) == ["primitives", "toys"]
+    assert OmegaConf.to_container(mixed.env.randomization) == {"object_mass": 0.2}
+    # The value replaces an experiment's objects, here a list (Hydra alone refuses a dict over it).
+    own_only = compose_train(["experiment=grasp_objects_ppo", *rewrite([own]), out])
+    assert OmegaConf.to_container(own_only.env.objects) == {"paths": ["/my/meshes"]}
+    assert compose_train(["objects=primitives", out]).env.objects == "primitives"  # a set: the group
+    for spelling in (own, "env.objects={paths:[/my/meshes]}"):
+        ev = compose_eval(rewrite([spelling], open_env=True))
+        assert OmegaConf.to_container(ev.env) == {"objects": {"paths": ["/my/meshes"]}}
+    assert compose_eval(["objects=random_urdfs_test"]).env.objects == "random_urdfs_test"
+
+
+def test_evaluating_own_meshes_names_them(tmp_path):
+    """rlgrasp-eval with objects={paths:[folder]}, as typed: the episodes use those meshes and the
+    summary says which objects (and that the scripted baseline has no training objects)."""
+    _box_obj(tmp_path / "small.obj", (0.03, 0.04, 0.06))
+    code = run_entry("eval", ["policy=scripted", f"objects={{paths:[{tmp_path}]}}", "episodes=2",
+                              "video=false", "plots=false", f"outputs_root={tmp_path}", "name=own"], tmp_path)
+    assert code == 0
+    out = tmp_path / "eval" / "scripted" / "own"
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["config"]["env"]["objects"] == {"paths": [str(tmp_path)]}
+    assert metrics["objects_label"] == f"{{paths: [{tmp_path}]}}"
+    assert {r["object"] for r in metrics["success_by_object"]} == {"paths/small.obj"}
+    assert f"| objects                          | {{paths: [{tmp_path}]}}" in (out / "summary.md").read_text()

@@ -15,7 +15,8 @@ from pathlib import Path
 import optuna
 import pytest
 
-from rlgrasp.sweep.cli import is_sweep_override, main, run_sweep
+from rlgrasp.sweep.cli import is_sweep_override, main
+from rlgrasp.sweep.runner import run_sweep
 from rlgrasp.sweep.space import parse_space, to_overrides
 from rlgrasp.sweep.study import ATTR_INTERRUPTED, ATTR_RETRY_OF
 

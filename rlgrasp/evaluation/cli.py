@@ -22,7 +22,14 @@ import hydra
 from omegaconf import DictConfig, OmegaConf
 
 from rlgrasp.config import CONFIG_DIR, register_configs
-from rlgrasp.evaluation.source import EvaluationError
+from rlgrasp.envs import Randomizer
+from rlgrasp.evaluation import metrics as M
+from rlgrasp.evaluation.episodes import episode_seeds, timed_run
+from rlgrasp.evaluation.plots import return_histogram, success_by_object_plot, success_by_parameter
+from rlgrasp.evaluation.source import EvaluationError, load_checked_checkpoint, prepare
+from rlgrasp.evaluation.tb_log import log_to_tensorboard
+from rlgrasp.evaluation.video import video_format, write_video
+from rlgrasp.overrides import entry_point, unwritable
 
 log = logging.getLogger("rlgrasp.eval")
 
@@ -45,29 +52,25 @@ def output_dir(cfg: DictConfig, source: Any) -> Path:
 
 
 def _randomization_ranges(spec: Any) -> dict[str, Any]:
-    from rlgrasp.envs import Randomizer
-
     return {k: {"low": r.low, "high": r.high, "log": r.log} for k, r in Randomizer(spec).ranges.items()}
 
 
 def evaluate(cfg: DictConfig) -> dict[str, Any]:
     """Validate, run the episodes, write every artefact; return ``metrics.json``'s content."""
-    from rlgrasp.evaluation.episodes import timed_run
-    from rlgrasp.evaluation.metrics import summary_table
-
     # --- validate everything before anything is written
     source, fmt, out = _validate(cfg)
-    randomization = source.env_cfg.get("randomization")
     try:
-        ranges = _randomization_ranges(randomization)
+        ranges = _randomization_ranges(source.env_cfg.get("randomization"))
     except ValueError as exc:
         raise EvaluationError(f"randomization: {exc}") from exc
+    labels = conditions(source)
     log.info(
-        "evaluating %s: %d episodes, seeds %d.., randomization %s, %d worker(s), %s actions",
+        "evaluating %s: %d episodes, seeds %d.., objects %s, randomization %s, %d worker(s), %s actions",
         source.ckpt_path or source.kind,
         cfg.episodes,
         cfg.seed,
-        randomization,
+        labels["objects"],
+        labels["randomization"],
         cfg.workers,
         "deterministic" if cfg.deterministic else "stochastic",
     )
@@ -83,13 +86,13 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
         progress=_Progress(),
     )
     metrics = _metrics(cfg, source, results, seconds, ranges)
-    table = metrics["summary_markdown"] = summary_table(metrics)
+    table = metrics["summary_markdown"] = M.summary_table(metrics)
 
     # --- write: into a hidden staging folder renamed at the end, so an evaluation is complete or absent
     out.parent.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
     try:
-        files = _write_artefacts(stage, cfg, source, results, metrics, table, seconds, fmt)
+        files = _write_artefacts(stage, out.name, cfg, source, results, metrics, table, seconds, fmt)
         if out.exists():  # an empty folder made in the meantime
             out.rmdir()
         os.replace(stage, out)
@@ -97,8 +100,6 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
         shutil.rmtree(stage, ignore_errors=True)
         raise
     if cfg.tensorboard and source.run_dir:
-        from rlgrasp.evaluation.tb_log import log_to_tensorboard
-
         step = int((source.info or {}).get("frames") or 0)
         tb = log_to_tensorboard(source.run_dir, out.name, metrics, [r for r in results if r.frames], step)
         log.info("logged to TensorBoard %s (tags posthoc_eval/%s/*, eval_video/%s/*)", tb, out.name, out.name)
@@ -111,24 +112,47 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
 
 def _validate(cfg: DictConfig) -> tuple[Any, str | None, Path]:
     """The policy source (checkpoint, env and policy checked), the video format, the output folder."""
-    from rlgrasp.evaluation.source import prepare
-
-    for key, minimum in (("episodes", 1), ("workers", 1), ("video_episodes", 0)):
+    for key, minimum in (("episodes", 1), ("workers", 1), ("video_episodes", 0), ("seed", 0)):
         if cfg[key] < minimum:
-            raise EvaluationError(f"{key} must be at least {minimum}, got {cfg[key]}")
-    source = prepare(cfg.policy, cfg.ckpt, cfg.ckpt_kind, _plain(cfg.randomization), _plain(cfg.env))
+            raise EvaluationError(f"{key}={cfg[key]}: must be at least {minimum}")
     fmt = None
     if cfg.video and cfg.video_episodes > 0:
-        from rlgrasp.evaluation.video import video_format
-
         try:
             fmt = video_format(cfg.video_format)
         except ValueError as exc:
             raise EvaluationError(str(exc)) from exc
+    source = prepare(cfg.policy, cfg.ckpt, cfg.ckpt_kind, _plain(cfg.randomization), _plain(cfg.env))
     out = output_dir(cfg, source)
     if (out / "metrics.json").exists():
         raise EvaluationError(f"{out} already holds an evaluation; pick another name=")
+    problem = unwritable(out, folder=True)
+    if problem:
+        raise EvaluationError(f"cannot write the evaluation to {out}: {problem}")
     return source, fmt, out
+
+
+def describe(spec: Any) -> str:
+    """An objects or randomization spec as the command line would spell it (``{paths: [a.obj]}``)."""
+    if isinstance(spec, dict):
+        return "{" + ", ".join(f"{k}: {describe(v)}" for k, v in spec.items()) + "}"
+    if isinstance(spec, (list, tuple)):
+        return "[" + ", ".join(describe(v) for v in spec) + "]"
+    return str(spec)
+
+
+def conditions(source: Any) -> dict[str, str]:
+    """The objects and the randomization the episodes use, and whether the checkpoint trained on
+    them: a held-out figure must say so, and so must one that is not."""
+    labels = {}
+    for key in ("objects", "randomization"):
+        used = describe(source.env_cfg.get(key))
+        trained = (source.info or {}).get(f"train_{key}")
+        if trained is None:
+            labels[key] = used
+        else:
+            trained = describe(trained)
+            labels[key] = f"{used} (as trained)" if used == trained else f"{used} (trained on {trained})"
+    return labels
 
 
 class _Progress:
@@ -146,15 +170,14 @@ class _Progress:
 
 def _metrics(cfg: DictConfig, source: Any, results: list, seconds: float, ranges: dict) -> dict[str, Any]:
     """``metrics.json``: the summary, what was evaluated and how, the timing."""
-    from rlgrasp.evaluation.episodes import episode_seeds
-    from rlgrasp.evaluation.metrics import summarize
-
     randomization = source.env_cfg.get("randomization")
+    labels = conditions(source)
     metrics = {
         "policy": source.kind,
         "policy_label": source.ckpt_path or source.kind,
-        "randomization_label": str(randomization),
-        **summarize(results),
+        "objects_label": labels["objects"],
+        "randomization_label": labels["randomization"],
+        **M.summarize(results),
         "seeds": episode_seeds(cfg.seed, cfg.episodes),
         "deterministic": bool(cfg.deterministic),
         "randomization": {"spec": randomization, "ranges": ranges},
@@ -167,14 +190,13 @@ def _metrics(cfg: DictConfig, source: Any, results: list, seconds: float, ranges
         },
     }
     if source.kind == "checkpoint":
-        from rlgrasp.evaluation.source import load_checked_checkpoint
-
         metrics["config"]["train"] = load_checked_checkpoint(Path(source.ckpt_path))["config"]
     return metrics
 
 
 def _write_artefacts(
     out: Path,
+    name: str,
     cfg: DictConfig,
     source: Any,
     results: list,
@@ -183,22 +205,17 @@ def _write_artefacts(
     seconds: float,
     fmt: str | None,
 ) -> list[str]:
-    """metrics.json, episodes.csv, summary.md, plots and videos into ``out``."""
-    from rlgrasp.evaluation import metrics as M
-
+    """metrics.json, episodes.csv, summary.md, plots and videos into ``out`` (the staging folder
+    that becomes the evaluation ``name``)."""
     M.write_episodes_csv(out / "episodes.csv", results)
     M.write_objects_csv(out / "objects.csv", metrics)
     files = ["metrics.json", "episodes.csv", "objects.csv", "summary.md"]
     if cfg.plots:
-        from rlgrasp.evaluation.plots import return_histogram, success_by_object_plot, success_by_parameter
-
         metrics["success_by_parameter"] = success_by_parameter(results, out / "success_by_parameter.png")
         return_histogram(results, out / "return_histogram.png")
         success_by_object_plot(metrics, out / "success_by_object.png")
         files += ["success_by_parameter.png", "return_histogram.png", "success_by_object.png"]
     if fmt:
-        from rlgrasp.evaluation.video import write_video
-
         step_s = source.env_cfg.get("time_step", 1 / 240) * source.env_cfg.get("substeps", 12)
         for r in results:
             if r.frames:
@@ -209,7 +226,7 @@ def _write_artefacts(
     metrics["files"] = files
     M.write_json(out / "metrics.json", metrics)
     (out / "summary.md").write_text(
-        f"# Evaluation {out.name}\n\n{table}\n\n## Outcomes\n\n{M.outcome_table(metrics)}\n\n"
+        f"# Evaluation {name}\n\n{table}\n\n## Outcomes\n\n{M.outcome_table(metrics)}\n\n"
         f"## Success per object, lowest first (all of them: objects.csv)\n\n{M.object_table(metrics)}\n\n"
         f"Wall time {seconds:.1f} s on {cfg.workers} worker(s). Files: {', '.join(files)}\n"
     )
@@ -250,6 +267,7 @@ def run(cfg: DictConfig) -> float:
             sys.exit(128 + sig)
 
 
+@entry_point("eval", open_env=True)
 @hydra.main(config_path=CONFIG_DIR, config_name="eval", version_base="1.3")
 def main(cfg: DictConfig) -> float:
     return run(cfg)

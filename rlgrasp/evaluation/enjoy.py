@@ -2,7 +2,8 @@
 
 The policy and the env are rebuilt from the checkpoint exactly as ``rlgrasp-eval`` does (same
 checks, same seeds, same episode loop and outcome rules); only the env opens the GUI and each step
-waits for its 1/20 s slot. Without a display it says so in one line and exits with code 1.
+waits for its 1/20 s slot. Bad input is refused first, display or not (one line, exit code 2); then,
+without a display, it says so in one line and exits with code 1.
 """
 
 from __future__ import annotations
@@ -14,9 +15,18 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+import hydra
 import numpy as np
+import pybullet
+from hydra.core.config_store import ConfigStore
+from omegaconf import OmegaConf
 
-from rlgrasp.evaluation.policies import Actor
+from rlgrasp.config import CONFIG_DIR, register_configs
+from rlgrasp.envs.factory import env_factory
+from rlgrasp.evaluation.episodes import run_episode
+from rlgrasp.evaluation.policies import Actor, PolicySource, build_policy
+from rlgrasp.evaluation.source import EvaluationError, prepare
+from rlgrasp.overrides import entry_point
 
 
 @dataclass
@@ -37,8 +47,6 @@ class EnjoyConfig:
 
 def register_enjoy_config() -> None:
     """Register ``EnjoyConfig`` as ``enjoy_schema`` (idempotent; called by the entry point)."""
-    from hydra.core.config_store import ConfigStore
-
     ConfigStore.instance().store(name="enjoy_schema", node=EnjoyConfig)
 
 
@@ -94,8 +102,6 @@ def episode_line(i: int, n: int, r: Any) -> str:
 
 def _point_camera(env: Any) -> None:
     """The GUI's camera where the videos look from, and its side panels off."""
-    import pybullet
-
     client = getattr(env, "client", None)
     if client is None:
         return
@@ -108,19 +114,27 @@ def _print(line: str) -> None:
     print(line, flush=True)
 
 
-def play(cfg: Any, out: Callable[[str], None] = _print, sleep: Callable[[float], None] = time.sleep) -> list:
-    """Rebuild, check and play ``cfg.episodes`` episodes, one line per episode; the results."""
-    from omegaconf import OmegaConf
-
-    from rlgrasp.envs.factory import env_factory
-    from rlgrasp.evaluation.episodes import run_episode
-    from rlgrasp.evaluation.policies import build_policy
-    from rlgrasp.evaluation.source import EvaluationError, prepare
-
+def check(cfg: Any) -> PolicySource:
+    """Every value, the checkpoint, the env and one policy step (``prepare``'s dry run), without a
+    window: ``EvaluationError`` naming the first problem."""
     if cfg.render not in ("human", "none"):
-        raise EvaluationError(f"render must be human or none, got {cfg.render!r}")
+        raise EvaluationError(f"render={cfg.render}: must be human or none")
+    for key, minimum in (("episodes", 1), ("seed", 0), ("speed", 0)):
+        if not cfg[key] >= minimum:
+            raise EvaluationError(f"{key}={cfg[key]}: must be at least {minimum}")
     plain = lambda v: OmegaConf.to_container(v) if OmegaConf.is_config(v) else v  # noqa: E731
-    source = prepare(cfg.policy, cfg.ckpt, cfg.ckpt_kind, plain(cfg.randomization), plain(cfg.env))
+    return prepare(cfg.policy, cfg.ckpt, cfg.ckpt_kind, plain(cfg.randomization), plain(cfg.env))
+
+
+def play(
+    cfg: Any,
+    out: Callable[[str], None] = _print,
+    sleep: Callable[[float], None] = time.sleep,
+    source: PolicySource | None = None,
+) -> list:
+    """Play ``cfg.episodes`` episodes (of ``source``, else ``check(cfg)``'s), one line per episode;
+    the results."""
+    source = source or check(cfg)
     env = env_factory({**source.env_cfg, "render_mode": "human" if cfg.render == "human" else None})()
     try:
         if cfg.render == "human":
@@ -147,28 +161,26 @@ def play(cfg: Any, out: Callable[[str], None] = _print, sleep: Callable[[float],
 
 
 def run(cfg: Any) -> None:
-    """``play``, or one line and exit code 1 without a display, 2 on bad input."""
-    from rlgrasp.evaluation.source import EvaluationError
-
+    """``play``; bad input (checked first, with or without a display) one line and exit code 2,
+    no display one line and exit code 1."""
+    try:
+        source = check(cfg)
+    except EvaluationError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        sys.exit(2)
     reason = no_display_reason() if cfg.render == "human" else None
     if reason:
         print(reason, file=sys.stderr)
         sys.exit(1)
     try:
-        play(cfg)
-    except EvaluationError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        sys.exit(2)
+        play(cfg, source=source)
     except KeyboardInterrupt:
         print("stopped", file=sys.stderr)
 
 
 def main() -> None:
     """Console entry point ``rlgrasp-enjoy`` (same as ``python scripts/enjoy.py``)."""
-    import hydra
-
-    from rlgrasp.config import CONFIG_DIR, register_configs
-
     register_configs()
     register_enjoy_config()
-    hydra.main(config_path=CONFIG_DIR, config_name="enjoy", version_base="1.3")(run)()
+    hydra_main = hydra.main(config_path=CONFIG_DIR, config_name="enjoy", version_base="1.3")(run)
+    entry_point("enjoy", open_env=True)(hydra_main)()

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import torch
 
 from rlgrasp.evaluation.outcomes import SUCCESS, failure_reason
 from rlgrasp.evaluation.policies import Actor, PolicySource, build_policy
@@ -101,8 +102,6 @@ _WORKER: dict[str, Any] = {}
 
 def _init_worker(source: PolicySource, deterministic: bool, video_episodes: int) -> None:
     """Per-process set-up: one torch thread, one env (own PyBullet client), one policy."""
-    import torch
-
     torch.set_num_threads(1)
     env = source.make_env()
     _WORKER.update(env=env, actor=build_policy(source, env, deterministic), video_episodes=video_episodes)
@@ -155,8 +154,6 @@ def run_episodes(
     chunks = [[j] for j in jobs[:k]] + [jobs[i : i + size] for i in range(k, len(jobs), size)]
     results: list[EpisodeResult] = []
     if workers == 1:
-        import torch
-
         threads = torch.get_num_threads()
         try:
             with torch.random.fork_rng():

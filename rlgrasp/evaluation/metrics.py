@@ -116,6 +116,7 @@ def summary_table(metrics: dict[str, Any]) -> str:
     m = metrics
     rows = [
         ("policy", m.get("policy_label", m.get("policy", ""))),
+        ("objects", m.get("objects_label", "")),
         ("randomization", m.get("randomization_label", "")),
         (
             "episodes (seeds)",

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from rlgrasp.evaluation.episodes import EpisodeResult
+from rlgrasp.evaluation.outcomes import object_group
 from rlgrasp.stats import wilson_interval
 from rlgrasp.utils import pyplot
 
@@ -130,8 +131,6 @@ def return_histogram(results: Sequence[EpisodeResult], path: Path) -> Path:
 
 def success_by_object_plot(metrics: dict[str, Any], path: Path, most: int = 30) -> Path:
     """Left: success per object group; right: the ``most`` objects that fail most (Wilson bars)."""
-    from rlgrasp.evaluation.outcomes import object_group
-
     plt = pyplot()
     rows = metrics["success_by_object"]
     groups: dict[str, list[int]] = {}

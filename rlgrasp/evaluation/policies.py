@@ -7,6 +7,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import torch
+from tensordict import TensorDict
+from torchrl.envs import ExplorationType, set_exploration_type
+
+from rlgrasp.envs import ScriptedExpert
+from rlgrasp.envs.factory import env_factory
+from rlgrasp.train.checkpoint import policy_from_checkpoint
 
 POLICIES = ("checkpoint", "scripted", "random")
 
@@ -28,8 +35,6 @@ class PolicySource:
     info: dict[str, Any] = field(default_factory=dict)
 
     def make_env(self) -> Any:
-        from rlgrasp.envs.factory import env_factory
-
         return env_factory(self.env_cfg)()
 
 
@@ -47,24 +52,14 @@ class CheckpointActor(Actor):
     """The trained policy (normalizer inside), fed one observation at a time."""
 
     def __init__(self, ckpt: dict[str, Any], deterministic: bool) -> None:
-        import torch
-        from torchrl.envs import ExplorationType
-
-        from rlgrasp.train.checkpoint import policy_from_checkpoint
-
-        self.torch = torch
         self.policy = policy_from_checkpoint(ckpt, "cpu")
         self.mode = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
 
     def reset(self, seed: int) -> None:
         # Stochastic actions: the episode's own torch RNG stream, whatever ran before it.
-        self.torch.manual_seed(seed)
+        torch.manual_seed(seed)
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
-        from tensordict import TensorDict
-        from torchrl.envs import set_exploration_type
-
-        torch = self.torch
         td = TensorDict(
             {"observation": torch.as_tensor(obs, dtype=torch.float32).unsqueeze(0)}, batch_size=[1]
         )
@@ -76,8 +71,6 @@ class ScriptedActor(Actor):
     """The env package's scripted expert (deterministic)."""
 
     def __init__(self, env: Any) -> None:
-        from rlgrasp.envs import ScriptedExpert
-
         self.expert = ScriptedExpert(env.obs_slices, action_dim=env.action_space.shape[0])
 
     def reset(self, seed: int) -> None:

@@ -21,6 +21,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from omegaconf import OmegaConf
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from rlgrasp.stats import iqm, stratified_bootstrap_ci
 from rlgrasp.utils import markdown_table, pyplot
@@ -79,8 +81,6 @@ def _run_identity(run: Path, evaluation: dict[str, Any] | None) -> tuple[str, An
         return str(train.get("experiment_name", run.parent.name)), train.get("seed")
     hydra_cfg = run / ".hydra" / "config.yaml"
     if hydra_cfg.is_file():
-        from omegaconf import OmegaConf
-
         cfg = OmegaConf.load(hydra_cfg)
         return str(cfg.get("experiment_name", run.parent.name)), cfg.get("seed")
     return run.parent.name, None
@@ -91,8 +91,6 @@ def read_scalars(log_dir: Path, tags: Sequence[str]) -> dict[str, tuple[np.ndarr
     included; a step logged twice keeps its last value)."""
     if not log_dir.is_dir():
         return {}
-    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
-
     acc = EventAccumulator(str(log_dir), size_guidance={"scalars": 0})
     acc.Reload()
     available = set(acc.Tags().get("scalars", []))

@@ -10,17 +10,28 @@ from __future__ import annotations
 import os
 import pickle
 import zipfile
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
+from hydra.errors import InstantiationException
+from omegaconf import OmegaConf
+from omegaconf.errors import OmegaConfBaseException
 
+from rlgrasp.config import EnvConfig
 from rlgrasp.evaluation.policies import POLICIES, PolicySource, build_policy
+from rlgrasp.overrides import explain
+from rlgrasp.train.checkpoint import unpickler_reason
 
 CKPT_KINDS = ("best", "last")
 # What a checkpoint must hold for evaluation (see rlgrasp.train.checkpoint's docstring).
 REQUIRED_KEYS = ("actor", "config", "spec")
 REQUIRED_SPEC = ("obs_dim", "action_dim", "action_low", "action_high")
+#: What building an env from user input raises: a bad keyword (ValueError, TypeError), a missing or
+#: unreadable object file (OSError), a ``_target_`` that does not import.
+ENV_ERRORS = (ValueError, TypeError, OSError, ImportError, AttributeError, InstantiationException)
 
 
 class EvaluationError(RuntimeError):
@@ -30,7 +41,7 @@ class EvaluationError(RuntimeError):
 def resolve_checkpoint_path(ckpt: str | os.PathLike, kind: str = "best") -> Path:
     """A checkpoint file, or ``<run dir>/checkpoints/<kind>.pt`` for a run directory."""
     if kind not in CKPT_KINDS:
-        raise EvaluationError(f"ckpt_kind must be one of {', '.join(CKPT_KINDS)}, got {kind!r}")
+        raise EvaluationError(f"ckpt_kind={kind}: must be one of {', '.join(CKPT_KINDS)}")
     path = Path(ckpt).expanduser()
     if path.is_dir():
         ckpt_dir = path / "checkpoints"
@@ -52,10 +63,6 @@ def resolve_checkpoint_path(ckpt: str | os.PathLike, kind: str = "best") -> Path
 
 def load_checked_checkpoint(path: Path) -> dict[str, Any]:
     """Load and check the structure; a truncated or foreign file gets a message, not a traceback."""
-    import torch
-
-    from rlgrasp.train.checkpoint import unpickler_reason
-
     try:
         # weights_only: a checkpoint someone sent cannot run code when it is loaded.
         ckpt = torch.load(path, map_location="cpu", weights_only=True)
@@ -90,13 +97,6 @@ def build_env_cfg(
 ) -> dict[str, Any]:
     """The env's ``_target_`` node: a training ``env`` config (``None``: the env's defaults), with
     evaluation's overrides on top and rendering on. Keys of the grasp env are type-checked."""
-    from dataclasses import asdict
-
-    from omegaconf import OmegaConf
-    from omegaconf.errors import OmegaConfBaseException
-
-    from rlgrasp.config import EnvConfig
-
     cfg = _upgrade_env_cfg(dict(env_cfg or asdict(EnvConfig())))
     cfg.update(overrides or {})
     if randomization is not None:
@@ -106,7 +106,7 @@ def build_env_cfg(
         try:
             cfg = OmegaConf.to_container(OmegaConf.merge(OmegaConf.structured(EnvConfig), cfg))
         except OmegaConfBaseException as exc:
-            raise EvaluationError(f"env config: {exc}".splitlines()[0]) from exc
+            raise EvaluationError(f"env.{explain(exc, root='env')}") from exc
     return cfg
 
 
@@ -156,7 +156,7 @@ def prepare(
 ) -> PolicySource:
     """Resolve, load and validate everything; build one env and one policy call as a dry run."""
     if policy not in POLICIES:
-        raise EvaluationError(f"policy must be one of {', '.join(POLICIES)}, got {policy!r}")
+        raise EvaluationError(f"policy={policy}: must be one of {', '.join(POLICIES)}")
     if policy == "checkpoint":
         if not ckpt:
             raise EvaluationError(
@@ -179,6 +179,9 @@ def prepare(
             "versions": full.get("versions"),
             "experiment_name": full["config"].get("experiment_name"),
             "train_seed": full["config"].get("seed"),
+            # What it was trained on: an evaluation elsewhere says so (rlgrasp.evaluation.cli.conditions).
+            "train_objects": env_cfg.get("objects", "cube"),
+            "train_randomization": env_cfg.get("randomization", "default"),
         }
         # The run this checkpoint belongs to: checkpoints/<file>.pt sits in <run dir>/checkpoints.
         run_dir = path.resolve().parent.parent if path.parent.name == "checkpoints" else None
@@ -203,12 +206,10 @@ def prepare(
 
 def _dry_run(source: PolicySource) -> None:
     """Build the env and the policy once and act on the first observation: fail here, not in a worker."""
-    from hydra.errors import InstantiationException
-
     where = f"checkpoint {source.ckpt_path}" if source.ckpt_path else f"policy={source.kind}"
     try:
         env = source.make_env()
-    except (ValueError, TypeError, ImportError, AttributeError, InstantiationException) as exc:
+    except ENV_ERRORS as exc:  # the env's own message names the keyword and what it allows
         raise EvaluationError(f"cannot build the env for {where}: {exc}") from exc
     try:
         if source.ckpt is not None:
@@ -219,7 +220,10 @@ def _dry_run(source: PolicySource) -> None:
             raise EvaluationError(
                 f"corrupt checkpoint: {where}: the policy cannot be rebuilt ({exc})"
             ) from exc
-        obs, _ = env.reset(seed=0)
+        try:
+            obs, _ = env.reset(seed=0)
+        except ENV_ERRORS as exc:
+            raise EvaluationError(f"cannot reset the env for {where}: {exc}") from exc
         act.reset(0)
         action = np.asarray(act(obs))
         if action.shape != env.action_space.shape:

@@ -18,6 +18,7 @@ def log_to_tensorboard(
     run_dir: str | Path, name: str, metrics: dict[str, Any], videos: Sequence[EpisodeResult], step: int
 ) -> Path:
     """Write into ``<run dir>/tensorboard`` (a new events file; tags distinct from training's)."""
+    # Lazy: tensorboard's writer, which only an evaluation logged to its run's TensorBoard needs.
     from torch.utils.tensorboard import SummaryWriter
 
     log_dir = Path(run_dir) / "tensorboard"

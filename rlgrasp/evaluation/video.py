@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from rlgrasp.evaluation.episodes import EpisodeResult
+from rlgrasp.utils import pyplot
 
 
 def outcome_caption(r: EpisodeResult) -> str:
@@ -26,7 +27,7 @@ def outcome_caption(r: EpisodeResult) -> str:
 def video_format(requested: str = "auto") -> str:
     """``gif``, or ``mp4`` when asked for (or ``auto``) and ffmpeg is installed."""
     if requested not in ("auto", "gif", "mp4"):
-        raise ValueError(f"video_format must be auto, gif or mp4, got {requested!r}")
+        raise ValueError(f"video_format={requested}: must be auto, gif or mp4")
     has_ffmpeg = shutil.which("ffmpeg") is not None
     if requested == "mp4" and not has_ffmpeg:
         raise ValueError("video_format=mp4 needs an ffmpeg binary on PATH; use video_format=gif")
@@ -37,9 +38,8 @@ def video_format(requested: str = "auto") -> str:
 
 def write_video(r: EpisodeResult, path: Path, fps: int = 20, fmt: str = "gif") -> Path:
     """Render ``r.frames`` with a caption: the outcome (coloured) on top, step and flag below."""
+    # Lazy: matplotlib, which only the videos need (rlgrasp.utils.pyplot is lazy for the same reason).
     from matplotlib.animation import FFMpegWriter, PillowWriter
-
-    from rlgrasp.utils import pyplot
 
     plt = pyplot()
 

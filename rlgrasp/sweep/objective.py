@@ -18,6 +18,7 @@ from omegaconf import DictConfig
 from rlgrasp.compose import compose_train
 from rlgrasp.sweep.space import suggest, to_overrides
 from rlgrasp.sweep.study import ATTR_HOST, ATTR_INTERRUPTED, ATTR_OVERRIDES, ATTR_PID, study_dir
+from rlgrasp.train.loop import train
 
 log = logging.getLogger("rlgrasp.sweep")
 
@@ -65,8 +66,6 @@ class Objective:
         return compose_train(overrides, self.config_dir)
 
     def __call__(self, trial: optuna.Trial) -> float:
-        from rlgrasp.train.loop import train
-
         trial.set_user_attr(ATTR_HOST, socket.gethostname())
         trial.set_user_attr(ATTR_PID, os.getpid())
         train_cfg = self.compose(trial)

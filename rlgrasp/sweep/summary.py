@@ -151,6 +151,7 @@ def write_plots(study: optuna.Study, out_dir: Path) -> list[Path]:
     A plot Optuna cannot draw yet (e.g. importances with fewer than two completed trials) is
     skipped with a log line. Importances use PED-ANOVA, which needs no scikit-learn.
     """
+    # Lazy: Optuna's matplotlib backend imports matplotlib, which only the plots need.
     from optuna.importance import PedAnovaImportanceEvaluator
     from optuna.visualization import matplotlib as ovm
 

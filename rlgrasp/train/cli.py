@@ -16,6 +16,7 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
 from rlgrasp.config import CONFIG_DIR, ConfigError, register_configs
+from rlgrasp.overrides import entry_point
 from rlgrasp.train.checkpoint import CheckpointError
 from rlgrasp.train.loop import TrainingError, train
 from rlgrasp.train.resume import command_line_keys
@@ -50,6 +51,7 @@ def _command_line_keys(cfg: DictConfig) -> set[str] | None:
     return command_line_keys(list(HydraConfig.get().overrides.task), cfg)
 
 
+@entry_point("train")  # objects={paths:[...]} as in evaluation; a refused command line in one line
 @hydra.main(config_path=CONFIG_DIR, config_name="train", version_base="1.3")
 def main(cfg: DictConfig) -> float:
     return run(cfg)

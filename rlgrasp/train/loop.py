@@ -84,7 +84,7 @@ class Trainer:
         seed_everything(cfg.seed)
         try:
             self.parts = build_parts(cfg, self.device)
-        except (ValueError, TypeError) as exc:  # the env refuses its keywords
+        except (ValueError, TypeError, OSError) as exc:  # the env refuses its keywords or object files
             raise ConfigError(f"env: {exc}".splitlines()[0]) from exc
         self.actor = self.parts.actor
         self.learner = PPOLearner(

@@ -1,0 +1,1 @@
+"""Policies that see through a camera: image models and teacher-student distillation."""

@@ -1,0 +1,208 @@
+"""Teacher-student distillation by DAgger: a camera policy learns to act as a state policy would.
+
+The workers step camera envs; the teacher (a state checkpoint) reads each frame's privileged state
+and labels it with its action; the student (``rlgrasp.vision.models``) sees only proprioception and
+the images. Early on the teacher acts (``beta`` near 1) so the data shows what success looks like;
+``beta`` decays each batch so that the student soon acts and the teacher labels the states the
+student itself visits (Ross et al. 2011). Every labelled frame is kept (up to ``algo.buffer_frames``)
+and the student is regressed onto the labels with TorchRL's ``BCLoss``.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import torch
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+from torchrl.envs import ExplorationType, set_exploration_type
+from torchrl.objectives import BCLoss
+
+from rlgrasp.config import ConfigError
+from rlgrasp.envs.factory import env_factory
+from rlgrasp.stats import wilson_interval
+from rlgrasp.train import checkpoint as ckpt_lib
+from rlgrasp.train.batches import Batches
+from rlgrasp.train.collect import EnvFactory
+from rlgrasp.train.collectors import collector_backend
+from rlgrasp.train.evaluate import periodic_evaluator
+from rlgrasp.train.logger import log, setup_text_log
+from rlgrasp.train.loop import seed_everything
+from rlgrasp.train.metrics import finished_episodes
+from rlgrasp.vision.dagger import LABEL_KEY, DAggerPolicy, LabelledFrames, load_teacher
+from rlgrasp.vision.models import IMAGE_KEYS, actor_norm, build_vision_actor
+
+
+def vision_spec(make_env: EnvFactory) -> dict[str, Any]:
+    """Sizes of a camera env's observation parts and action, from one throw-away env."""
+    env = make_env()
+    try:
+        space = env.observation_space
+        if not isinstance(space, gym.spaces.Dict) or not any(k in space.spaces for k in IMAGE_KEYS):
+            raise ConfigError("env.camera=null: a camera policy needs a camera (e.g. cameras=wrist_depth)")
+        spec = {
+            "obs_key": "observation",
+            "obs_dim": int(space["state"].shape[-1]),
+            "privileged_dim": int(space["privileged"].shape[-1]),
+            "images": {k: list(space[k].shape) for k in IMAGE_KEYS if k in space.spaces},
+            "far": float(env.unwrapped.camera.spec.far),
+            "action_dim": int(env.action_space.shape[0]),
+            "action_low": [float(x) for x in env.action_space.low],
+            "action_high": [float(x) for x in env.action_space.high],
+        }
+    finally:
+        env.close()
+    return spec
+
+
+class Distiller:
+    """One distillation run: collect labelled frames, regress the student, evaluate it beside its
+    teacher on the same seeded episodes, checkpoint."""
+
+    def __init__(self, cfg: DictConfig) -> None:
+        self.cfg, a = cfg, cfg.algo
+        self.run_dir = Path(cfg.paths.output_dir)
+        setup_text_log(self.run_dir)
+        torch.set_num_threads(cfg.collector.torch_threads)
+        seed_everything(cfg.seed)
+        self.make_env = env_factory(cfg.env)
+        self.spec = vision_spec(self.make_env)
+        self.teacher, _ = load_teacher(a.teacher, self.spec, cfg.env)
+        self.student = build_vision_actor(self.spec, cfg.model)
+        self.policy = DAggerPolicy(self.student, self.teacher, a.beta0)
+        self.loss = BCLoss(self.student, loss_function="mse")
+        self.optimizer = torch.optim.Adam(self.student.parameters(), lr=a.lr)
+        self.data = LabelledFrames(self.student.in_keys, a.buffer_frames, a.minibatch_size)
+        self.logger = instantiate(cfg.logger, _partial_=True, _convert_="all")(
+            run_dir=self.run_dir, config=OmegaConf.to_container(cfg, resolve=True), resumed_frames=None
+        )
+        self.logger.text("config", OmegaConf.to_yaml(cfg), 0)
+        self.evaluator = periodic_evaluator(self.make_env, cfg)
+        self.frames, self.batches_seen, self.last_eval = 0, 0, None
+        self._teacher_evals: dict[int, dict[str, float]] = {}
+
+    def run(self) -> float:
+        cfg = self.cfg
+        budget_s = cfg.time_budget_min * 60 if cfg.time_budget_min else math.inf
+        behaviour = copy.deepcopy(self.policy)
+        backend = collector_backend(cfg.collector)
+        collector = backend.build(self.make_env, behaviour, cfg.seed, 0, str(self.run_dir / "env_errors"))
+        batches = Batches(collector, self.policy, behaviour, backend.collects_ahead)
+        start = time.monotonic()
+        next_eval = cfg.eval.interval_frames
+        try:
+            while self.frames < cfg.total_frames and time.monotonic() - start < budget_s:
+                t0 = time.perf_counter()
+                batch = next(batches).reshape(-1)
+                self.frames += batch.numel()
+                metrics = {
+                    "time/collect_s": time.perf_counter() - t0,
+                    **finished_episodes(batch.unsqueeze(0)),
+                }
+                metrics.update(self.learn(batch))
+                metrics["charts/SPS"] = self.frames / (time.monotonic() - start)
+                self.logger.scalars(metrics, self.frames)
+                if (
+                    cfg.eval.interval_frames > 0
+                    and self.frames >= next_eval
+                    and self.frames < cfg.total_frames
+                ):
+                    next_eval += cfg.eval.interval_frames
+                    self.evaluate(cfg.eval.episodes)
+        finally:
+            batches.close()
+            collector.shutdown()
+        result = self.evaluate(cfg.eval.final_episodes or cfg.eval.episodes, final=True)
+        self.save()
+        self.logger.close()
+        self.evaluator.close()
+        return result
+
+    def learn(self, batch) -> dict[str, float]:
+        """Add the batch to the dataset and regress the student on samples of all of it."""
+        a = self.cfg.algo
+        t0 = time.perf_counter()
+        actor_norm(self.student).update(batch["observation"])
+        self.data.extend(batch)
+        updates = max(1, math.ceil(a.epochs * batch.numel() / a.minibatch_size))
+        total = 0.0
+        for _ in range(updates):
+            sample = self.data.sample()
+            sample["action"] = sample[LABEL_KEY]
+            with set_exploration_type(ExplorationType.DETERMINISTIC):
+                loss = self.loss(sample)["loss_bc"]
+            self.optimizer.zero_grad()
+            loss.backward()
+            self.optimizer.step()
+            total += float(loss)
+        beta = self.policy.beta.item()
+        self.batches_seen += 1
+        self.policy.beta.fill_(a.beta0 * a.beta_decay**self.batches_seen)
+        return {
+            "losses/bc_loss": total / updates,
+            "charts/beta": beta,
+            "charts/dataset_frames": len(self.data),
+            "time/train_s": time.perf_counter() - t0,
+        }
+
+    def evaluate(self, episodes: int, final: bool = False) -> float:
+        """The student and its teacher on the same seeded episodes; returns the student's success."""
+        self.student.eval()
+        student = self.evaluator.run(self.student, episodes)
+        self.student.train()
+        if episodes not in self._teacher_evals:
+            self._teacher_evals[episodes] = self.evaluator.run(self.teacher, episodes)
+        teacher = self._teacher_evals[episodes]
+        s, t = student.get("success_rate", math.nan), teacher.get("success_rate", math.nan)
+        self.last_eval = {**student, "teacher_success_rate": t, "frames": self.frames}
+        self.logger.scalars(
+            {
+                "eval/success_rate": s,
+                "eval/mean_reward": student["mean_reward"],
+                "eval/teacher_success_rate": t,
+                "eval/student_over_teacher": s / max(t, 1e-9),
+            },
+            self.frames,
+        )
+        wins = round(s * episodes)
+        low, high = wilson_interval(wins, episodes)
+        log.info(
+            "%seval at %s frames: student %d/%d [95%% Wilson %.3f, %.3f], teacher %.3f on the same episodes",
+            "final " if final else "",
+            f"{self.frames:,}",
+            wins,
+            episodes,
+            low,
+            high,
+            t,
+        )
+        return s
+
+    def save(self) -> None:
+        state = {
+            "format": ckpt_lib.FORMAT,
+            "kind": "vision",
+            "actor": self.student.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "frames": self.frames,
+            "last_eval": self.last_eval,
+            "rng": ckpt_lib.rng_state(),
+            "config": OmegaConf.to_container(self.cfg, resolve=True),
+            "spec": self.spec,
+            "versions": ckpt_lib.package_versions(),
+            "run_dir": str(self.run_dir),
+        }
+        path = ckpt_lib.write_checkpoints(
+            self.run_dir / "checkpoints", state, self.cfg.checkpoint.keep_last, True
+        )
+        log.info("checkpoint %s", path)
+
+
+def distill(cfg: DictConfig) -> float:
+    """Distill ``cfg.algo.teacher`` into a camera student; returns the student's final success."""
+    return Distiller(cfg).run()

@@ -1,0 +1,116 @@
+"""Policies that see: a small CNN per image, its features joined with the normalized state.
+
+In a TorchRL tensordict the env's ``state`` entry arrives as ``observation`` (TorchRL's gym wrapper
+names it so), next to ``depth``/``rgb`` and ``privileged``. The student actor reads ``observation``
+and the images; a critic may read ``privileged`` (asymmetric actor-critic: the critic is not
+deployed, so it may use what no robot senses).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import torch
+from tensordict.nn import AddStateIndependentNormalScale, InteractionType, TensorDictModule
+from torch import nn
+from torchrl.modules import ConvNet, ProbabilisticActor, TanhNormal
+
+from rlgrasp.train.models import ACTIVATIONS, OBS_KEY, RunningNorm, _bound, _mlp
+
+IMAGE_KEYS = ("depth", "rgb")
+
+
+class ImageEncoder(nn.Module):
+    """Image -> feature vector. Depth (metres) is scaled by ``far``; RGB arrives as uint8 and becomes
+    float here, so batches and replay data keep images in their compact dtype until the network."""
+
+    def __init__(self, key: str, shape: Sequence[int], far: float, channels: Sequence[int], features: int):
+        super().__init__()
+        self.key, self.far = key, float(far)
+        self.conv = ConvNet(
+            in_features=shape[0],
+            num_cells=list(channels),
+            kernel_sizes=[8, 4, 3],
+            strides=[4, 2, 1],
+            activation_class=nn.ELU,
+        )
+        with torch.no_grad():
+            flat = self.conv(torch.zeros(1, *shape)).shape[-1]
+        self.project = nn.Sequential(nn.Linear(flat, features), nn.ELU())
+
+    def forward(self, image: torch.Tensor) -> torch.Tensor:
+        x = image.float() / (255.0 if self.key == "rgb" else self.far)
+        batch = x.shape[:-3]
+        features = self.project(self.conv(x.reshape(-1, *x.shape[-3:])))
+        return features.reshape(*batch, -1)
+
+
+class VisionActorNet(nn.Module):
+    """(normalized state, images) -> MLP -> (loc, state-independent scale)."""
+
+    def __init__(
+        self,
+        norm: RunningNorm,
+        encoders: Mapping[str, ImageEncoder],
+        state_dim: int,
+        act_dim: int,
+        model_cfg: Any,
+    ) -> None:
+        super().__init__()
+        self.norm = norm
+        self.encoders = nn.ModuleDict(dict(encoders))
+        features = sum(e.project[0].out_features for e in self.encoders.values())
+        self.mlp = _mlp(state_dim + features, act_dim, model_cfg.hidden_sizes, model_cfg.activation, 0.01)
+        self.scale = AddStateIndependentNormalScale(
+            act_dim, scale_lb=model_cfg.min_std, init_value=model_cfg.init_log_std
+        )
+
+    def forward(self, state: torch.Tensor, *images: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        parts = [self.norm(state)] + [enc(img) for enc, img in zip(self.encoders.values(), images)]
+        return self.scale(self.mlp(torch.cat(parts, -1)))
+
+
+def image_specs(spec: Mapping[str, Any]) -> dict[str, tuple[int, ...]]:
+    """The image entries of an env spec (``rlgrasp.train.collect.env_spec``): key -> shape."""
+    return {k: tuple(spec["images"][k]) for k in IMAGE_KEYS if k in spec.get("images", {})}
+
+
+def build_vision_actor(
+    spec: Mapping[str, Any], model_cfg: Any, deterministic: bool = False
+) -> ProbabilisticActor:
+    """A TanhNormal actor over the state and the images, shaped by ``spec`` (state ``obs_dim``,
+    ``images``, ``far``, action bounds); ``model_cfg`` adds ``channels`` and ``image_features``."""
+    images = image_specs(spec)
+    if model_cfg.activation not in ACTIVATIONS:
+        raise ValueError(
+            f"model.activation={model_cfg.activation!r}: must be one of {', '.join(ACTIVATIONS)}"
+        )
+    encoders = {
+        k: ImageEncoder(k, shape, spec.get("far", 1.0), model_cfg.channels, model_cfg.image_features)
+        for k, shape in images.items()
+    }
+    norm = RunningNorm(spec["obs_dim"], clip=model_cfg.obs_clip, enabled=model_cfg.obs_norm)
+    low, high = torch.as_tensor(spec["action_low"]), torch.as_tensor(spec["action_high"])
+    net = VisionActorNet(norm, encoders, spec["obs_dim"], int(low.numel()), model_cfg)
+    module = TensorDictModule(net, in_keys=[OBS_KEY, *images], out_keys=["loc", "scale"])
+    return ProbabilisticActor(
+        module,
+        in_keys=["loc", "scale"],
+        distribution_class=TanhNormal,
+        distribution_kwargs={"low": _bound(low), "high": _bound(high), "tanh_loc": False},
+        return_log_prob=True,
+        default_interaction_type=InteractionType.DETERMINISTIC if deterministic else InteractionType.RANDOM,
+    )
+
+
+def actor_norm(actor: ProbabilisticActor) -> RunningNorm:
+    """The state normalizer inside a vision actor (the learner updates it from each batch)."""
+    return actor.module[0].module.norm
+
+
+def vision_policy(spec: Mapping[str, Any], model_cfg: Any, weights: Mapping[str, Any]) -> ProbabilisticActor:
+    """The deterministic camera policy of a checkpoint's spec, model config and weights."""
+    actor = build_vision_actor(spec, model_cfg, deterministic=True)
+    actor.load_state_dict(weights)
+    return actor.eval()

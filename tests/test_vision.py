@@ -1,0 +1,119 @@
+"""Image models and DAgger's pieces, without a training run."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+from omegaconf import OmegaConf
+from tensordict import TensorDict
+from torchrl.envs import ExplorationType, set_exploration_type
+from torchrl.objectives import BCLoss
+
+from rlgrasp.train.checkpoint import CheckpointError
+from rlgrasp.vision.dagger import LABEL_KEY, DAggerPolicy, LabelledFrames, PrivilegedTeacher, load_teacher
+from rlgrasp.vision.models import build_vision_actor
+
+MODEL = OmegaConf.create(
+    dict(
+        hidden_sizes=[32, 32],
+        activation="elu",
+        channels=[8, 16, 16],
+        image_features=32,
+        init_log_std=-0.5,
+        min_std=0.05,
+        obs_norm=True,
+        obs_clip=10.0,
+    )
+)
+SPEC = {
+    "obs_dim": 5,
+    "privileged_dim": 9,
+    "images": {"depth": [1, 64, 64], "rgb": [3, 64, 64]},
+    "far": 1.0,
+    "action_low": [-1.0] * 3,
+    "action_high": [1.0] * 3,
+}
+
+
+def frames(n: int) -> TensorDict:
+    return TensorDict(
+        {
+            "observation": torch.randn(n, 5),
+            "depth": torch.rand(n, 1, 64, 64),
+            "rgb": torch.randint(0, 256, (n, 3, 64, 64), dtype=torch.uint8),
+            "privileged": torch.randn(n, 9),
+        },
+        [n],
+    )
+
+
+class ConstantTeacher(torch.nn.Module):
+    """A stand-in state policy: always the same action, whatever it reads."""
+
+    def forward(self, td):
+        td["action"] = torch.full((*td.batch_size, 3), 0.5)
+        return td
+
+
+def test_vision_actor_reads_state_and_uint8_images():
+    actor = build_vision_actor(SPEC, MODEL, deterministic=True)
+    assert set(actor.in_keys) == {"observation", "depth", "rgb"}
+    out = actor(frames(4))
+    assert out["action"].shape == (4, 3) and out["action"].abs().max() <= 1.0
+
+
+def test_bc_loss_lowers_on_a_fixed_batch():
+    torch.manual_seed(0)
+    actor = build_vision_actor(SPEC, MODEL)
+    batch = frames(64)
+    batch["action"] = torch.rand(64, 3) * 1.6 - 0.8
+    loss, optimizer = BCLoss(actor, loss_function="mse"), torch.optim.Adam(actor.parameters(), 1e-3)
+    values = []
+    for _ in range(60):
+        with set_exploration_type(ExplorationType.DETERMINISTIC):
+            value = loss(batch.clone())["loss_bc"]
+        optimizer.zero_grad()
+        value.backward()
+        optimizer.step()
+        values.append(float(value))
+    assert values[-1] < 0.5 * values[0]
+
+
+@pytest.mark.parametrize("beta, teacher_share", [(1.0, 1.0), (0.0, 0.0)])
+def test_dagger_policy_labels_every_frame_and_mixes_by_beta(beta, teacher_share):
+    student = build_vision_actor(SPEC, MODEL)
+    policy = DAggerPolicy(student, PrivilegedTeacher(ConstantTeacher()), beta=beta)
+    out = policy(frames(200))
+    assert torch.all(out[LABEL_KEY] == 0.5)
+    acted_as_teacher = (out["action"] == 0.5).all(-1).float().mean()
+    assert float(acted_as_teacher) == teacher_share
+
+
+def test_beta_travels_with_the_weights():
+    policy = DAggerPolicy(build_vision_actor(SPEC, MODEL), PrivilegedTeacher(ConstantTeacher()), beta=0.3)
+    assert float(policy.state_dict()["beta"]) == pytest.approx(0.3)
+
+
+def test_labelled_frames_aggregate_up_to_capacity():
+    data = LabelledFrames(["observation", "depth"], capacity=100, minibatch=16)
+    for _ in range(3):
+        batch = frames(40)
+        batch[LABEL_KEY] = torch.zeros(40, 3)
+        data.extend(batch)
+    assert len(data) == 100
+    sample = data.sample()
+    assert sample.batch_size == (16,) and set(sample.keys()) == {"observation", "depth", LABEL_KEY}
+
+
+def test_a_teacher_of_another_layout_is_refused():
+    spec = dict(SPEC, privileged_dim=45)
+    with pytest.raises(CheckpointError, match="it reads 49 state values, this env's privileged state has 45"):
+        load_teacher("policies/grasp_objects_ppo.pt", spec, {"control_mode": "ee_delta", "ee_yaw": False})
+
+
+def test_a_teacher_of_another_control_mode_is_refused():
+    spec = dict(SPEC, privileged_dim=49)
+    with pytest.raises(
+        CheckpointError, match="env.control_mode='joint_delta' in the teacher, 'ee_delta' here"
+    ):
+        load_teacher("policies/grasp_ppo.pt", spec, {"control_mode": "ee_delta", "ee_yaw": False})
