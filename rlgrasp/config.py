@@ -1,27 +1,27 @@
-"""Every config schema, in one place, and composing the configs outside a command line.
+"""Every config schema, in one place, and the validation of a training config.
 
 The YAML files under ``configs/`` name these schemas in their defaults lists, so a typo, a wrong
 type or an unknown key fails at start with Hydra's message naming the key, instead of deep inside a
 worker process minutes later. Each default is written once, here; the YAML files carry only what
 differs from it. Training (``train.yaml``), evaluation (``eval.yaml``) and sweeps
-(``sweep/<name>.yaml``) are three separate trees.
+(``sweep/<name>.yaml``) are three separate trees; ``rlgrasp.compose`` composes them outside a
+command line.
 """
 
 from __future__ import annotations
 
 import os
-import secrets
-import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from hydra import compose, initialize_config_dir
+import torch
 from hydra.core.config_store import ConfigStore
-from hydra.experimental.callback import Callback
 from hydra.utils import instantiate
-from omegaconf import MISSING, DictConfig, OmegaConf
+from omegaconf import MISSING, OmegaConf
+
+from rlgrasp.train.rundir import register_resolvers
 
 #: The Hydra config tree (``configs/`` next to the package in a source checkout).
 CONFIG_DIR = os.environ.get("RLGRASP_CONFIG_DIR", str(Path(__file__).resolve().parents[1] / "configs"))
@@ -33,7 +33,7 @@ class EnvConfig:
     """``PandaGraspEnv``'s constructor as a ``_target_`` node: every keyword, with its default.
 
     Built everywhere with ``hydra.utils.instantiate(cfg.env, _partial_=True)`` (see
-    ``rlgrasp.train.collect.env_factory``); a test checks that the fields mirror the constructor.
+    ``rlgrasp.envs.factory.env_factory``); a test checks that the fields mirror the constructor.
     """
 
     _target_: str = "rlgrasp.envs.PandaGraspEnv"
@@ -112,8 +112,28 @@ class MLPConfig:
 
 
 @dataclass
+class CollectorConfig:
+    """How frames are collected: ``_target_`` is the backend, a class of ``rlgrasp.train.collectors``
+    built from the other keys (``collector=process``: TorchRL's collector over worker processes;
+    ``single``: in-process; ``ray``: collector actors on a Ray cluster). Each worker steps one
+    gymnasium ``SyncVectorEnv`` of ``envs_per_worker`` envs and runs the actor on the whole batch;
+    frames per batch = workers x envs_per_worker x steps_per_env."""
+
+    _target_: str = "rlgrasp.train.collectors.ProcessCollector"
+    num_workers: int = 2  # 0: in-process
+    envs_per_worker: int = 4
+    steps_per_env: int = 128
+    torch_threads: int = 1
+    # Collect the next batch while the learner updates (one update of lag; rlgrasp/train/batches.py, ppo.py).
+    overlap: bool = True
+    # Cut each env's first episode at a different length so that a worker's envs are not in phase:
+    # needed when steps_per_env is short against an episode (rlgrasp/train/collect.py StaggeredStart).
+    stagger_starts: bool = False
+
+
+@dataclass
 class RayConfig:
-    """Where ``collector.backend=ray`` runs its collector actors (one per worker)."""
+    """Where ``collector=ray`` runs its collector actors (one per worker)."""
 
     # null: start a private local Ray bound to node_ip_address; "auto" or "host:6379": join a cluster.
     address: str | None = None
@@ -126,29 +146,46 @@ class RayConfig:
 
 
 @dataclass
-class CollectorConfig:
-    """How frames are collected: ``backend=process`` (TorchRL Collector over worker processes),
-    ``ray`` (collector actors on a Ray cluster) or ``single`` (in-process). Each worker steps one
-    gymnasium ``SyncVectorEnv`` of ``envs_per_worker`` envs and runs the actor on the whole batch;
-    frames per batch = workers x envs_per_worker x steps_per_env."""
+class RayCollectorConfig(CollectorConfig):
+    """``collector=ray``: the process backend's keys plus where Ray runs (``collector.ray.*``)."""
 
-    backend: str = "process"
-    num_workers: int = 2
-    envs_per_worker: int = 4
-    steps_per_env: int = 128
-    torch_threads: int = 1
-    # Collect the next batch while the learner updates (one update of lag; rlgrasp/train/batches.py, ppo.py).
-    overlap: bool = True
-    # Cut each env's first episode at a different length so that a worker's envs are not in phase:
-    # needed when steps_per_env is short against an episode (rlgrasp/train/collect.py StaggeredStart).
-    stagger_starts: bool = False
+    _target_: str = "rlgrasp.train.collectors.RayCollector"
     ray: RayConfig = field(default_factory=RayConfig)
 
 
 @dataclass
 class LoggerConfig:
-    backend: str = "tensorboard"  # tensorboard | none
-    console_interval_s: float = 5.0
+    """Where the run's curves go: ``_target_`` is a class of ``rlgrasp.train.logger`` (``logger=
+    tensorboard``; ``none``: the console only) or ``rlgrasp.train.trackers`` (``wandb``, ``mlflow``:
+    TensorBoard plus the tracker), built from the other keys."""
+
+    _target_: str = "rlgrasp.train.logger.TensorBoardLogger"
+    console_interval_s: float = 5.0  # the console's progress line at most this often
+
+
+@dataclass
+class TrackerLoggerConfig(LoggerConfig):
+    """``logger=wandb`` / ``logger=mlflow``: TensorBoard plus a tracker (``rlgrasp.train.trackers``)."""
+
+    project: str = "rlgrasp"  # W&B project / MLflow experiment
+    tags: list[str] = field(default_factory=list)  # run tags in the tracker's UI
+    run_name: str | None = None  # null: <experiment_name>/<run dir name>
+
+
+@dataclass
+class WandbLoggerConfig(TrackerLoggerConfig):
+    _target_: str = "rlgrasp.train.trackers.WandbLogger"
+    entity: str | None = None  # W&B team or user (null: your default)
+    # online | offline | disabled (null: $WANDB_MODE, else online).
+    mode: str | None = None
+
+
+@dataclass
+class MlflowLoggerConfig(TrackerLoggerConfig):
+    _target_: str = "rlgrasp.train.trackers.MlflowLogger"
+    # A server (http://...), a database (sqlite:///...) or a folder (file:...); null: $MLFLOW_TRACKING_URI,
+    # else the folder outputs/mlruns.
+    tracking_uri: str | None = None
 
 
 @dataclass
@@ -293,10 +330,6 @@ class SweepConfig:
 SWEEP_PRIMARY = "rlgrasp_sweep_primary"
 
 
-def _first_not_none(value: Any, fallback: Any) -> Any:
-    return fallback if value is None else value
-
-
 def _sum(*values: int) -> int:
     return sum(values)
 
@@ -305,121 +338,27 @@ class ConfigError(ValueError):
     """A bad training input; the message is one line naming the key, its value and what is allowed."""
 
 
-#: Run directories this process chose that did not exist before (safe to remove on a start-up error).
-FRESH_RUN_DIRS: set[str] = set()
-_RUN_TOKEN = secrets.token_hex(3)  # one per process: every resolution of hydra.run.dir agrees
-
-
-def run_dir(resume: str | None, base: str, seed: int) -> str:
-    """``hydra.run.dir``: a run directory named ``<date>_<time>_s<seed>_<random>`` under ``base``
-    (two runs started in the same second never share one); ``resume=<run dir>`` that directory,
-    ``resume=<run>/checkpoints/<file>.pt`` its run (any other resume: a new directory);
-    ``resume=auto`` the newest run of ``base`` with this seed that holds a checkpoint, else a new one."""
-    chosen = None
-    if resume == "auto":
-        runs = sorted(Path(base).glob(f"*_s{seed}_*/checkpoints/*.pt"), key=lambda p: p.parts[-3])
-        chosen = str(runs[-1].parents[1]) if runs else None
-    elif resume:  # a run, or a file in a run's checkpoints/; anything else fails later, in a new dir
-        path = Path(resume)
-        if path.is_dir() and any((path / "checkpoints").glob("*.pt")):
-            chosen = str(path)
-        elif path.is_file() and path.parent.name == "checkpoints":
-            chosen = str(path.parents[1])
-    if chosen is None:
-        chosen = f"{base}/{time.strftime('%Y-%m-%d_%H-%M-%S')}_s{seed}_{_RUN_TOKEN}"
-    if not Path(chosen).exists():
-        FRESH_RUN_DIRS.add(str(Path(chosen).resolve()))
-    return chosen
-
-
-#: ``hydra.output_subdir`` per run directory, chosen once per Hydra run (Hydra resolves it more than
-#: once, the last time after writing into it); ``RunDirCheck.on_run_start`` forgets earlier runs'.
-_OUTPUT_SUBDIRS: dict[str, str] = {}
-
-
-def output_subdir(output_dir: str) -> str:
-    """``hydra.output_subdir``: ``.hydra`` for the first start in a run directory; every later start
-    there (a resume, a requeued job) ``.hydra/resume_<n>`` (n = 1, 2, ...). Hydra writes config.yaml,
-    hydra.yaml and overrides.yaml into it: in ``.hydra/`` itself a resume would overwrite the launch's."""
-    key = str(Path(output_dir).resolve())
-    if key not in _OUTPUT_SUBDIRS:
-        hydra_dir = Path(key) / ".hydra"
-        n = 0
-        if (hydra_dir / "config.yaml").exists():
-            n = 1
-            while (hydra_dir / f"resume_{n}").exists():
-                n += 1
-        _OUTPUT_SUBDIRS[key] = f".hydra/resume_{n}" if n else ".hydra"
-    return _OUTPUT_SUBDIRS[key]
-
-
 def register_configs() -> None:
-    """Register every schema (idempotent), the resolvers of ``hydra.run.dir`` (``rlgrasp_run_dir``) and
-    ``hydra.output_subdir`` (``rlgrasp_output_subdir``), and ``rlgrasp_sum`` (OmegaConf has no
-    arithmetic; the SLURM launcher asks for workers + 1 CPUs)."""
-    if not OmegaConf.has_resolver("rlgrasp_or"):
-        OmegaConf.register_new_resolver("rlgrasp_or", _first_not_none)
-    if not OmegaConf.has_resolver("rlgrasp_run_dir"):
-        OmegaConf.register_new_resolver("rlgrasp_run_dir", run_dir)
-    if not OmegaConf.has_resolver("rlgrasp_output_subdir"):
-        OmegaConf.register_new_resolver("rlgrasp_output_subdir", output_subdir)
+    """Register every schema (idempotent) and the resolvers the YAML files call: ``rlgrasp_sum``
+    (OmegaConf has no arithmetic; the SLURM launcher asks for workers + 1 CPUs) and the run
+    directory's (``rlgrasp.train.rundir``)."""
     if not OmegaConf.has_resolver("rlgrasp_sum"):
         OmegaConf.register_new_resolver("rlgrasp_sum", _sum)
+    register_resolvers()
     cs = ConfigStore.instance()
     cs.store(name="train_schema", node=TrainConfig)
     cs.store(group="env", name="env_schema", node=EnvConfig)
     cs.store(group="algo", name="ppo_schema", node=PPOConfig)
     cs.store(group="model", name="mlp_schema", node=MLPConfig)
     cs.store(group="collector", name="collector_schema", node=CollectorConfig)
+    cs.store(group="collector", name="ray_collector_schema", node=RayCollectorConfig)
     cs.store(group="logger", name="logger_schema", node=LoggerConfig)
+    cs.store(group="logger", name="wandb_schema", node=WandbLoggerConfig)
+    cs.store(group="logger", name="mlflow_schema", node=MlflowLoggerConfig)
     cs.store(group="paths", name="paths_schema", node=PathsConfig)
     cs.store(name="eval_schema", node=EvalConfig)
     cs.store(group="sweep", name="sweep_schema", node=SweepConfig)
     cs.store(name=SWEEP_PRIMARY, node={"defaults": [{"sweep": "smoke"}, "_self_"]})
-    from rlgrasp.train.trackers import register_tracker_configs  # logger=wandb|mlflow (extends LoggerConfig)
-
-    register_tracker_configs()
-
-
-def compose_config(
-    name: str, overrides: list[str] | tuple[str, ...] = (), config_dir: str | Path = CONFIG_DIR
-) -> DictConfig:
-    """``configs/<name>.yaml`` with ``overrides``, as its script would build it (without Hydra's
-    run-time keys: pass ``paths.output_dir=...`` for training)."""
-    register_configs()
-    with initialize_config_dir(config_dir=str(Path(config_dir).resolve()), version_base="1.3"):
-        return compose(config_name=name, overrides=list(overrides))
-
-
-def compose_train(
-    overrides: list[str] | tuple[str, ...] = (), config_dir: str | Path = CONFIG_DIR
-) -> DictConfig:
-    """A training config as ``scripts/train.py`` would build it."""
-    return compose_config("train", overrides, config_dir)
-
-
-def compose_eval(
-    overrides: list[str] | tuple[str, ...] = (), config_dir: str | Path = CONFIG_DIR
-) -> DictConfig:
-    """An evaluation config as ``scripts/evaluate.py`` would build it."""
-    return compose_config("eval", overrides, config_dir)
-
-
-def compose_sweep(
-    overrides: list[str] | tuple[str, ...] = (), config_dir: str | Path = CONFIG_DIR
-) -> DictConfig:
-    """The ``sweep`` node composed from ``configs/sweep/<name>.yaml`` and ``sweep.*`` overrides."""
-    return compose_config(SWEEP_PRIMARY, overrides, config_dir).sweep
-
-
-def env_factory(env_cfg: DictConfig | Mapping[str, Any]) -> Callable[[], Any]:
-    """The one way to build envs: the ``env`` node's ``_target_`` with its fields as keywords.
-
-    Used by the collector workers, training's evaluation, ``rlgrasp-eval`` and the benchmarks. The
-    partial is picklable, so it travels to spawned workers and Ray actors as it is; ``_convert_``
-    makes the keywords (``randomization`` as a preset name or a mapping) plain Python values.
-    """
-    return instantiate(env_cfg, _partial_=True, _convert_="all")
 
 
 # --- validation of a training config (before any worker starts) -------------------------------
@@ -427,17 +366,14 @@ def _positive(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0
 
 
-def _train_problems(cfg: Any) -> list[str]:
-    """Each bad value of a composed training config as ``key=value: what is allowed``."""
+def _train_problems(cfg: Any, batch: int) -> list[str]:
+    """Each bad value of a composed training config as ``key=value: what is allowed``; ``batch``: the
+    collector's frames per batch."""
     c, a, m, e, k = cfg.collector, cfg.algo, cfg.model, cfg.eval, cfg.checkpoint
-    workers = 1 if c.backend == "single" or c.num_workers == 0 else c.num_workers
-    batch = workers * c.envs_per_worker * c.steps_per_env
     checks = [
         ("total_frames", cfg.total_frames, cfg.total_frames > 0, "must be > 0"),
         ("time_budget_min", cfg.time_budget_min, cfg.time_budget_min is None or cfg.time_budget_min > 0,
          "must be > 0 or null"),
-        ("collector.backend", c.backend, c.backend in ("process", "ray", "single"),
-         "must be process, ray or single"),
         ("collector.num_workers", c.num_workers, c.num_workers >= 0, "must be >= 0 (0: in-process)"),
         ("collector.envs_per_worker", c.envs_per_worker, c.envs_per_worker >= 1, "must be >= 1"),
         ("collector.steps_per_env", c.steps_per_env, c.steps_per_env >= 1, "must be >= 1"),
@@ -462,8 +398,6 @@ def _train_problems(cfg: Any) -> list[str]:
         ("checkpoint.keep_last", k.keep_last, k.keep_last >= 1, "must be >= 1"),
         ("checkpoint.interval_frames", k.interval_frames, k.interval_frames >= 0,
          "must be >= 0 (0: only at the end)"),
-        ("logger.backend", cfg.logger.backend, cfg.logger.backend in ("tensorboard", "none"),
-         "must be tensorboard or none"),
     ]
     return [f"{key}={value!r}: {allowed}" for key, value, ok, allowed in checks if not ok] + _device_problems(
         cfg.device
@@ -471,8 +405,6 @@ def _train_problems(cfg: Any) -> list[str]:
 
 
 def _device_problems(device: str) -> list[str]:
-    import torch
-
     if device in ("auto", "cpu"):
         return []
     try:
@@ -488,6 +420,15 @@ def _device_problems(device: str) -> list[str]:
     return []
 
 
+def _built(key: str, node: Any, build: Callable[[Any], Any]) -> Any:
+    """``build(node)`` for a ``_target_`` node; ``ConfigError`` naming the target when it fails."""
+    try:
+        return build(node)
+    except Exception as exc:  # noqa: BLE001 - Hydra wraps whatever the target raised
+        reason = " ".join(str(exc).split(", set env var HYDRA_FULL_ERROR")[0].split())[:300]
+        raise ConfigError(f"{key}._target_={node.get('_target_')!r} cannot be built: {reason}") from None
+
+
 def validate_train(cfg: Any) -> None:
     """Refuse a training config with a bad value: ``ConfigError`` naming the first (and how many
     more). The env's own keywords are checked by the env when the learner builds it, before workers."""
@@ -496,36 +437,9 @@ def validate_train(cfg: Any) -> None:
             OmegaConf.merge(OmegaConf.structured(EnvConfig), cfg.env)
         except Exception as exc:  # noqa: BLE001 - OmegaConf's validation errors
             raise ConfigError(f"env: {str(exc).splitlines()[0]}") from None
-    problems = _train_problems(cfg)
+    collector = _built("collector", cfg.collector, lambda node: instantiate(node, _convert_="all"))
+    _built("logger", cfg.logger, lambda node: instantiate(node, _partial_=True))  # built with the run dir
+    problems = _train_problems(cfg, collector.frames_per_batch)
     if problems:
         more = f" (and {len(problems) - 1} more: {'; '.join(problems[1:])})" if len(problems) > 1 else ""
         raise ConfigError(problems[0] + more)
-
-
-class RunDirCheck(Callback):
-    """Hydra callback (``configs/hydra/default.yaml``): an output directory that cannot be created
-    ends the command with one line instead of Hydra's traceback from inside its job runner."""
-
-    def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
-        _OUTPUT_SUBDIRS.clear()  # a new start in this process (tests run several): choose afresh
-        self._check(config.hydra.run.dir)
-
-    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
-        self._check(config.hydra.sweep.dir)
-
-    @staticmethod
-    def _check(path: Any) -> None:
-        import sys
-
-        # Creates nothing: hydra.run.dir holds the time, so this resolution may name another second
-        # than the one the job then creates; a directory made here would be left behind empty.
-        target = Path(str(path)).absolute()
-        existing = next(p for p in (target, *target.parents) if p.exists())
-        problem = None
-        if not existing.is_dir():
-            problem = "Not a directory"
-        elif not os.access(existing, os.W_OK | os.X_OK):
-            problem = f"{existing} is not writable"
-        if problem:
-            print(f"error: cannot create the run directory {path}: {problem}", file=sys.stderr)
-            sys.exit(2)

@@ -30,8 +30,9 @@ import torch
 from hydra.core.config_store import ConfigStore
 from torch import nn
 
-from rlgrasp.config import CONFIG_DIR, env_factory
+from rlgrasp.config import CONFIG_DIR
 from rlgrasp.deploy import DeployPolicy, deploy_module
+from rlgrasp.envs.factory import env_factory
 from rlgrasp.envs.observation import PROPRIOCEPTION
 from rlgrasp.evaluation.policies import CheckpointActor
 from rlgrasp.evaluation.source import (
@@ -196,7 +197,7 @@ def _named(inputs: np.ndarray | Inputs) -> Inputs:
 
 # --- checking against the checkpoint policy ------------------------------------------------------
 def make_env(env_cfg: dict[str, Any]) -> Any:
-    """The checkpoint's env without rendering (``rlgrasp.config.env_factory``, as everywhere)."""
+    """The checkpoint's env without rendering (``rlgrasp.envs.factory.env_factory``, as everywhere)."""
     cfg = build_env_cfg(env_cfg)
     cfg["render_mode"] = None
     return env_factory(cfg)()

@@ -29,7 +29,8 @@ from hydra._internal.utils import get_args_parser
 from hydra.errors import HydraException, MissingConfigException, OverrideParseException
 from omegaconf.errors import OmegaConfBaseException
 
-from rlgrasp.config import CONFIG_DIR, compose_config
+from rlgrasp.compose import compose_config
+from rlgrasp.config import CONFIG_DIR
 
 #: Groups whose files set one ``env`` key; a dict (or, for objects, a list) value is that key's value.
 ENV_GROUPS = {"objects": ("{", "["), "randomization": ("{",)}

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from pathlib import Path
 from typing import Any
 
 
@@ -36,23 +35,11 @@ def markdown_table(head: Sequence[Any], rows: Sequence[Sequence[Any]]) -> str:
 
 def pyplot() -> Any:
     """``matplotlib.pyplot`` drawing to files only (no display on workers, clusters or CI)."""
+    # Imported here: only plots need matplotlib, and choosing its backend when rlgrasp.utils is
+    # imported would take the display away from any program that imports it.
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     return plt
-
-
-def processes_in_group(pgid: int) -> list[int]:
-    """Live (not zombie) processes of process group ``pgid``, read from ``/proc`` (Linux; psutil is
-    not a dependency): what a stopped command must not leave behind (its workers are in its group)."""
-    found = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:  # the process ended while we looked
-            continue
-        if int(fields[2]) == pgid and fields[0] != "Z":
-            found.append(int(stat.parent.name))
-    return found

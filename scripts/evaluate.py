@@ -1,6 +1,6 @@
 """Evaluate a policy: python scripts/evaluate.py ckpt=<run dir or checkpoint> [key=value ...].
 
-Baselines: python scripts/evaluate.py policy=scripted (or policy=random). See docs/EVALUATION.md.
+Baselines: python scripts/evaluate.py policy=scripted (or policy=random). See docs/evaluation.md.
 """
 
 import sys

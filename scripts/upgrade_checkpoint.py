@@ -5,7 +5,8 @@ the RNG states as numpy and Python objects, so resume and evaluation refuse them
 means unpickling arbitrary objects, which can run code: do it only for files you made yourself,
 hence ``--trust``. ``--policy-only`` keeps what evaluation and export read (actor with its
 normalizer, config, spec, counters, versions) and drops the optimizer, critic and RNG states: a
-small file to share or ship, which cannot be resumed.
+small file to share or ship, which cannot be resumed. The config comes out in today's shape
+(``rlgrasp.train.legacy``: collector and logger as ``_target_`` nodes).
 
     python scripts/upgrade_checkpoint.py outputs/train/x/run/checkpoints/last.pt upgraded.pt --trust
     python scripts/upgrade_checkpoint.py <run>/checkpoints/best.pt policies/grasp_ppo.pt --policy-only
@@ -25,6 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a checkout, uninstalled
 
 from rlgrasp.train import checkpoint as ckpt_lib  # noqa: E402
+from rlgrasp.train.legacy import upgrade_config  # noqa: E402
 
 POLICY_KEYS = ("actor", "config", "spec", "frames", "updates", "best_eval_success", "last_eval", "versions")
 
@@ -44,6 +46,7 @@ def load(path: Path, trust: bool) -> dict:
         torch.set_rng_state(state["rng"]["torch"])
         state["rng"] = ckpt_lib.rng_state()
     state.pop("obs_norm", None)  # format 1 kept a copy of the normalizer the actor already holds
+    state["config"] = upgrade_config(state["config"])
     state["format"] = ckpt_lib.FORMAT
     return state
 

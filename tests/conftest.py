@@ -11,7 +11,8 @@ import pytest
 # tests only ever start Ray on loopback, so keep it there for the whole session.
 os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
 
-from rlgrasp.config import compose_eval, compose_train  # noqa: E402
+from rlgrasp.compose import compose_eval, compose_train  # noqa: E402
+from rlgrasp.envs import PandaGraspEnv
 from tests.procs import Started, start_script  # noqa: E402
 
 
@@ -38,8 +39,6 @@ def eval_cfg():
 @pytest.fixture
 def make_env():
     """``make_env(**kwargs)``: a ``PandaGraspEnv`` closed at the end of the test."""
-    from rlgrasp.envs import PandaGraspEnv
-
     envs = []
 
     def _make(**kwargs):

@@ -12,9 +12,21 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from rlgrasp.utils import processes_in_group
-
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def processes_in_group(pgid: int) -> list[int]:
+    """Live (not zombie) processes of process group ``pgid``, read from ``/proc`` (Linux; psutil is
+    not a dependency): what a stopped command must not leave behind (its workers are in its group)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:  # the process ended while we looked
+            continue
+        if int(fields[2]) == pgid and fields[0] != "Z":
+            found.append(int(stat.parent.name))
+    return found
 
 
 class Started:

@@ -6,7 +6,13 @@ on ``sys.path`` and the workers inherit it.
 
 from __future__ import annotations
 
+import multiprocessing
 from typing import Any
+
+import gymnasium as gym
+import torch
+
+from rlgrasp.envs import PandaGraspEnv
 
 
 class EnvCrash(RuntimeError):
@@ -15,15 +21,11 @@ class EnvCrash(RuntimeError):
 
 def pendulum(max_episode_steps: int = 50) -> Any:
     """Gymnasium's Pendulum-v1 with the grasp env's episode length: the pipeline without PyBullet."""
-    import gymnasium as gym
-
     return gym.make("Pendulum-v1", max_episode_steps=max_episode_steps)
 
 
 def crashing_grasp_env(crash_after: int = 100, **env_kwargs: Any) -> Any:
     """``PandaGraspEnv(**env_kwargs)`` whose ``step`` raises ``EnvCrash`` after ``crash_after`` steps."""
-    from rlgrasp.envs import PandaGraspEnv
-
     env = PandaGraspEnv(**env_kwargs)
     step, calls = env.step, [0]
 
@@ -35,3 +37,11 @@ def crashing_grasp_env(crash_after: int = 100, **env_kwargs: Any) -> Any:
 
     env.step = crashing_step
     return env
+
+
+def unseeded_worker_grasp_env(**env_kwargs: Any) -> Any:
+    """``PandaGraspEnv(**env_kwargs)``; built in a collector worker, it first reseeds the worker's torch
+    RNG from the OS, so the policy's actions there differ run to run: a worker that lost its seed."""
+    if multiprocessing.parent_process() is not None:  # a spawned worker, not the learner
+        torch.seed()
+    return PandaGraspEnv(**env_kwargs)

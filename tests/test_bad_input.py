@@ -25,7 +25,7 @@ from hydra.core.global_hydra import GlobalHydra
 from omegaconf import OmegaConf
 
 from rlgrasp import demo
-from rlgrasp.config import compose_train
+from rlgrasp.compose import compose_train
 from rlgrasp.train.loop import Trainer
 from rlgrasp.utils import markdown_table
 from tests.test_vision_eval import bad_input_files

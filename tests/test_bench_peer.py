@@ -1,10 +1,12 @@
-"""scripts/bench_peer.py's mapping from an rlgrasp training config to Stable-Baselines3's PPO: the
+"""benchmarks/bench_peer.py's mapping from an rlgrasp training config to Stable-Baselines3's PPO: the
 peer comparison is only fair if SB3 gets rlgrasp's settings, and SB3 must accept them as given."""
 
 import runpy
 from pathlib import Path
 
+import gymnasium as gym
 import pytest
+import torch
 
 sb3 = pytest.importorskip("stable_baselines3")
 
@@ -13,13 +15,11 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(scope="module")
 def peer():
-    return runpy.run_path(str(ROOT / "scripts" / "bench_peer.py"))
+    return runpy.run_path(str(ROOT / "benchmarks" / "bench_peer.py"))
 
 
 def test_sb3_gets_grasp_ppo_settings(peer, train_cfg):
-    import gymnasium as gym
-    import torch
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize  # optional: skipped without it
 
     cfg = train_cfg("experiment=grasp_ppo")
     a, m, c = cfg.algo, cfg.model, cfg.collector

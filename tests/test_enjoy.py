@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from rlgrasp.config import compose_config
+from rlgrasp.compose import compose_config
 from rlgrasp.evaluation.enjoy import PacedActor, no_display_reason, play, register_enjoy_config
 from rlgrasp.evaluation.episodes import run_episode
 from rlgrasp.evaluation.policies import build_policy

@@ -13,7 +13,7 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
-from rlgrasp.config import compose_eval, compose_train
+from rlgrasp.compose import compose_eval, compose_train
 from rlgrasp.evaluation import EvaluationError
 from rlgrasp.evaluation.cli import evaluate
 from rlgrasp.evaluation.episodes import run_episodes
@@ -96,7 +96,7 @@ def test_checkpoint_evaluation_writes_every_artefact(tmp_path: Path) -> None:
 
 
 def test_scripted_baseline_within_known_bounds(tmp_path: Path) -> None:
-    """scripts/bench_expert.py: default preset 98/100 on seeds 0-99, so >= 18/20 on seeds 0-19."""
+    """benchmarks/bench_expert.py: default preset 98/100 on seeds 0-99, so >= 18/20 on seeds 0-19."""
     m = evaluate(
         _cfg(
             "policy=scripted",

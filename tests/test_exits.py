@@ -30,7 +30,7 @@ def test_eval_runs_to_the_end_and_exits(tmp_path: Path, script) -> None:
 
 @pytest.mark.parametrize(
     ("sig", "to_group"),
-    [(signal.SIGTERM, False),  # `kill <pid>`, a scheduler: the pool workers were left running, orphaned
+    [(signal.SIGTERM, False),  # `kill <pid>`, a scheduler: the main process only; its pool must end too
      (signal.SIGINT, True)],  # Ctrl-C at a terminal: the whole group gets it
     ids=["sigterm-to-main", "sigint-to-group"],
 )
@@ -62,8 +62,8 @@ def _trials(root: Path) -> list[optuna.trial.FrozenTrial]:
 
 def test_sweep_stops_on_sigterm_then_the_same_command_finishes(tmp_path: Path, script) -> None:
     """SIGTERM during a trial (collector workers running): the trial saves, the sweep stops with 130 and
-    is resumable; the same command then runs to the end. Before, training kept the SIGTERM to itself: the
-    trial ended early as COMPLETE with a half-trained value and the sweep went on."""
+    is resumable; the same command then runs to the end. Training hands the SIGTERM on: kept to itself,
+    the trial would end early as COMPLETE with a half-trained value and the sweep go on."""
     root = tmp_path / "sweeps"
     cmd = ["experiment=smoke", "sweep=smoke", f"sweep.root_dir={root}", "sweep.n_trials=1",
            "sweep.plots=false",

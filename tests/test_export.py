@@ -13,7 +13,7 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
-from rlgrasp.config import compose_config
+from rlgrasp.compose import compose_config
 from rlgrasp.export import DeployPolicy, ExportError, export, register_export_config
 from tests.test_eval import make_run
 

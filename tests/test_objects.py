@@ -12,7 +12,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 from omegaconf import OmegaConf
 
-from rlgrasp.config import compose_eval, compose_train
+from rlgrasp.compose import compose_eval, compose_train
 from rlgrasp.envs import PandaGraspEnv, ScriptedExpert
 from rlgrasp.envs.objects import (
     BROKEN_RANDOM_URDFS,

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from rlgrasp.config import compose_eval
+from rlgrasp.compose import compose_eval
 from rlgrasp.evaluation.cli import evaluate
 from rlgrasp.evaluation.outcomes import failure_reason, object_group, success_by_object
 

@@ -11,24 +11,30 @@ import sys
 import time
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from omegaconf import OmegaConf
 
-from rlgrasp.config import ConfigError, compose_train, run_dir
+import rlgrasp
+from rlgrasp.compose import compose_train
+from rlgrasp.config import ConfigError, validate_train
+from rlgrasp.evaluation.source import EvaluationError, load_checked_checkpoint
 from rlgrasp.train import checkpoint as ckpt_lib
+from rlgrasp.train.loop import Trainer
 from rlgrasp.train.resume import merged_config, prepare_run
+from rlgrasp.train.rundir import run_dir
 from tests.procs import wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 SMOKE = ["experiment=smoke", "logger=none"]
+COLLECTORS, LOGGERS = "rlgrasp.train.collectors", "rlgrasp.train.logger"
 
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory) -> Path:
     """A run directory with one real smoke checkpoint at frame 0 (no workers started)."""
-    from rlgrasp.train.loop import Trainer
-
     run = tmp_path_factory.mktemp("resume") / "run"
     Trainer(compose_train([*SMOKE, f"paths.output_dir={run}"])).save()
     return run
@@ -53,8 +59,6 @@ class _Evil:
 
 
 def test_a_checkpoint_that_would_run_code_is_refused_and_runs_nothing(tmp_path: Path, run: Path) -> None:
-    from rlgrasp.evaluation.source import EvaluationError, load_checked_checkpoint
-
     marker = tmp_path / "pwned"
     state = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
     state["payload"] = _Evil(str(marker))
@@ -91,6 +95,42 @@ def test_resume_refuses_a_change_of_a_fixed_key_naming_both_values(run: Path) ->
         merged_config(cfg, saved, {"env.randomization"})
 
 
+def test_resume_may_switch_the_collector_and_logger_classes(run: Path) -> None:
+    """collector=ray on a process run brings the Ray keys; back to process drops them again (the
+    process backend would refuse them); logger=none replaces TensorBoard."""
+    saved = ckpt_lib.load_checkpoint(run)["config"]
+    cfg = compose_train([*SMOKE, f"paths.output_dir={run}", "collector=ray", "collector.ray.address=auto"])
+    to_ray = merged_config(cfg, saved, {"collector._target_", "collector.ray.address"})
+    assert to_ray.collector._target_ == "rlgrasp.train.collectors.RayCollector"
+    assert to_ray.collector.ray.address == "auto"
+    cfg = compose_train([*SMOKE, f"paths.output_dir={run}", "collector=process", "logger=tensorboard"])
+    back = merged_config(cfg, OmegaConf.to_container(to_ray), {"collector._target_", "logger._target_"})
+    assert back.collector._target_.endswith("ProcessCollector") and "ray" not in back.collector
+    assert back.logger._target_.endswith("TensorBoardLogger")
+    validate_train(back)
+
+
+def test_a_checkpoint_with_string_backends_resumes(tmp_path: Path, run: Path) -> None:
+    """Checkpoints from before the _target_ nodes (policies/*.pt among them) name the collector and
+    the logger with strings; read, they come in today's shape, and resume."""
+    state = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
+    collector = {k: v for k, v in state["config"]["collector"].items() if k != "_target_"}
+    state["config"]["collector"] = {"backend": "process", **collector, "ray": {"address": None}}
+    state["config"]["logger"] = {"backend": "none", "console_interval_s": 5.0}
+    old = tmp_path / "old" / "checkpoints" / "last.pt"
+    ckpt_lib.save_checkpoint(old, state)
+    cfg = compose_train([f"paths.output_dir={old.parents[1]}", f"resume={old}"])
+    merged, resumed = prepare_run(cfg, {"resume"})
+    assert resumed is not None
+    assert dict(merged.collector) == {"_target_": f"{COLLECTORS}.ProcessCollector", **collector}
+    assert dict(merged.logger) == {"_target_": f"{LOGGERS}.ConsoleLogger", "console_interval_s": 5.0}
+    for shipped in sorted((ROOT / "policies").glob("*.pt")):
+        config = ckpt_lib.read_checkpoint(shipped)["config"]
+        assert config["collector"]["_target_"] == f"{COLLECTORS}.ProcessCollector"
+        assert "backend" not in config["collector"] and "ray" not in config["collector"]
+        assert config["logger"] == {"_target_": f"{LOGGERS}.TensorBoardLogger", "console_interval_s": 5.0}
+
+
 def test_a_requeued_slurm_job_resumes_its_run_dir_without_resume_given(run: Path, monkeypatch) -> None:
     """The requeued job runs its first command line again (no resume=) in a run dir with checkpoints."""
     cfg = compose_train([*SMOKE, f"paths.output_dir={run}"])
@@ -119,7 +159,7 @@ def test_a_truncated_last_falls_back_with_a_warning(tmp_path: Path, run: Path, c
 
 
 def test_run_dirs_are_unique_per_process_and_name_the_seed(tmp_path: Path) -> None:
-    code = "from rlgrasp.config import run_dir; print(run_dir(None, 'base', 7))"
+    code = "from rlgrasp.train.rundir import run_dir; print(run_dir(None, 'base', 7))"
     names = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
                             check=True).stdout.strip() for _ in range(2)}
     assert len(names) == 2
@@ -138,10 +178,6 @@ def test_resume_auto_picks_the_newest_run_of_the_seed(tmp_path: Path, run: Path)
 
 
 def test_gym_make_honours_max_episode_steps() -> None:
-    import gymnasium as gym
-
-    import rlgrasp
-
     for kwargs, want in (({}, 50), ({"max_episode_steps": 80}, 80)):
         env = gym.make(rlgrasp.ENV_ID, randomization="none", **kwargs)
         env.reset(seed=0)
@@ -216,8 +252,8 @@ def test_a_resume_keeps_the_launch_config_in_dot_hydra(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_soak_three_kill_9_cycles(tmp_path: Path) -> None:
-    """scripts/soak_resume.py: 3 x (start or resume, random wait, kill -9 of the group), every check."""
-    proc = subprocess.run([sys.executable, str(ROOT / "scripts" / "soak_resume.py"), "--cycles", "3",
+    """benchmarks/soak_resume.py: 3 x (start or resume, random wait, kill -9 of the group), every check."""
+    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "soak_resume.py"), "--cycles", "3",
                            "--out", str(tmp_path), "--wait", "15", "35"], capture_output=True, text=True,
                           cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=1800)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-2000:]

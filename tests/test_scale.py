@@ -4,14 +4,20 @@ two-node Ray cluster started on loopback."""
 from __future__ import annotations
 
 import gc
+import pickle
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 import torch
+from hydra import compose, initialize_config_dir
 
-from rlgrasp.config import compose_train
+from rlgrasp.compose import compose_train
+from rlgrasp.config import CONFIG_DIR, register_configs
+from rlgrasp.train.checkpoint import load_checkpoint
+from rlgrasp.train.loop import train
+from rlgrasp.train.parts import build_parts
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = ["collector=single", "collector.envs_per_worker=4", "total_frames=1024", "logger=none"]
@@ -41,7 +47,6 @@ def test_two_seed_multirun_through_submitit_local(tmp_path: Path) -> None:
     jobs = _multirun(tmp_path, "hydra/launcher=local", *TINY)
     results = list((jobs[0].parent / ".submitit").glob("*/*_result.pkl"))
     assert len(results) == 2
-    import pickle
 
     for path in results:
         status, value = pickle.loads(path.read_bytes())
@@ -60,10 +65,6 @@ def test_two_seed_multirun_sequential(tmp_path: Path) -> None:
 
 
 def test_slurm_launcher_config_composes() -> None:
-    from hydra import compose, initialize_config_dir
-
-    from rlgrasp.config import CONFIG_DIR, register_configs
-
     register_configs()
     with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
         cfg = compose("train", overrides=["hydra/launcher=slurm"], return_hydra_config=True)
@@ -79,7 +80,7 @@ def test_slurm_launcher_config_composes() -> None:
 def ray_cluster():
     """Two Ray nodes (one CPU each) on 127.0.0.1, the driver connected; torn down after the module."""
     pytest.importorskip("ray")  # conftest.py keeps Ray on loopback (must precede the first import)
-    import ray
+    import ray  # an optional extra, imported only once it is there
     from ray.cluster_utils import Cluster
 
     node = {"num_cpus": 1, "node_ip_address": "127.0.0.1"}
@@ -101,9 +102,7 @@ def _cfg(tmp_path: Path, *overrides: str):
 def test_ray_collector_runs_on_both_nodes(ray_cluster, tmp_path: Path) -> None:
     """One collector actor per node, each collecting its share; the data match the process backend's
     (same env seeds and worker RNG seeds, same initial policy)."""
-    import ray
-
-    from rlgrasp.train.parts import build_parts
+    import ray  # an optional extra: the fixture skipped without it
 
     batches = {}
     for backend in ("ray", "process"):
@@ -132,9 +131,6 @@ def test_ray_collector_runs_on_both_nodes(ray_cluster, tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_ray_training_matches_process_backend_on_a_smoke_budget(ray_cluster, tmp_path: Path) -> None:
-    from rlgrasp.train.checkpoint import load_checkpoint
-    from rlgrasp.train.loop import train
-
     evals = {}
     for backend in ("ray", "process"):
         run = tmp_path / backend

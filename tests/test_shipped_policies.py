@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from rlgrasp.config import compose_eval
+from rlgrasp.compose import compose_eval
 from rlgrasp.evaluation.cli import evaluate
 
 POLICIES = Path(__file__).resolve().parents[1] / "policies"

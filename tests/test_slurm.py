@@ -99,7 +99,7 @@ def test_a_job_slurm_requeued_itself_exits_without_a_result(
     fails ("Job is pending execution"). Returning would write a submitit result with the preempted
     frames, and the sweep would take it for the run's end; exiting leaves the result to the rerun."""
 
-    from rlgrasp.train.loop import hand_off_preemption
+    from rlgrasp.train.preemption import hand_off_preemption
 
     bin_dir = tmp_path / "bin"
     bin_dir.mkdir()

@@ -115,7 +115,7 @@ def test_sweep_fails_prunes_resumes_and_summarizes(tmp_path: Path) -> None:
          "experiment=smoke_best", "--cfg", "job"],
         capture_output=True, text=True, check=True, cwd=tmp_path,
     ).stdout
-    assert "experiment_name: smoke_best" in job and "backend: single" in job
+    assert "experiment_name: smoke_best" in job and "collectors.SingleCollector" in job
     assert f"lr: {trials[1].params['algo.lr']!r}" in job and "epochs: 1\n" in job
 
     # 4) on demand: --summary, with the plots

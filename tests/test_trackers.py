@@ -3,6 +3,7 @@ tracker, and ``resume=`` continues the same tracker run. Short in-process runs o
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import time
 from pathlib import Path
@@ -10,6 +11,7 @@ from typing import Any
 
 import pytest
 
+from rlgrasp.config import ConfigError
 from rlgrasp.train.loop import train
 
 STAND_IN = {"_target_": "tests.standins.pendulum", "max_episode_steps": 20}
@@ -35,7 +37,7 @@ def _train(train_cfg, run_dir: Path, frames: int, *overrides: str) -> None:
 
 def test_mlflow_gets_tags_config_and_resumes_the_same_run(tmp_path: Path, train_cfg) -> None:
     pytest.importorskip("mlflow")
-    from mlflow.tracking import MlflowClient
+    from mlflow.tracking import MlflowClient  # an optional extra: skipped above without it
 
     run_dir, store = tmp_path / "run", tmp_path / "mlruns"
     over = ("logger=mlflow", f"logger.tracking_uri=file://{store}", "logger.project=unit",
@@ -61,7 +63,7 @@ def test_mlflow_gets_tags_config_and_resumes_the_same_run(tmp_path: Path, train_
 def _wandb_records(path: Path) -> list[Any]:
     """The records of a W&B transaction log (``run-<id>.wandb``): a 7-byte file header, then 32 kB
     blocks of chunks, each with a 7-byte header (crc32, little-endian length, type 1 full .. 4 last)."""
-    from wandb.proto import wandb_internal_pb2 as pb
+    from wandb.proto import wandb_internal_pb2 as pb  # an optional extra: only its test reads it
 
     data, pos, buf, out = path.read_bytes(), 7, b"", []
     while pos + 7 <= len(data):
@@ -126,9 +128,13 @@ def test_wandb_offline_gets_tags_config_and_resumes_the_same_run(tmp_path: Path,
     assert {1024, 2048} <= frames
 
 
-def test_unknown_tracker_is_refused(tmp_path: Path, train_cfg) -> None:
-    from rlgrasp.train.trackers import attach_tracker
-
-    cfg = train_cfg("logger=wandb", "logger.tracker=comet")
-    with pytest.raises(ValueError, match="logger.tracker must be one of wandb, mlflow"):
-        attach_tracker(object(), cfg.logger, tmp_path, {}, resumed=False)
+def test_a_tracker_without_its_extra_is_refused_in_one_line(
+    tmp_path: Path, train_cfg, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Before any worker starts, and naming the extra to install."""
+    find_spec = importlib.util.find_spec
+    hidden = lambda name, *args: None if name == "wandb" else find_spec(name, *args)  # noqa: E731
+    monkeypatch.setattr(importlib.util, "find_spec", hidden)
+    with pytest.raises(ConfigError, match=r'logger=wandb needs its extra: pip install -e "\.\[wandb\]"'):
+        _train(train_cfg, tmp_path / "run", 1024, "logger=wandb")
+    assert not (tmp_path / "run" / "tracker.json").exists()

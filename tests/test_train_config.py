@@ -1,9 +1,10 @@
-"""The Hydra config tree composes, bad overrides fail at start naming the key, and the env schema
-mirrors the env's constructor."""
+"""The Hydra config tree composes, bad overrides fail at start naming the key, the env schema
+mirrors the env's constructor, and every collector and logger option names a class that builds."""
 
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import inspect
 import pickle
 from pathlib import Path
@@ -13,7 +14,11 @@ from hydra.errors import ConfigCompositionException
 from omegaconf import OmegaConf
 from omegaconf.errors import ConfigKeyError, ValidationError
 
-from rlgrasp.config import CONFIG_DIR, EnvConfig, env_factory
+from rlgrasp.config import CONFIG_DIR, ConfigError, EnvConfig, validate_train
+from rlgrasp.envs import PandaGraspEnv
+from rlgrasp.envs.factory import env_factory
+from rlgrasp.train.collectors import CollectorBackend, RayCollector, SingleCollector, collector_backend
+from rlgrasp.train.logger import ConsoleLogger
 
 EXPERIMENTS = sorted(p.stem for p in (Path(CONFIG_DIR) / "experiment").glob("*.yaml"))
 
@@ -36,7 +41,55 @@ def test_group_options_compose(group: str, train_cfg) -> None:
     if group.startswith("randomization"):
         assert cfg.env.randomization == group.split("=")[1]
     if group in ("collector=single", "debug=default"):
-        assert cfg.collector.backend == "single"
+        assert cfg.collector._target_ == "rlgrasp.train.collectors.SingleCollector"
+
+
+def _options(group: str) -> list[str]:
+    return sorted(p.stem for p in (Path(CONFIG_DIR) / group).glob("*.yaml"))
+
+
+@pytest.mark.parametrize("collector", _options("collector"))
+def test_each_collector_option_builds_its_backend(collector: str, train_cfg) -> None:
+    """A backend is a class and a YAML file naming it; the schema still checks its keys."""
+    cfg = train_cfg("experiment=smoke", f"collector={collector}")
+    validate_train(cfg)
+    backend = collector_backend(cfg.collector)
+    assert isinstance(backend, CollectorBackend) and type(backend).__name__.lower().startswith(collector)
+    workers = 1 if backend.in_process else cfg.collector.num_workers
+    assert backend.frames_per_batch == workers * cfg.collector.envs_per_worker * cfg.collector.steps_per_env
+    assert backend.collects_ahead == (cfg.collector.overlap and not backend.in_process)
+
+
+@pytest.mark.parametrize("logger", _options("logger"))
+def test_each_logger_option_names_a_logger_class(logger: str, train_cfg) -> None:
+    cfg = train_cfg(f"logger={logger}")
+    validate_train(cfg)
+    module, _, name = cfg.logger._target_.rpartition(".")
+    assert issubclass(getattr(importlib.import_module(module), name), ConsoleLogger)
+
+
+def test_the_command_lines_of_the_string_backends_still_work(train_cfg) -> None:
+    assert isinstance(collector_backend(train_cfg("collector=single").collector), SingleCollector)
+    ray = collector_backend(train_cfg("collector=ray", "collector.ray.address=auto").collector)
+    assert isinstance(ray, RayCollector) and ray.ray.address == "auto"
+    assert train_cfg("logger=none").logger._target_ == "rlgrasp.train.logger.ConsoleLogger"
+    assert train_cfg("logger=wandb", "logger.mode=offline").logger._target_.endswith("trackers.WandbLogger")
+    assert collector_backend(train_cfg("collector.num_workers=4").collector).num_workers == 4
+
+
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        ("collector._target_=rlgrasp.train.collectors.Bogus",
+         "collector._target_='rlgrasp.train.collectors.Bogus' cannot be built: Error locating target"),
+        ("logger._target_=nowhere.Logger", "logger._target_='nowhere.Logger' cannot be built"),
+        ("collector.num_workers=-1", "collector.num_workers=-1: must be >= 0"),
+    ],
+)
+def test_a_bad_backend_is_refused_in_one_line(override: str, message: str, train_cfg) -> None:
+    with pytest.raises(ConfigError) as info:
+        validate_train(train_cfg(override))
+    assert message in str(info.value) and "\n" not in str(info.value)
 
 
 def test_grasp_ppo_defaults(train_cfg) -> None:
@@ -51,8 +104,6 @@ def test_grasp_ppo_defaults(train_cfg) -> None:
 
 def test_env_schema_mirrors_the_constructor() -> None:
     """Every keyword of PandaGraspEnv, with the same default: a new one is a new EnvConfig field."""
-    from rlgrasp.envs import PandaGraspEnv
-
     params = inspect.signature(PandaGraspEnv.__init__).parameters
     ctor = {k: p.default for k, p in params.items() if k != "self"}
     fields = [f.name for f in dataclasses.fields(EnvConfig) if f.name != "_target_"]
@@ -81,13 +132,15 @@ def test_env_factory_is_one_picklable_partial(train_cfg) -> None:
         ("total_frames=many", ValidationError, ["total_frames"]),
         ("collector.num_workers=1.5", ValidationError, ["collector.num_workers"]),
         ("collector=bogus", ConfigCompositionException, ["collector", "process", "single"]),
+        ("collector.ray.address=auto", ConfigKeyError, ["collector.ray"]),  # only collector=ray has it
+        ("logger=mlflow logger.entity=me", ConfigKeyError, ["logger.entity"]),  # a W&B key
         ("env.ee_yaw=maybe", ValidationError, ["env.ee_yaw", "maybe"]),
         ("env.ee_yew=true", ConfigKeyError, ["ee_yew"]),
     ],
 )
 def test_bad_override_fails_naming_the_key(override: str, error: type, names: list[str], train_cfg) -> None:
     with pytest.raises((error, ConfigCompositionException)) as info:
-        train_cfg(override)
+        train_cfg(*override.split())
     text = str(info.value) + str(info.value.__cause__ or "")
     for name in names:
         assert name in text, text

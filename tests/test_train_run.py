@@ -1,18 +1,28 @@
-"""End-to-end runs of the training pipeline on small budgets (real env, process collector), and
-the numbers a refactor must not change."""
+"""End-to-end runs of the training pipeline on small budgets (real env, process collector), the
+promise that one seed gives one run on the machine it runs on, and a guard of what a seed decides
+before any torch kernel runs: what a refactor must not change, on any CPU.
+
+Nothing here pins a float that training computes: torch's kernels differ in the last bits between
+CPUs (AVX2, AVX-512), and the physics amplifies those bits over a run.
+"""
 
 from __future__ import annotations
 
 import re
 from pathlib import Path
+from typing import Any
 
 import pytest
 import torch
 from omegaconf import OmegaConf
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+from tensordict import TensorDict
 
-from rlgrasp.train.checkpoint import load_checkpoint, policy_from_checkpoint
-from rlgrasp.train.loop import TrainingError, train
+from rlgrasp.config import EnvConfig
+from rlgrasp.train.checkpoint import load_checkpoint, policy_from_checkpoint, read_checkpoint
+from rlgrasp.train.loop import Trainer, TrainingError, train
+from rlgrasp.train.parts import build_parts
+from rlgrasp.utils import flatten
 
 REQUIRED_TAGS = {
     "charts/episodic_return",
@@ -32,37 +42,8 @@ REQUIRED_TAGS = {
     "time/collect_s",
     "time/train_s",
 }
-
-# Pinned results, bit-identical over repeated runs: the first update's losses (as logged to
-# TensorBoard) and the final evaluation. A change here means the same seed no longer gives the same
-# run. The Trainer/`_target_` refactor reproduced the values of commit e36396d exactly; they were
-# re-measured when the observation gained `object_extents` (3 more inputs, so another network init)
-# with the object sets, and when `collector.overlap` became the default (the second batch is
-# collected with the first weights; `collector.overlap=false` still gives mean_reward
-# 2.073204517364502), and when overlapped batches got their log-probs recomputed by the learner
-# (the first losses moved in the 6th digit: recomputed rather than recorded log-probs).
-SMOKE_PINNED = {  # experiment=smoke: seed 0, two process workers, 2,048 frames
-    "first_losses": {
-        "policy_loss": -0.004469783045351505,
-        "value_loss": 0.1951102316379547,
-        "entropy": 2.3896048069000244,
-        "approx_kl": -0.0001977781648747623,
-        "grad_norm": 2.9372127056121826,
-        "explained_variance": -1.7989351749420166,
-    },
-    "last_eval": {"mean_reward": 2.0709190368652344, "success_rate": 0.0, "frames": 2048},
-}
-ONE_WORKER_PINNED = {  # experiment=smoke collector.num_workers=1 seed=3 total_frames=512
-    "first_losses": {
-        "policy_loss": 1.1408701539039612e-08,
-        "value_loss": 0.3723558485507965,
-        "entropy": 2.3941917419433594,
-        "approx_kl": 0.0,
-        "grad_norm": 4.781360626220703,
-        "explained_variance": -0.619930624961853,
-    },
-    "last_eval": {"mean_reward": 2.3946707248687744, "success_rate": 0.0, "frames": 512},
-}
+#: Tags that measure the wall clock, not the run.
+WALL_CLOCK = ("charts/SPS", "time/")
 
 
 def _scalars(run_dir: Path) -> EventAccumulator:
@@ -71,18 +52,10 @@ def _scalars(run_dir: Path) -> EventAccumulator:
     return acc
 
 
-def _assert_pinned(run_dir: Path, pinned: dict) -> None:
-    acc = _scalars(run_dir)
-    first = {k: acc.Scalars(f"losses/{k}")[0].value for k in pinned["first_losses"]}
-    assert first == pytest.approx(pinned["first_losses"], rel=1e-6, abs=1e-12)
-    assert load_checkpoint(run_dir)["last_eval"] == pytest.approx(pinned["last_eval"], rel=1e-6)
-
-
 def test_smoke_end_to_end_then_resume(tmp_path: Path, train_cfg) -> None:
     run_dir = tmp_path / "run"
     success = train(train_cfg("experiment=smoke", run_dir=run_dir))
-    assert isinstance(success, float)
-    _assert_pinned(run_dir, SMOKE_PINNED)
+    assert isinstance(success, float) and 0.0 <= success <= 1.0
     tags = set(_scalars(run_dir).Tags()["scalars"])
     assert REQUIRED_TAGS <= tags, REQUIRED_TAGS - tags
     ckpts = run_dir / "checkpoints"
@@ -101,8 +74,6 @@ def test_smoke_end_to_end_then_resume(tmp_path: Path, train_cfg) -> None:
     assert len(norm_count) == 1 and float(norm_count[0]) > 0
     policy = policy_from_checkpoint(ckpt)
     obs = torch.zeros(3, ckpt["spec"]["obs_dim"])
-    from tensordict import TensorDict
-
     a1 = policy(TensorDict({"observation": obs}, [3]))["action"]
     a2 = policy(TensorDict({"observation": obs}, [3]))["action"]
     assert a1.shape == (3, ckpt["spec"]["action_dim"])
@@ -113,11 +84,6 @@ def test_smoke_end_to_end_then_resume(tmp_path: Path, train_cfg) -> None:
     assert load_checkpoint(run_dir)["frames"] == 4096
     steps = [e.step for e in _scalars(run_dir).Scalars("losses/policy_loss")]
     assert steps == sorted(steps) and steps[-1] == 4096 and 2048 in steps
-
-
-def test_one_worker_run_is_pinned(tmp_path: Path, train_cfg) -> None:
-    train(train_cfg("experiment=smoke", "collector.num_workers=1", "total_frames=512", "seed=3"))
-    _assert_pinned(tmp_path, ONE_WORKER_PINNED)
 
 
 @pytest.mark.parametrize("collector", ["process", "single"])
@@ -135,8 +101,6 @@ def test_crashing_env_stops_with_a_clear_error(tmp_path: Path, collector: str, t
 
 def test_stand_in_env_from_tests_reaches_spawned_workers(tmp_path: Path, train_cfg) -> None:
     """A `_target_` inside tests/ is importable in the collector's spawned workers too."""
-    from rlgrasp.train.parts import build_parts
-
     cfg = train_cfg("experiment=smoke", "collector.num_workers=1", "collector.envs_per_worker=2")
     cfg.env = {"_target_": "tests.standins.pendulum", "max_episode_steps": 20}
     parts = build_parts(cfg)
@@ -147,3 +111,145 @@ def test_stand_in_env_from_tests_reaches_spawned_workers(tmp_path: Path, train_c
     finally:
         collector.shutdown()
     assert batch.numel() == parts.frames_per_batch == 512
+
+
+# --- one seed, one run (on the machine the test runs on) -----------------------------------------
+def _record(run_dir: Path) -> dict[str, Any]:
+    """What a run's seed decides: every curve but the wall-clock ones, the checkpoints it wrote and
+    their frames, the final evaluation and the final weights. Floats as hex: equal means bit-identical."""
+    acc = _scalars(run_dir)
+    curves = {
+        tag: [(e.step, float(e.value).hex()) for e in acc.Scalars(tag)]
+        for tag in acc.Tags()["scalars"]
+        if not tag.startswith(WALL_CLOCK)
+    }
+    ckpts = {p.name: read_checkpoint(p)["frames"] for p in sorted((run_dir / "checkpoints").glob("*.pt"))}
+    last = load_checkpoint(run_dir)
+    final_eval = {k: float(v).hex() for k, v in last["last_eval"].items()}
+    weights = {k: v.numpy().tobytes() for k, v in last["actor"].items()}
+    return {"curves": curves, "checkpoints": ckpts, "final_eval": final_eval, "weights": weights}
+
+
+def _differences(a: dict[str, Any], b: dict[str, Any]) -> list[str]:
+    """Where two records differ: a curve's tag, ``checkpoints``, ``final_eval`` or a weight's name."""
+    out = [part for part in ("checkpoints", "final_eval") if a[part] != b[part]]
+    for part in ("curves", "weights"):
+        out += [key for key in sorted(set(a[part]) | set(b[part])) if a[part].get(key) != b[part].get(key)]
+    return out
+
+
+def _twice(train_cfg, tmp_path: Path, *overrides: str, env_target: str | None = None) -> list[dict[str, Any]]:
+    records = []
+    for name in ("first", "second"):
+        cfg = train_cfg("experiment=smoke", *overrides, run_dir=tmp_path / name)
+        if env_target:
+            cfg.env = OmegaConf.merge(OmegaConf.to_container(cfg.env), {"_target_": env_target})
+        train(cfg)
+        records.append(_record(tmp_path / name))
+    return records
+
+
+def test_a_seed_gives_one_run_on_this_machine(tmp_path: Path, train_cfg) -> None:
+    """Twice the same seed on process workers that collect while the learner updates (four updates,
+    each batch after the first one update late): the same curves, checkpoints, evaluation and weights,
+    bit for bit. Not across machines: another CPU's kernels round differently."""
+    overrides = ("collector.steps_per_env=128",)  # 512-frame batches: 4 updates in 2,048 frames
+    cfg = train_cfg("experiment=smoke", *overrides)
+    assert cfg.collector._target_ == "rlgrasp.train.collectors.ProcessCollector"
+    assert cfg.collector.num_workers == 2 and cfg.collector.overlap
+    first, second = _twice(train_cfg, tmp_path, *overrides)
+    assert len(first["curves"]["losses/policy_loss"]) == 4 and len(first["checkpoints"]) >= 3
+    assert {"eval/mean_reward", "losses/approx_kl", "charts/episodic_return"} <= set(first["curves"])
+    assert _differences(first, second) == []
+
+
+def test_the_seed_check_catches_an_unseeded_worker(tmp_path: Path, train_cfg) -> None:
+    """The check above is not vacuous: workers that draw their torch seed from the OS (a forgotten
+    worker seed) sample other actions each run, and the check names what moved."""
+    first, second = _twice(train_cfg, tmp_path, "collector.num_workers=1", "collector.steps_per_env=128",
+                           "total_frames=512", env_target="tests.standins.unseeded_worker_grasp_env")
+    differ = _differences(first, second)
+    assert "losses/policy_loss" in differ and any(name.endswith("weight") for name in differ), differ
+
+
+# --- the refactor guard: what the seed decides before any torch kernel runs ----------------------
+#: experiment=smoke composed, except ``env`` (its own guard below) and ``paths.output_dir``.
+SMOKE_CONFIG = """
+algo: {name: ppo, gamma: 0.9, gae_lambda: 0.9, epochs: 2, minibatch_size: 256, lr: 0.0003, anneal_lr: true,
+       min_lr_frac: 0.0, clip_epsilon: 0.2, entropy_coeff: 0.0, critic_coeff: 0.5, loss_critic_type: l2,
+       normalize_advantage: true, max_grad_norm: 0.5, target_kl: 0.05, adam_eps: 1.0e-05,
+       gae_every_epoch: true}
+model: {name: mlp, hidden_sizes: [64, 64], activation: tanh, init_log_std: -0.5, min_std: 0.05,
+        obs_norm: true, obs_clip: 10.0}
+collector: {_target_: rlgrasp.train.collectors.ProcessCollector, num_workers: 2, envs_per_worker: 2,
+            steps_per_env: 256, torch_threads: 1, overlap: true, stagger_starts: false}
+logger: {_target_: rlgrasp.train.logger.TensorBoardLogger, console_interval_s: 0.0}
+eval: {interval_frames: 1024, episodes: 4, final_episodes: 8, num_envs: 4, seed_offset: 1000000}
+checkpoint: {interval_frames: 1024, keep_last: 2}
+paths: {root_dir: .}
+experiment_name: smoke
+seed: 0
+device: auto
+total_frames: 2048
+time_budget_min: null
+resume: null
+"""
+#: The env's spec under experiment=smoke (ee_delta control).
+SMOKE_SPEC = {"obs_key": "observation", "obs_dim": 45, "action_dim": 4, "action_low": [-1.0] * 4,
+              "action_high": [1.0] * 4}
+#: Each weight matrix after the seeded init: shape, L1 norm and its first three entries. The init is
+#: orthogonal, from LAPACK's QR: another CPU's rounding moves these by ~1e-7, a seed change by ~1e-1.
+SMOKE_INIT = {
+    "actor:module.0.module.mlp.0.weight": ((64, 45), 408.10312, [-0.0642230, 0.1954284, -0.2984768]),
+    "actor:module.0.module.mlp.2.weight": ((64, 64), 580.25940, [-0.0350631, -0.0542964, -0.0507446]),
+    "actor:module.0.module.mlp.4.weight": ((4, 64), 0.2587920, [0.000756, -6.63e-05, 0.0006959]),
+    "critic:module.mlp.0.weight": ((64, 45), 407.06229, [0.2198626, 0.2860771, 0.2685727]),
+    "critic:module.mlp.2.weight": ((64, 64), 580.30383, [-0.1207350, 0.0509477, 0.0480773]),
+    "critic:module.mlp.4.weight": ((1, 64), 6.7478065, [-0.0934519, 0.0232873, 0.2371279]),
+}
+#: First reset observation of each env of the first batch (worker 0's two envs, then worker 1's): its
+#: sum and L1 norm. Seeded numpy and PyBullet only, no policy involved.
+SMOKE_FIRST_OBS = [(3.9892926, 9.8073111), (4.8802624, 9.4366169), (4.0817728, 9.9534740),
+                   (4.4125991, 10.040336)]
+
+
+def test_guard_the_composed_smoke_config(train_cfg) -> None:
+    cfg = OmegaConf.to_container(train_cfg("experiment=smoke"), resolve=True)
+    env = cfg.pop("env")
+    del cfg["paths"]["output_dir"]
+    assert flatten(cfg) == flatten(OmegaConf.to_container(OmegaConf.create(SMOKE_CONFIG)))
+    # the env node: the group choices over EnvConfig's own defaults
+    defaults = {k: v for k, v in OmegaConf.to_container(OmegaConf.structured(EnvConfig)).items()}
+    assert env == {**defaults, "randomization": "default", "objects": "cube"}
+
+
+def test_guard_the_spec_and_the_seeded_initial_networks(tmp_path: Path, train_cfg) -> None:
+    """The Trainer seeds before it builds the networks (no workers start)."""
+    trainer = Trainer(train_cfg("experiment=smoke", "logger=none"))
+    assert trainer.parts.spec == SMOKE_SPEC
+    params = {f"actor:{k}": v for k, v in trainer.actor.named_parameters()}
+    params |= {f"critic:{k}": v for k, v in trainer.parts.critic.named_parameters()}
+    for name, (shape, l1, first) in SMOKE_INIT.items():
+        weight = params[name].detach()
+        assert tuple(weight.shape) == shape, name
+        assert float(weight.abs().sum()) == pytest.approx(l1, rel=1e-4), name
+        assert weight.flatten()[:3].tolist() == pytest.approx(first, rel=1e-4, abs=1e-6), name
+    assert len(params) == 2 * len(SMOKE_INIT) + 1  # a bias per weight, and the actor's log-std
+    assert all(not params[k].any() for k in params if k.endswith(".bias"))
+
+
+def test_guard_the_first_observations_of_the_seeded_workers(tmp_path: Path, train_cfg) -> None:
+    """The first batch's first step, through the configured process collector: each worker's envs
+    reset with their own seeds, whatever the policy then does."""
+    cfg = train_cfg("experiment=smoke")
+    parts = build_parts(cfg)
+    collector = parts.make_collector(0, str(tmp_path / "errors"))
+    try:
+        batch = next(iter(collector))
+    finally:
+        collector.shutdown()
+    first = batch.reshape(-1, batch.shape[-1])["observation"][:, 0]
+    got = [(float(o.sum()), float(o.abs().sum())) for o in first]
+    assert len(got) == len(SMOKE_FIRST_OBS)
+    for env, (have, want) in enumerate(zip(got, SMOKE_FIRST_OBS)):
+        assert have == pytest.approx(want, abs=1e-5), f"env {env}"

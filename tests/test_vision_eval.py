@@ -17,7 +17,9 @@ import torch
 from omegaconf import OmegaConf
 from tensordict import TensorDict
 
-from rlgrasp.config import EnvConfig, compose_config, compose_eval, env_factory
+from rlgrasp.compose import compose_config, compose_eval
+from rlgrasp.config import EnvConfig
+from rlgrasp.envs.factory import env_factory
 from rlgrasp.evaluation import EvaluationError
 from rlgrasp.evaluation.cli import evaluate
 from rlgrasp.evaluation.enjoy import camera_line, gui_settings, play, register_enjoy_config, set_up_gui

@@ -22,7 +22,8 @@ import pybullet
 from hydra.core.config_store import ConfigStore
 from omegaconf import OmegaConf
 
-from rlgrasp.config import CONFIG_DIR, env_factory, register_configs
+from rlgrasp.config import CONFIG_DIR, register_configs
+from rlgrasp.envs.factory import env_factory
 from rlgrasp.evaluation.episodes import run_episode
 from rlgrasp.evaluation.policies import Actor, PolicySource, build_policy
 from rlgrasp.evaluation.source import EvaluationError, prepare

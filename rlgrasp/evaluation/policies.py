@@ -18,8 +18,8 @@ import torch
 from tensordict import TensorDict
 from torchrl.envs import ExplorationType, set_exploration_type
 
-from rlgrasp.config import env_factory
 from rlgrasp.envs import ScriptedExpert
+from rlgrasp.envs.factory import env_factory
 from rlgrasp.train.checkpoint import policy_from_checkpoint
 from rlgrasp.vision.models import IMAGE_KEYS
 
@@ -30,7 +30,7 @@ POLICIES = ("checkpoint", "scripted", "random")
 class PolicySource:
     """What the workers need to rebuild the policy and the env, all picklable.
 
-    ``env_cfg`` is the env's ``_target_`` node as a plain dict (``rlgrasp.config.env_factory`` builds
+    ``env_cfg`` is the env's ``_target_`` node as a plain dict (``rlgrasp.envs.factory.env_factory`` builds
     it). ``ckpt`` is trimmed to the entries the policy needs (weights, model config, spec), so that
     each spawned worker receives a few hundred kB rather than the optimizer state.
     """

@@ -12,7 +12,9 @@ from typing import Any
 import optuna
 from optuna.distributions import BaseDistribution, CategoricalDistribution
 
-from rlgrasp.config import ConfigError, compose_train, env_factory, validate_train
+from rlgrasp.compose import compose_train
+from rlgrasp.config import ConfigError, validate_train
+from rlgrasp.envs.factory import env_factory
 from rlgrasp.evaluation.source import ENV_ERRORS
 from rlgrasp.overrides import CommandLineError, check, unwritable
 from rlgrasp.sweep.objective import trial_overrides

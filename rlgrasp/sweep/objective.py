@@ -15,7 +15,7 @@ from typing import Any
 import optuna
 from omegaconf import DictConfig
 
-from rlgrasp.config import compose_train
+from rlgrasp.compose import compose_train
 from rlgrasp.sweep.space import suggest, to_overrides
 from rlgrasp.sweep.study import ATTR_HOST, ATTR_INTERRUPTED, ATTR_OVERRIDES, ATTR_PID, study_dir
 from rlgrasp.train.loop import train

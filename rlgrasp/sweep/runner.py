@@ -12,7 +12,8 @@ from hydra.errors import HydraException
 from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from rlgrasp.config import CONFIG_DIR, compose_sweep
+from rlgrasp.compose import compose_sweep
+from rlgrasp.config import CONFIG_DIR
 from rlgrasp.overrides import CommandLineError, explain
 from rlgrasp.sweep.checks import SweepError, check_training, check_values, load_existing
 from rlgrasp.sweep.objective import Interrupted, Objective, catch_signals, stop_requested

@@ -19,7 +19,7 @@ import optuna
 from omegaconf import OmegaConf
 from optuna.trial import FrozenTrial, TrialState
 
-from rlgrasp.config import compose_train
+from rlgrasp.compose import compose_train
 from rlgrasp.sweep.study import ATTR_INTERRUPTED, ATTR_RETRY_OF
 from rlgrasp.utils import markdown_table, pyplot
 

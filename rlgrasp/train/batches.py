@@ -28,11 +28,6 @@ from torchrl.collectors import BaseCollector
 DRAIN_TIMEOUT_S = 120.0
 
 
-def collects_ahead(cfg: Any) -> bool:
-    """Whether batches come one update late (``collector.overlap``; the in-process backend cannot)."""
-    return bool(cfg.collector.overlap) and cfg.collector.backend != "single"
-
-
 class Batches(Iterator[TensorDictBase]):
     """``next()`` gives the next batch; with ``overlap`` the one after is already being collected."""
 

@@ -11,7 +11,8 @@ writes it):
 - ``best_eval_success``, ``last_eval``: evaluation bookkeeping (``last_eval`` may be None)
 - ``rng``: python / numpy / torch RNG states of the learner, as tensors and plain values
 - ``config``: the resolved training config as a plain dict (``config["env"]`` is the env's
-  ``_target_`` node, which ``rlgrasp.config.env_factory`` builds)
+  ``_target_`` node, which ``rlgrasp.envs.factory.env_factory`` builds); an older checkpoint's is
+  read in today's shape (``rlgrasp.train.legacy``)
 - ``spec``: ``obs_key``, ``obs_dim``, ``action_dim``, ``action_low``, ``action_high``
 - ``versions``: python, torch, torchrl, tensordict, gymnasium, pybullet, rlgrasp
 - ``run_dir``: the run directory it was written in
@@ -39,7 +40,9 @@ import torch
 from omegaconf import OmegaConf
 from tensordict.nn import TensorDictModuleBase
 
+from rlgrasp.train.legacy import upgrade_config
 from rlgrasp.train.models import OBS_KEY, RunningNorm, build_actor
+from rlgrasp.train.rundir import CHECKPOINTS
 from rlgrasp.vision.models import vision_policy
 
 FORMAT = 2
@@ -82,6 +85,7 @@ def read_checkpoint(path: str | os.PathLike, map_location: str | torch.device = 
         ) from exc
     if not isinstance(state, dict) or "actor" not in state or "config" not in state:
         raise CheckpointError(f"not an rlgrasp training checkpoint: {path}")
+    state["config"] = upgrade_config(state["config"])  # older checkpoints: rlgrasp.train.legacy
     return state
 
 
@@ -110,7 +114,7 @@ def newest_readable(
 ) -> tuple[Path, dict[str, Any]]:
     """``(path, state)`` of the newest checkpoint of a run that loads; a bad ``last.pt`` (say,
     truncated by a full disk) is skipped with a warning naming it."""
-    ckpt_dir = Path(run_dir) / "checkpoints"
+    ckpt_dir = Path(run_dir) / CHECKPOINTS
     files = checkpoint_files(ckpt_dir)
     if not files:
         raise CheckpointError(f"no checkpoints: {ckpt_dir} holds no last.pt or ckpt_*.pt")

@@ -8,17 +8,22 @@ at another config tree.
 from __future__ import annotations
 
 import logging
-import shutil
 import sys
 from pathlib import Path
 
 import hydra
+from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
-from rlgrasp.config import CONFIG_DIR, FRESH_RUN_DIRS, register_configs
+from rlgrasp.config import CONFIG_DIR, ConfigError, register_configs
 from rlgrasp.overrides import entry_point
+from rlgrasp.train.checkpoint import CheckpointError
+from rlgrasp.train.loop import TrainingError, train
+from rlgrasp.train.resume import command_line_keys
+from rlgrasp.train.rundir import remove_refused_start
 
 register_configs()
+log = logging.getLogger("rlgrasp.train")
 
 
 def run(cfg: DictConfig) -> float:
@@ -28,16 +33,11 @@ def run(cfg: DictConfig) -> float:
     line, and removes the run directory this command created; a fault (env crash, NaN) with exit
     code 1 and its message. Neither prints a traceback.
     """
-    from rlgrasp.config import ConfigError
-    from rlgrasp.train.checkpoint import CheckpointError
-    from rlgrasp.train.loop import TrainingError, train
-
-    log = logging.getLogger("rlgrasp.train")
     try:
         return train(cfg, changed=_command_line_keys(cfg))
     except (ConfigError, CheckpointError) as exc:
         log.error("%s", exc)
-        _remove_what_this_start_wrote(Path(cfg.paths.output_dir))
+        remove_refused_start(Path(cfg.paths.output_dir))
         sys.exit(2)
     except TrainingError as exc:
         log.error("training stopped: %s", exc)
@@ -46,30 +46,9 @@ def run(cfg: DictConfig) -> float:
 
 def _command_line_keys(cfg: DictConfig) -> set[str] | None:
     """The keys this command line sets (what a resume applies over the checkpoint's config)."""
-    from hydra.core.hydra_config import HydraConfig
-
-    from rlgrasp.train.resume import command_line_keys
-
     if not cfg.resume or not HydraConfig.initialized():
         return None
     return command_line_keys(list(HydraConfig.get().overrides.task), cfg)
-
-
-def _remove_what_this_start_wrote(run_dir: Path) -> None:
-    """After a refused start: remove the run directory if this process created it and it holds only
-    Hydra's files and the log; in an existing run, the ``.hydra/resume_<n>`` Hydra just wrote."""
-    if not run_dir.is_dir():
-        return
-    if str(run_dir.resolve()) in FRESH_RUN_DIRS:
-        if {p.name for p in run_dir.iterdir()} <= {".hydra", "train.log"}:
-            logging.shutdown()
-            shutil.rmtree(run_dir, ignore_errors=True)
-        return
-    from hydra.core.hydra_config import HydraConfig
-
-    subdir = HydraConfig.get().output_subdir if HydraConfig.initialized() else None
-    if subdir and subdir.startswith(".hydra/resume_"):
-        shutil.rmtree(run_dir / subdir, ignore_errors=True)
 
 
 @entry_point("train")  # objects={paths:[...]} as in evaluation; a refused command line in one line

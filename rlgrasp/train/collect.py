@@ -1,14 +1,13 @@
-"""Batches of envs and the collector: each worker steps a batch of envs and runs the policy on it.
+"""A worker's batch of envs: each collector worker steps one and runs the policy on it.
 
 The policy runs inside the workers, once per step on a whole ``SyncVectorEnv`` of envs: with
 TorchRL's ``ParallelEnv`` the policy would run in the parent once per step per env and TorchRL's
-per-step cost would dominate the physics.
+per-step cost would dominate the physics. Where the workers run: ``rlgrasp.train.collectors``.
 """
 
 from __future__ import annotations
 
 import functools
-import multiprocessing
 import os
 import re
 import traceback
@@ -20,15 +19,15 @@ import gymnasium as gym
 import numpy as np
 import torch
 from tensordict import TensorDictBase
-from torchrl.collectors import BaseCollector, Collector
-from torchrl.envs import EnvBase, default_info_dict_reader
+from torchrl.data import Composite, Unbounded
+from torchrl.envs import EnvBase, GymWrapper, default_info_dict_reader
 from torchrl.envs.transforms import Compose, RewardSum, StepCounter, TransformedEnv
 
 ERROR_FILE_PREFIX = "env_error_"
 # Info entries copied into the tensordict (those the env provides).
 INFO_DTYPES = {"is_success": torch.bool, "grasped": torch.bool, "lift_height": torch.float32}
 
-#: Builds one gymnasium env: what ``rlgrasp.config.env_factory`` returns (a picklable partial).
+#: Builds one gymnasium env: what ``rlgrasp.envs.factory.env_factory`` returns (a picklable partial).
 EnvFactory = Callable[[], Any]
 
 
@@ -150,9 +149,6 @@ def make_vector_env(
     final observation of an episode is kept. Vector infos arrive as arrays, which TorchRL's
     ``default_info_dict_reader`` reads directly. ``stagger``: see ``StaggeredStart``.
     """
-    from torchrl.data import Composite, Unbounded
-    from torchrl.envs import GymWrapper
-
     fns = [
         functools.partial(
             _guarded_env, make_env, f"worker {worker} env {i}", error_dir, i, num_envs if stagger else 0
@@ -195,89 +191,9 @@ def make_batched_env(
     return env
 
 
-def frames_per_batch(cfg: Any) -> int:
-    c = cfg.collector
-    workers = 1 if c.backend == "single" or c.num_workers == 0 else c.num_workers
-    return workers * c.envs_per_worker * c.steps_per_env
-
-
 def worker_seed(seed: int, worker: int, generation: int = 0) -> int:
     """Distinct, reproducible seeds: 10,000 apart per worker, shifted on each resume."""
     return int(seed) * 1_000_003 + generation * 100_003 + worker * 10_000
-
-
-def build_collector(
-    cfg: Any, make_env: EnvFactory, policy: torch.nn.Module, generation: int, error_dir: str | None
-) -> BaseCollector:
-    """A synchronous TorchRL collector over ``num_workers`` processes, Ray actors, or in-process."""
-    c = cfg.collector
-    common = {
-        "frames_per_batch": frames_per_batch(cfg),
-        "total_frames": -1,
-        "auto_register_policy_transforms": False,
-    }
-    if c.backend == "single" or c.num_workers == 0:
-        env = make_batched_env(
-            make_env, c.envs_per_worker, worker_seed(cfg.seed, 0, generation), 0,
-            torch.get_num_threads(), error_dir, stagger=c.stagger_starts,
-        )
-        return Collector(env, policy, **common)
-    if c.backend not in ("process", "ray"):
-        raise ValueError(f"collector.backend must be 'process', 'ray' or 'single', got {c.backend!r}")
-    fns = [
-        functools.partial(
-            make_batched_env, make_env, c.envs_per_worker, worker_seed(cfg.seed, w, generation), w,
-            c.torch_threads, error_dir, stagger=c.stagger_starts,
-        )
-        for w in range(c.num_workers)
-    ]
-    if c.backend == "ray":
-        return _ray_collector(c, fns, policy, common)
-    # Inside a joblib (loky) multirun job the start method is not spawn; the workers need it: a
-    # forked child would inherit the parent's PyBullet and torch thread state.
-    multiprocessing.set_start_method("spawn", force=True)
-    return Collector(fns, policy, num_collectors=c.num_workers, sync=True, backend="process", **common)
-
-
-def ray_init_kwargs(ray_cfg: Any) -> dict[str, Any]:
-    """``ray.init`` keywords: join ``address`` if set, else a private local Ray on ``node_ip_address``.
-
-    A local Ray binds to the machine's network address unless it is given one.
-    """
-    if ray_cfg.address:
-        return {"address": ray_cfg.address, "ignore_reinit_error": True, "log_to_driver": False}
-    os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
-    return {
-        "num_cpus": ray_cfg.num_cpus,
-        "_node_ip_address": ray_cfg.node_ip_address,
-        "include_dashboard": ray_cfg.include_dashboard,
-        "ignore_reinit_error": True,
-        "log_to_driver": False,
-    }
-
-
-def _ray_collector(c: Any, fns: list, policy: torch.nn.Module, common: dict[str, Any]) -> BaseCollector:
-    """One TorchRL ``Collector`` actor per worker on Ray; a Ray already initialised is reused."""
-    remote = {
-        "num_cpus": c.ray.cpus_per_worker,
-        "memory": int(c.ray.memory_per_worker_gb * 1024**3),
-    }
-    common = dict(common)
-    inner = {"auto_register_policy_transforms": common.pop("auto_register_policy_transforms")}
-    common["total_frames"] = 2**62  # RayCollector stops at once on -1 (endless elsewhere)
-    collector = Collector(
-        fns,
-        policy,
-        num_collectors=c.num_workers,
-        sync=True,
-        backend="ray",
-        ray_init_config=ray_init_kwargs(c.ray),
-        remote_configs=remote,
-        collector_kwargs=[dict(inner) for _ in fns],
-        **common,
-    )
-    collector.update_policy_weights_()  # initialise the weight sync before the first batch
-    return collector
 
 
 def read_env_errors(error_dir: str | os.PathLike) -> list[str]:

@@ -1,4 +1,5 @@
-"""Run logging: TensorBoard scalars (x axis = env frames), a console progress line, a text log.
+"""Run logging: the loggers ``logger._target_`` names (console only, TensorBoard; the trackers are
+in ``rlgrasp.train.trackers``), the console's progress line and the text log.
 
 Uses torch's ``SummaryWriter`` directly rather than TorchRL's ``TensorboardLogger`` for its
 ``purge_step``: a resumed run appends to the same event directory and drops any events written
@@ -9,13 +10,18 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from pathlib import Path
 from typing import Any
+
+from torch.utils.tensorboard import SummaryWriter
+
+from rlgrasp.train.rundir import TENSORBOARD, TEXT_LOG
 
 log = logging.getLogger("rlgrasp.train")
 
 
-def setup_text_log(run_dir: Path, name: str = "train.log") -> None:
+def setup_text_log(run_dir: Path, name: str = TEXT_LOG) -> None:
     """Log to ``run_dir/train.log`` unless a handler (e.g. Hydra's) already writes that file."""
     target = (run_dir / name).resolve()
     root = logging.getLogger()
@@ -31,44 +37,85 @@ def setup_text_log(run_dir: Path, name: str = "train.log") -> None:
         logging.basicConfig(level=logging.INFO, format="[%(asctime)s][%(levelname)s] %(message)s")
 
 
-class RunLogger:
-    """TensorBoard writer (or nothing, with ``backend="none"``)."""
+class ConsoleLogger:
+    """``logger=none``: the progress line on the console (and in ``train.log``), no curves; the base
+    of every logger.
 
-    def __init__(self, log_dir: Path, backend: str, purge_step: int | None = None) -> None:
-        self.writer = None
-        if backend == "tensorboard":
-            from torch.utils.tensorboard import SummaryWriter
+    The Trainer builds the ``logger`` node's class with the run's own arguments besides the node's
+    keys: ``run_dir``, the resolved ``config`` and ``resumed_frames`` (the checkpoint's frames on a
+    resume, else None). The calls it makes: ``scalars``, ``text``, ``hparams``, ``progress``,
+    ``flush``, ``close``.
+    """
 
-            self.writer = SummaryWriter(str(log_dir), purge_step=purge_step)
-        elif backend != "none":
-            raise ValueError(f"logger.backend must be 'tensorboard' or 'none', got {backend!r}")
+    def __init__(
+        self,
+        run_dir: Path,
+        config: dict[str, Any],
+        resumed_frames: int | None,
+        console_interval_s: float = 5.0,
+    ) -> None:
+        self.console_interval_s = console_interval_s
+        self._last_progress = time.monotonic()
 
     def scalars(self, metrics: dict[str, float], step: int) -> None:
-        if self.writer is None:
-            return
+        pass
+
+    def text(self, tag: str, text: str, step: int = 0) -> None:
+        pass
+
+    def hparams(self, hparams: dict[str, Any], metrics: dict[str, float]) -> None:
+        pass
+
+    def progress(self, line: str) -> None:
+        """Log ``line`` if ``console_interval_s`` has passed since the last one (then flush too)."""
+        now = time.monotonic()
+        if now - self._last_progress >= self.console_interval_s:
+            self._last_progress = now
+            log.info(line)
+            self.flush()
+
+    def flush(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+class TensorBoardLogger(ConsoleLogger):
+    """``logger=tensorboard``: the scalars (x axis = env frames), the config and the hparams in
+    ``<run dir>/tensorboard``; a resumed run drops the events after its checkpoint (``purge_step``)."""
+
+    def __init__(
+        self,
+        run_dir: Path,
+        config: dict[str, Any],
+        resumed_frames: int | None,
+        console_interval_s: float = 5.0,
+    ) -> None:
+        super().__init__(run_dir, config, resumed_frames, console_interval_s)
+        purge_step = None if resumed_frames is None else resumed_frames + 1
+        self.writer = SummaryWriter(str(Path(run_dir) / TENSORBOARD), purge_step=purge_step)
+
+    def scalars(self, metrics: dict[str, float], step: int) -> None:
         for tag, value in metrics.items():
             if value is not None and not (isinstance(value, float) and math.isnan(value)):
                 self.writer.add_scalar(tag, value, step)
 
     def text(self, tag: str, text: str, step: int = 0) -> None:
-        if self.writer is not None:
-            # Markdown code block keeps the YAML's indentation in TensorBoard's text tab.
-            self.writer.add_text(tag, "```\n" + text + "\n```", step)
+        # Markdown code block keeps the YAML's indentation in TensorBoard's text tab.
+        self.writer.add_text(tag, "```\n" + text + "\n```", step)
 
     def hparams(self, hparams: dict[str, Any], metrics: dict[str, float]) -> None:
         """``hparams`` flat (``a.b.c`` keys); values TensorBoard cannot show (lists, None) as text."""
-        if self.writer is not None:
-            shown = {k: v if isinstance(v, (bool, int, float, str)) else str(v) for k, v in hparams.items()}
-            clean = {k: v for k, v in metrics.items() if not math.isnan(v)}
-            self.writer.add_hparams(shown, clean, run_name=".")
+        shown = {k: v if isinstance(v, (bool, int, float, str)) else str(v) for k, v in hparams.items()}
+        clean = {k: v for k, v in metrics.items() if not math.isnan(v)}
+        self.writer.add_hparams(shown, clean, run_name=".")
 
     def flush(self) -> None:
-        if self.writer is not None:
-            self.writer.flush()
+        self.writer.flush()
 
     def close(self) -> None:
-        if self.writer is not None:
-            self.writer.close()
+        self.writer.close()
 
 
 def progress_line(

@@ -9,12 +9,8 @@ from __future__ import annotations
 import contextlib
 import copy
 import math
-import os
 import random
-import re
 import signal
-import subprocess
-import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -22,26 +18,28 @@ from typing import Any
 
 import numpy as np
 import torch
+from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDictBase
 
 from rlgrasp.config import ConfigError
 from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
-from rlgrasp.train.batches import Batches, collects_ahead
+from rlgrasp.train.batches import Batches
 from rlgrasp.train.collect import read_env_errors
+from rlgrasp.train.collectors import shut_down
 from rlgrasp.train.evaluate import periodic_evaluator
-from rlgrasp.train.logger import RunLogger, log, progress_line, setup_text_log
+from rlgrasp.train.logger import log, progress_line, setup_text_log
+from rlgrasp.train.metrics import Due, Throughput, finished_episodes
 from rlgrasp.train.parts import build_parts
 from rlgrasp.train.ppo import NonFiniteError, PPOLearner
+from rlgrasp.train.preemption import StopSignals
 from rlgrasp.train.resume import prepare_run
-from rlgrasp.train.trackers import attach_tracker
+from rlgrasp.train.rundir import CHECKPOINTS, ENV_ERRORS
 from rlgrasp.utils import flatten
 
 #: Called after each evaluation with (frames, metrics); see ``train``.
 EvalCallback = Callable[[int, dict[str, float]], None]
-#: What a scheduler sends before preemption or at a time limit (SLURM: TERM; submitit: USR2).
-STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGTERM", "SIGUSR1", "SIGUSR2") if hasattr(signal, n))
 
 
 class TrainingError(RuntimeError):
@@ -64,103 +62,6 @@ def seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
 
 
-class Due:
-    """True once every ``interval`` frames (interval <= 0: never)."""
-
-    def __init__(self, interval: int, frames: int) -> None:
-        self.interval = interval
-        self.mark = frames // interval if interval > 0 else 0
-
-    def __call__(self, frames: int) -> bool:
-        if self.interval <= 0 or frames // self.interval <= self.mark:
-            return False
-        self.mark = frames // self.interval
-        return True
-
-
-class Throughput:
-    """Frames/s of this session, measured from the end of the first batch (which includes the
-    workers' start-up) on."""
-
-    def __init__(self) -> None:
-        self.frames = 0
-        self.t0: float | None = None
-        self.frames0 = 0
-
-    def __call__(self, new_frames: int, batch_start: float) -> float:
-        self.frames += new_frames
-        now = time.perf_counter()
-        if self.t0 is None:
-            self.t0, self.frames0 = now, self.frames
-            return new_frames / max(now - batch_start, 1e-9)
-        return (self.frames - self.frames0) / max(now - self.t0, 1e-9)
-
-
-def _shut_down(collector: Any) -> None:
-    """Stop the workers, then the weight-sync schemes: left to ``__del__`` at interpreter exit, a
-    scheme's shutdown starts a queue feeder thread during finalization and the process never ends."""
-    try:
-        collector.shutdown()
-    except Exception as exc:  # noqa: BLE001 - a dead worker can make shutdown complain
-        log.warning("collector shutdown: %s", exc)
-    for scheme in (getattr(collector, "_weight_sync_schemes", None) or {}).values():
-        try:
-            scheme.shutdown()
-        except Exception as exc:  # noqa: BLE001
-            log.warning("weight sync shutdown: %s", exc)
-
-
-def hand_off_preemption(signum: int, previous: dict[int, Any]) -> None:
-    """After the checkpoint of a stop signal: under submitit, its own checkpoint-and-requeue handler
-    (SLURM: ``scontrol requeue``; submitit_local: restart), which exits; under plain SLURM,
-    ``scontrol requeue $SLURM_JOB_ID``. Elsewhere nothing: the process exits normally.
-
-    A job SLURM requeues by itself (``scontrol requeue``, preemption) is already pending when the
-    signal arrives, so submitit's own requeue fails; that job exits without a result too: a result
-    would tell submitit (and the Hydra sweep waiting on it) the run ended at the preempted frames."""
-    submitit = [h for h in previous.values() if getattr(h, "__name__", "") == "checkpoint_and_try_requeue"]
-    if submitit:
-        log.warning("handing over to submitit to requeue the job")
-        try:
-            submitit[0](signum, None)  # exits (SystemExit) once the job is requeued
-        except Exception as exc:  # noqa: BLE001 - e.g. scontrol refusing a job SLURM already requeues
-            if slurm_requeued_already():
-                log.warning("SLURM requeues the job itself; exiting without a result for the rerun to write")
-                sys.exit(-1)  # what submitit does after its own requeue
-            log.warning("requeue through submitit failed: %s", exc)
-        return
-    job = os.environ.get("SLURM_JOB_ID")
-    if job:
-        proc = subprocess.run(["scontrol", "requeue", job], capture_output=True, text=True, timeout=60)
-        log.warning("scontrol requeue %s: %s", job, (proc.stderr or proc.stdout).strip() or "requeued")
-
-
-def slurm_requeued_already() -> bool:
-    """SLURM requeued this job while it still runs (``scontrol requeue``, preemption): its restart
-    count is past this run's ``SLURM_RESTART_COUNT`` (the job shows COMPLETING meanwhile, and
-    ``scontrol requeue`` from inside it answers "Job is pending execution")."""
-    job = os.environ.get("SLURM_JOB_ID")
-    if not job:
-        return False
-    try:
-        proc = subprocess.run(["scontrol", "-o", "show", "job", job], capture_output=True, text=True,
-                              timeout=60)
-    except (OSError, subprocess.TimeoutExpired):
-        return False
-    restarts = re.search(r"\bRestarts=(\d+)", proc.stdout)
-    return restarts is not None and int(restarts.group(1)) > int(os.environ.get("SLURM_RESTART_COUNT") or 0)
-
-
-def pass_on_signal(signum: int, previous: dict[int, Any]) -> None:
-    """Training only borrows a stop signal to save first; a Python handler installed before it (a
-    sweep's, which stops the sweep) then gets it too. Without this, a SIGTERM to a sweep ended the
-    current trial early and the sweep went on to the next one. Submitit's handlers are
-    ``hand_off_preemption``'s."""
-    handler = previous.get(signum)
-    if callable(handler) and not getattr(handler, "__module__", "").startswith("submitit"):
-        handler(signum, None)
-
-
 class Trainer:
     """One training run. ``run()`` reads straight down: collect, update, log, evaluate, checkpoint,
     until the frame or time budget is spent; then the final evaluation and checkpoint."""
@@ -173,11 +74,11 @@ class Trainer:
         self.run_dir = Path(cfg.paths.output_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
         setup_text_log(self.run_dir)
-        self.ckpt_dir, self.error_dir = self.run_dir / "checkpoints", self.run_dir / "env_errors"
+        self.ckpt_dir, self.error_dir = self.run_dir / CHECKPOINTS, self.run_dir / ENV_ERRORS
         self.config = OmegaConf.to_container(cfg, resolve=True)
         self.device = resolve_device(cfg.device)
         torch.set_num_threads(cfg.collector.torch_threads)
-        self.stopped_by: int | None = None
+        self.signals = StopSignals()  # entered by run(): a stop signal saves and ends the run
 
         # --- parts: seeded first, so the same seed gives the same initial networks
         seed_everything(cfg.seed)
@@ -187,7 +88,8 @@ class Trainer:
             raise ConfigError(f"env: {exc}".splitlines()[0]) from exc
         self.actor = self.parts.actor
         self.learner = PPOLearner(
-            self.actor, self.parts.critic, self.parts.norm, cfg.algo, self.device, collects_ahead(cfg)
+            self.actor, self.parts.critic, self.parts.norm, cfg.algo, self.device,
+            stale_batches=self.parts.collector.collects_ahead,
         )
 
         # --- counters, possibly resumed
@@ -197,11 +99,10 @@ class Trainer:
             self.load_state_dict(resumed)
             log.info("resumed from %s at %s frames", cfg.resume, f"{self.frames:,}")
 
-        self.logger = RunLogger(
-            self.run_dir / "tensorboard", cfg.logger.backend, purge_step=self.frames + 1 if resumed else None
+        # The class logger._target_ names (rlgrasp.train.logger, .trackers), given the run's own arguments.
+        self.logger = instantiate(cfg.logger, _partial_=True, _convert_="all")(
+            run_dir=self.run_dir, config=self.config, resumed_frames=None if resumed is None else self.frames
         )
-        # logger=wandb|mlflow: the same calls also go to that tracker (rlgrasp/train/trackers.py).
-        self.logger = attach_tracker(self.logger, cfg.logger, self.run_dir, self.config, resumed is not None)
         if resumed is None:
             self.logger.text("config", OmegaConf.to_yaml(self.config), 0)
         self.evaluator = periodic_evaluator(self.parts.make_env, cfg)
@@ -260,17 +161,18 @@ class Trainer:
                 self.run_dir,
                 self.device,
                 self.parts.frames_per_batch,
-                self.cfg.collector.backend,
+                type(self.parts.collector).__name__,
                 self.parts.spec,
             )
             self.start = time.monotonic()  # the time budget includes the workers' start-up
-            cleanup.enter_context(self._stop_signals())
+            cleanup.enter_context(self.signals)
             try:
                 if self.frames < self.cfg.total_frames:  # a finished run starts no workers
                     with self._collector() as batches:
                         self._loop(batches)
             except (KeyboardInterrupt, _Stopped):
-                why = signal.Signals(self.stopped_by).name if self.stopped_by else "interrupted"
+                stopped_by = self.signals.received
+                why = signal.Signals(stopped_by).name if stopped_by else "interrupted"
                 log.warning("%s at %s frames: saving a checkpoint", why, f"{self.frames:,}")
                 self.save()
                 return float((self.last_eval or {}).get("success_rate", float("nan")))
@@ -281,28 +183,8 @@ class Trainer:
                 ) from exc
             return self.finish()
 
-    @contextlib.contextmanager
-    def _stop_signals(self) -> Iterator[None]:
-        """SIGTERM/USR1/USR2 only set ``stopped_by``; the loop saves and leaves at its next step.
-        Installed after submitit's handlers (kept in ``previous_handlers`` for the requeue)."""
-        self.previous_handlers: dict[int, Any] = {}
-
-        def note(signum: int, frame: Any) -> None:
-            self.stopped_by = signum
-
-        for sig in STOP_SIGNALS:
-            try:
-                self.previous_handlers[sig] = signal.signal(sig, note)
-            except ValueError:  # not the main thread: the caller handles signals
-                break
-        try:
-            yield
-        finally:
-            for sig, handler in self.previous_handlers.items():
-                signal.signal(sig, handler)
-
     def _check_stop(self) -> None:
-        if self.stopped_by is not None:
+        if self.signals.received is not None:
             raise _Stopped
 
     @contextlib.contextmanager
@@ -311,12 +193,12 @@ class Trainer:
         loop ends."""
         behaviour = copy.deepcopy(self.actor)
         collector = self.parts.make_collector(self.generation, str(self.error_dir), behaviour)
-        batches = Batches(collector, self.actor, behaviour, collects_ahead(self.cfg))
+        batches = Batches(collector, self.actor, behaviour, self.parts.collector.collects_ahead)
         try:
             yield batches
         finally:
             batches.close()
-            _shut_down(collector)
+            shut_down(collector)
 
     def _loop(self, batches: Iterator[TensorDictBase]) -> None:
         cfg = self.cfg
@@ -325,7 +207,7 @@ class Trainer:
         ckpt_due = Due(cfg.checkpoint.interval_frames, self.frames)
         throughput = Throughput()
         self.recent: dict[str, float] = {}
-        start = last_console = self.start
+        start = self.start
         while self.frames < cfg.total_frames and time.monotonic() - start < budget_s:
             self._check_stop()
             t0 = time.perf_counter()
@@ -342,9 +224,7 @@ class Trainer:
                 is_best = self.evaluate()
             if ckpt_due(self.frames) or is_best:
                 self.save(is_best)
-            if time.monotonic() - last_console >= cfg.logger.console_interval_s:
-                last_console = time.monotonic()
-                self.console(sps, budget_s - (last_console - start))
+            self.logger.progress(self.progress(sps, budget_s - (time.monotonic() - start)))
 
     def collect(self, batches: Iterator[TensorDictBase]) -> TensorDictBase:
         """The next batch, flattened to ``[envs * workers, time]`` (not yet counted in ``frames``: the
@@ -378,28 +258,26 @@ class Trainer:
 
     def episode_metrics(self, batch: TensorDictBase) -> dict[str, float]:
         """Return, length and success of the episodes that ended in this batch (for the console too)."""
-        stagger = self.cfg.collector.get("stagger_starts", False)
+        stagger = self.parts.collector.stagger_starts
         ep = finished_episodes(batch, self.cfg.env.get("max_episode_steps") if stagger else None)
         for key in ("charts/episodic_return", "charts/success_rate"):
             if key in ep:
                 self.recent[key] = ep[key]
         return ep
 
-    def console(self, sps: float, budget_left_s: float) -> None:
+    def progress(self, sps: float, budget_left_s: float) -> str:
+        """The console's progress line (the logger shows it every ``logger.console_interval_s``)."""
         eta = min((self.cfg.total_frames - self.frames) / max(sps, 1e-9), budget_left_s)
         eval_success = self.last_eval.get("success_rate") if self.last_eval else None
-        log.info(
-            progress_line(
-                self.frames,
-                self.cfg.total_frames,
-                sps,
-                self.recent.get("charts/success_rate"),
-                self.recent.get("charts/episodic_return"),
-                eval_success,
-                eta,
-            )
+        return progress_line(
+            self.frames,
+            self.cfg.total_frames,
+            sps,
+            self.recent.get("charts/success_rate"),
+            self.recent.get("charts/episodic_return"),
+            eval_success,
+            eta,
         )
-        self.logger.flush()
 
     def evaluate(self, final: bool = False) -> bool:
         """Deterministic evaluation; logs it, reports it to ``on_eval``; returns whether it is the best.
@@ -475,33 +353,5 @@ def train(
     cfg, resumed = prepare_run(cfg, changed)
     trainer = Trainer(cfg, on_eval, resumed)
     result = trainer.run()
-    if trainer.stopped_by is not None:
-        if trainer.frames < cfg.total_frames:
-            hand_off_preemption(trainer.stopped_by, trainer.previous_handlers)
-        pass_on_signal(trainer.stopped_by, trainer.previous_handlers)
+    trainer.signals.after_checkpoint(finished=trainer.frames >= cfg.total_frames)
     return result
-
-
-def finished_episodes(batch: TensorDictBase, full_length: int | None = None) -> dict[str, float]:
-    """Return, length and success-at-episode-end of the episodes that ended in this batch.
-
-    Episodes truncated before ``full_length`` steps are the first episodes ``StaggeredStart`` cut
-    short (``collector.stagger_starts``): they are left out so that the curves compare like with like.
-    """
-    done = batch["next", "done"].reshape(batch.shape)
-    keys = batch.keys(True)
-    if full_length and ("next", "step_count") in keys and ("next", "truncated") in keys:
-        steps = batch["next", "step_count"].reshape(batch.shape)
-        done = done & ~(batch["next", "truncated"].reshape(batch.shape) & (steps < full_length))
-    if not done.any():
-        return {}
-    out = {}
-    for key, name in (
-        ("episode_reward", "episodic_return"),
-        ("step_count", "episodic_length"),
-        ("is_success", "success_rate"),
-    ):
-        if ("next", key) in keys:
-            out[f"charts/{name}"] = float(batch["next", key].reshape(batch.shape)[done].float().mean())
-    out["charts/episodes"] = float(done.sum())
-    return out

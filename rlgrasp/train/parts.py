@@ -1,6 +1,6 @@
 """What a training run is made of, built from its config in one place: the env factory, the env's
-spec, the actor and critic, the batch size and the collector. Training, the benchmark scripts and the
-tests all build them here."""
+spec, the actor and critic, and the collector backend. Training, the benchmark scripts and the tests
+all build them here."""
 
 from __future__ import annotations
 
@@ -10,8 +10,9 @@ from typing import Any
 import torch
 from torchrl.collectors import BaseCollector
 
-from rlgrasp.config import env_factory
-from rlgrasp.train.collect import EnvFactory, build_collector, env_spec, frames_per_batch
+from rlgrasp.envs.factory import env_factory
+from rlgrasp.train.collect import EnvFactory, env_spec
+from rlgrasp.train.collectors import CollectorBackend, collector_backend
 from rlgrasp.train.models import RunningNorm, build_models
 
 
@@ -23,14 +24,18 @@ class Parts:
     actor: torch.nn.Module
     critic: torch.nn.Module
     norm: RunningNorm
-    frames_per_batch: int
+    collector: CollectorBackend
+
+    @property
+    def frames_per_batch(self) -> int:
+        return self.collector.frames_per_batch
 
     def make_collector(
         self, generation: int = 0, error_dir: str | None = None, policy: torch.nn.Module | None = None
     ) -> BaseCollector:
         """The configured collector running ``policy`` (default ``actor``); ``generation`` shifts
         the seeds on resume."""
-        return build_collector(self.cfg, self.make_env, policy or self.actor, generation, error_dir)
+        return self.collector.build(self.make_env, policy or self.actor, self.cfg.seed, generation, error_dir)
 
 
 def build_parts(cfg: Any, device: torch.device | str = "cpu") -> Parts:
@@ -40,4 +45,5 @@ def build_parts(cfg: Any, device: torch.device | str = "cpu") -> Parts:
     actor, critic, norm = build_models(
         spec["obs_dim"], torch.tensor(spec["action_low"]), torch.tensor(spec["action_high"]), cfg.model
     )
-    return Parts(cfg, make_env, spec, actor.to(device), critic.to(device), norm, frames_per_batch(cfg))
+    collector = collector_backend(cfg.collector)
+    return Parts(cfg, make_env, spec, actor.to(device), critic.to(device), norm, collector)

@@ -7,11 +7,11 @@ per-update metrics and the refreshed log-probs of stale batches.
 Stale batches (collected with the weights of one update before, ``collector.overlap``): their
 log-probs are recomputed with the learner's weights before the epochs, so the clip and the
 target-KL stop act around this update's starting policy, as with fresh batches; the one update of
-lag between the collecting policy and that one is not corrected. Measured (docs/BENCHMARKS.md,
-"Throughput"): with the log-probs recorded at collection the KL starts at the last update's, the
-target-KL stop cut the epochs from 9.2 to 6.6 per update and learning per frame fell by half;
-TorchRL's decoupled loss (``delay_actor``, the collecting policy's ratio kept as a weight) let the
-k1 KL estimate go negative, so the stop never fired, and the entropy collapsed.
+lag between the collecting policy and that one is not corrected. With the log-probs recorded at
+collection the KL would start at the last update's and the target-KL stop would cut the epochs
+short; TorchRL's decoupled loss (``delay_actor``, the collecting policy's ratio kept as a weight)
+lets the k1 KL estimate go negative, so the stop never fires. What each choice does to learning:
+docs/benchmarks/throughput.md.
 """
 
 from __future__ import annotations

@@ -3,8 +3,9 @@
 ``resume=<run dir>`` (or a checkpoint file) continues the run as it was launched: the checkpoint's
 resolved config is the base and only what the command line changes is applied on top. Keys in
 ``MUTABLE`` may change (and are logged); any other change is refused with one line naming the key
-and both values, before any worker starts. ``resume=auto`` continues the run directory's newest
-readable checkpoint when there is one and starts fresh otherwise (``rlgrasp.config.run_dir`` picks
+and both values, before any worker starts. A ``_target_`` node whose class changes (``collector=ray``
+on a process run) keeps only the keys of its new class. ``resume=auto`` continues the run directory's newest
+readable checkpoint when there is one and starts fresh otherwise (``rlgrasp.train.rundir.run_dir`` picks
 the newest run of the same experiment and seed as the run directory). A job SLURM runs again after a
 requeue (``SLURM_RESTART_COUNT`` > 0) resumes as with ``resume=auto`` when no ``resume`` was given.
 """
@@ -17,10 +18,15 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from hydra import compose
+from hydra.core.global_hydra import GlobalHydra
+from hydra.core.override_parser.overrides_parser import OverridesParser
 from omegaconf import DictConfig, OmegaConf
 
+from rlgrasp.compose import compose_train
 from rlgrasp.config import CONFIG_DIR, ConfigError, validate_train
 from rlgrasp.train import checkpoint as ckpt_lib
+from rlgrasp.train.rundir import CHECKPOINTS
 from rlgrasp.utils import flatten
 
 log = logging.getLogger("rlgrasp.train")
@@ -39,7 +45,7 @@ MUTABLE = (
     "checkpoint.keep_last",
     "logger.",
     "collector.num_workers",
-    "collector.backend",
+    "collector._target_",
     "collector.torch_threads",
     "collector.overlap",
     "collector.ray.",
@@ -61,7 +67,7 @@ def prepare_run(cfg: DictConfig, changed: Iterable[str] | None = None) -> tuple[
     """
     run_dir = Path(cfg.paths.output_dir)
     resume = cfg.resume or requeued_resume()
-    has_ckpts = bool(ckpt_lib.checkpoint_files(run_dir / "checkpoints"))
+    has_ckpts = bool(ckpt_lib.checkpoint_files(run_dir / CHECKPOINTS))
     if resume == "auto":
         source = run_dir if has_ckpts else None
         if source is None:
@@ -133,7 +139,22 @@ def merged_config(cfg: DictConfig, saved: dict[str, Any], changed: Iterable[str]
             f"cannot change on resume: {refused[0]}{more}; on resume only these may change: "
             + ", ".join(m.rstrip(".") for m in MUTABLE if m not in _QUIET)
         )
+    for key in sorted(k for k in keys if k.endswith("._target_") and given[k] != old.get(k, given[k])):
+        _drop_keys_of_the_old_class(base, key.removesuffix("._target_"), old, given)
     return base
+
+
+def _drop_keys_of_the_old_class(
+    base: DictConfig, node: str, old: dict[str, Any], given: dict[str, Any]
+) -> None:
+    """Remove from ``base``'s ``node`` the keys (first level) the command line's node does not have:
+    the old class's own keys, which the new class would refuse."""
+    def children(flat: dict[str, Any]) -> set[str]:
+        return {k[len(node) + 1 :].split(".")[0] for k in flat if k.startswith(node + ".")}
+
+    target = OmegaConf.select(base, node)
+    for child in children(old) - children(given):
+        del target[child]
 
 
 def _reshaped(key: str, old: dict[str, Any]) -> bool:
@@ -156,8 +177,6 @@ def _value_around(key: str, old: dict[str, Any]) -> Any:
 def command_line_keys(task_overrides: list[str], cfg: DictConfig) -> set[str]:
     """The config keys a Hydra command line sets: its ``key=value`` keys, plus the keys whose value
     its group choices (``experiment=``, ``collector=``, ...) change from the defaults."""
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-
     keys, groups = set(), []
     for override in OverridesParser.create().parse_overrides(task_overrides):
         name = override.key_or_group
@@ -174,11 +193,6 @@ def command_line_keys(task_overrides: list[str], cfg: DictConfig) -> set[str]:
 
 def _keys_changed_by(groups: list[str], cfg: DictConfig) -> set[str]:
     """Keys whose value differs between the defaults and the defaults with these group choices."""
-    from hydra import compose
-    from hydra.core.global_hydra import GlobalHydra
-
-    from rlgrasp.config import compose_train
-
     fixed = [f"paths.output_dir={cfg.paths.output_dir}"]
     try:
         if GlobalHydra.instance().is_initialized():

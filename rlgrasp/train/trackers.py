@@ -1,54 +1,35 @@
-"""Team experiment tracking besides TensorBoard: Weights & Biases (``logger=wandb``) or MLflow
-(``logger=mlflow``), optional extras.
+"""Team experiment tracking besides TensorBoard: Weights & Biases (``logger=wandb``,
+``WandbLogger``) or MLflow (``logger=mlflow``, ``MlflowLogger``), optional extras.
 
-TensorBoard stays on; a ``Tracker`` receives the same ``scalars`` / ``text`` / ``hparams`` calls as
-``RunLogger`` (same tags, x = env frames) plus the resolved config at start. The tracker's run id is
-stored in ``<run dir>/tracker.json``, so ``resume=<run dir>`` continues the same W&B or MLflow run.
-The libraries are used directly rather than through TorchRL's loggers, for that resume by id.
+TensorBoard stays on; the ``Tracker`` receives the same ``scalars`` / ``text`` / ``hparams`` calls
+(same tags, x = env frames) plus the resolved config at start. The tracker's run id is stored in
+``<run dir>/tracker.json``, so ``resume=<run dir>`` continues the same W&B or MLflow run. The
+libraries are used directly rather than through TorchRL's loggers, for that resume by id.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import logging
 import math
 import os
+import time
 import uuid
-from dataclasses import dataclass, field
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from rlgrasp.config import LoggerConfig
+from rlgrasp.config import ConfigError
+from rlgrasp.train.logger import TensorBoardLogger
+from rlgrasp.utils import flatten
 
 log = logging.getLogger("rlgrasp.train")
-TRACKERS = ("wandb", "mlflow")
 ID_FILE = "tracker.json"
 
 
-@dataclass
-class TrackerLoggerConfig(LoggerConfig):
-    """``logger=wandb`` / ``logger=mlflow``: TensorBoard plus a tracker."""
-
-    tracker: str = "wandb"  # wandb | mlflow
-    project: str = "rlgrasp"  # W&B project / MLflow experiment
-    entity: str | None = None  # W&B team or user (null: your default)
-    # W&B: online | offline | disabled (null: $WANDB_MODE, else online).
-    mode: str | None = None
-    # MLflow: a server (http://...), a database (sqlite:///...) or a folder (file:...).
-    tracking_uri: str | None = None
-    tags: list[str] = field(default_factory=list)  # run tags in the tracker's UI
-    run_name: str | None = None  # null: <experiment_name>/<run dir name>
-
-
-def register_tracker_configs() -> None:
-    """Store the schema the ``logger/wandb`` and ``logger/mlflow`` configs extend."""
-    from hydra.core.config_store import ConfigStore
-
-    ConfigStore.instance().store(group="logger", name="tracker_schema", node=TrackerLoggerConfig)
-
-
 class Tracker:
-    """One tracker run: ``scalars``, ``text``, ``hparams``, ``close`` (the ``RunLogger`` calls)."""
+    """One tracker run: ``scalars``, ``text``, ``hparams``, ``close`` (the logger's calls)."""
 
     def scalars(self, metrics: dict[str, float], step: int) -> None:  # pragma: no cover - interface
         raise NotImplementedError
@@ -71,38 +52,30 @@ def _finite(metrics: dict[str, float]) -> dict[str, float]:
     }
 
 
-def _flat(config: dict[str, Any], prefix: str = "") -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for k, v in config.items():
-        if isinstance(v, dict) and v:
-            out.update(_flat(v, f"{prefix}{k}."))
-        else:
-            out[f"{prefix}{k}"] = v
-    return out
-
-
 class WandbTracker(Tracker):
     """A W&B run whose id lives in the run directory; x axis = the ``frames`` metric, so a resumed
     run's steps may go back to the checkpoint's frames without W&B dropping them."""
 
-    def __init__(self, cfg: Any, name: str, run_dir: Path, config: dict[str, Any], run_id: str | None):
-        import wandb
+    def __init__(
+        self, logger: WandbLogger, name: str, run_dir: Path, config: dict[str, Any], ids: dict[str, Any]
+    ) -> None:
+        import wandb  # an optional extra: imported only when logger=wandb
 
         self.run = wandb.init(
-            project=cfg.project,
-            entity=cfg.entity,
-            mode=cfg.mode,
+            project=logger.project,
+            entity=logger.entity,
+            mode=logger.mode,
             dir=str(run_dir),
-            id=run_id or uuid.uuid4().hex[:12],
+            id=ids.get("id") or uuid.uuid4().hex[:12],
             resume="allow",
             name=name,
-            tags=list(cfg.tags),
+            tags=list(logger.tags),
             config=config,
             allow_val_change=True,  # a resume may change keys such as `resume` itself
         )
         self.run.define_metric("frames")
         self.run.define_metric("*", step_metric="frames")
-        self.id = {"wandb": {"id": self.run.id, "project": cfg.project}}
+        self.id = {"id": self.run.id, "project": logger.project}
 
     def scalars(self, metrics: dict[str, float], step: int) -> None:
         self.run.log({"frames": step, **_finite(metrics)})
@@ -120,35 +93,36 @@ class WandbTracker(Tracker):
 class MlflowTracker(Tracker):
     """An MLflow run (client API: no process-global active run, so sweeps in one process are safe)."""
 
-    def __init__(self, cfg: Any, name: str, run_dir: Path, config: dict[str, Any], run_id: str | None):
-        from mlflow.tracking import MlflowClient
+    def __init__(
+        self, logger: MlflowLogger, name: str, run_dir: Path, config: dict[str, Any], ids: dict[str, Any]
+    ) -> None:
+        from mlflow.tracking import MlflowClient  # an optional extra: imported only when logger=mlflow
 
-        uri = cfg.tracking_uri or os.environ.get("MLFLOW_TRACKING_URI") or "outputs/mlruns"
+        uri = logger.tracking_uri or os.environ.get("MLFLOW_TRACKING_URI") or "outputs/mlruns"
         if "://" not in uri or uri.startswith("file:"):
             # MLflow 3 asks for an explicit opt-in to its folder store; a folder needs no server.
             os.environ.setdefault("MLFLOW_ALLOW_FILE_STORE", "true")
         self.client = client = MlflowClient(tracking_uri=uri)
+        run_id = ids.get("run_id")
         if run_id is None:
-            exp = client.get_experiment_by_name(cfg.project)
-            exp_id = exp.experiment_id if exp else client.create_experiment(cfg.project)
-            tags = {t: "" for t in cfg.tags} | {"rlgrasp.run_dir": str(run_dir)}
+            exp = client.get_experiment_by_name(logger.project)
+            exp_id = exp.experiment_id if exp else client.create_experiment(logger.project)
+            tags = {t: "" for t in logger.tags} | {"rlgrasp.run_dir": str(run_dir)}
             run_id = client.create_run(exp_id, run_name=name, tags=tags).info.run_id
         else:
             client.update_run(run_id, status="RUNNING")
         self.run_id = run_id
         # Params cannot change once logged: on resume, log only keys the run does not have yet.
         have = client.get_run(run_id).data.params
-        params = {k: str(v)[:6000] for k, v in _flat(config).items() if k not in have}
+        params = {k: str(v)[:6000] for k, v in flatten(config, leaf=lambda v: not v).items() if k not in have}
         if params:
-            from mlflow.entities import Param
+            from mlflow.entities import Param  # optional extra, as above
 
             client.log_batch(run_id, params=[Param(k, v) for k, v in params.items()])
-        self.id = {"mlflow": {"run_id": run_id, "tracking_uri": uri, "experiment": cfg.project}}
+        self.id = {"run_id": run_id, "tracking_uri": uri, "experiment": logger.project}
 
     def scalars(self, metrics: dict[str, float], step: int) -> None:
-        import time
-
-        from mlflow.entities import Metric
+        from mlflow.entities import Metric  # optional extra, as above
 
         now = int(time.time() * 1000)
         batch = [Metric(k, v, now, step) for k, v in _finite(metrics).items()]
@@ -165,56 +139,97 @@ class MlflowTracker(Tracker):
         self.client.set_terminated(self.run_id)
 
 
-class TrackedLogger:
-    """A ``RunLogger`` (TensorBoard) and a ``Tracker`` fed the same calls."""
+class TrackedLogger(TensorBoardLogger):
+    """TensorBoard and a ``Tracker`` fed the same calls; a resumed run continues the tracker run
+    recorded in ``<run dir>/tracker.json``. ``kind``: the tracker's extra and its key in that file."""
 
-    def __init__(self, base: Any, tracker: Tracker) -> None:
-        self.base, self.tracker = base, tracker
+    kind = ""
+
+    def __init__(
+        self,
+        run_dir: Path,
+        config: dict[str, Any],
+        resumed_frames: int | None,
+        console_interval_s: float,
+        project: str,
+        tags: Sequence[str],
+        run_name: str | None,
+    ) -> None:
+        if importlib.util.find_spec(self.kind) is None:
+            raise ConfigError(f'logger={self.kind} needs its extra: pip install -e ".[{self.kind}]"')
+        super().__init__(run_dir, config, resumed_frames, console_interval_s)
+        self.project, self.tags = project, list(tags)
+        id_file = Path(run_dir) / ID_FILE
+        resumed = resumed_frames is not None and id_file.is_file()
+        stored = json.loads(id_file.read_text()).get(self.kind, {}) if resumed else {}
+        name = run_name or f"{config.get('experiment_name', 'run')}/{Path(run_dir).name}"
+        self.tracker = self.open_tracker(name, Path(run_dir), config, stored)
+        id_file.write_text(json.dumps({self.kind: self.tracker.id}, indent=2) + "\n")
+        log.info("tracking with %s: %s%s", self.kind, self.tracker.id, " (resumed)" if stored else "")
+
+    def open_tracker(self, name: str, run_dir: Path, config: dict[str, Any], ids: dict[str, Any]) -> Tracker:
+        """The tracker's run, continuing the one ``ids`` (from ``tracker.json``) name if any."""
+        raise NotImplementedError
 
     def scalars(self, metrics: dict[str, float], step: int) -> None:
-        self.base.scalars(metrics, step)
+        super().scalars(metrics, step)
         self.tracker.scalars(metrics, step)
 
     def text(self, tag: str, text: str, step: int = 0) -> None:
-        self.base.text(tag, text, step)
+        super().text(tag, text, step)
         self.tracker.text(tag, text, step)
 
     def hparams(self, hparams: dict[str, Any], metrics: dict[str, float]) -> None:
-        self.base.hparams(hparams, metrics)
+        super().hparams(hparams, metrics)
         self.tracker.hparams(hparams, metrics)
 
-    def flush(self) -> None:
-        self.base.flush()
-
     def close(self) -> None:
-        self.base.close()
+        super().close()
         self.tracker.close()
 
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self.base, name)
+
+class WandbLogger(TrackedLogger):
+    """``logger=wandb``: TensorBoard plus a W&B run (keys: ``rlgrasp.config.WandbLoggerConfig``)."""
+
+    kind = "wandb"
+
+    def __init__(
+        self,
+        run_dir: Path,
+        config: dict[str, Any],
+        resumed_frames: int | None,
+        console_interval_s: float = 5.0,
+        project: str = "rlgrasp",
+        tags: Sequence[str] = (),
+        run_name: str | None = None,
+        entity: str | None = None,
+        mode: str | None = None,
+    ) -> None:
+        self.entity, self.mode = entity, mode
+        super().__init__(run_dir, config, resumed_frames, console_interval_s, project, tags, run_name)
+
+    def open_tracker(self, name: str, run_dir: Path, config: dict[str, Any], ids: dict[str, Any]) -> Tracker:
+        return WandbTracker(self, name, run_dir, config, ids)
 
 
-def attach_tracker(base: Any, logger_cfg: Any, run_dir: Path, config: dict[str, Any], resumed: bool) -> Any:
-    """``base`` itself without a tracker configured, else a ``TrackedLogger``; a resumed run continues
-    the tracker run recorded in ``<run dir>/tracker.json``."""
-    kind = getattr(logger_cfg, "tracker", None)
-    if not kind or kind == "none":
-        return base
-    if kind not in TRACKERS:
-        raise ValueError(f"logger.tracker must be one of {', '.join(TRACKERS)}, got {kind!r}")
-    id_file = Path(run_dir) / ID_FILE
-    stored = json.loads(id_file.read_text()) if resumed and id_file.is_file() else {}
-    try:
-        __import__(kind)
-    except ImportError as exc:
-        raise ImportError(f'logger={kind} needs its extra: pip install -e ".[{kind}]"') from exc
-    name = logger_cfg.run_name or f"{config.get('experiment_name', 'run')}/{Path(run_dir).name}"
-    if kind == "wandb":
-        run_id = stored.get("wandb", {}).get("id")
-        tracker: Tracker = WandbTracker(logger_cfg, name, Path(run_dir), config, run_id)
-    else:
-        run_id = stored.get("mlflow", {}).get("run_id")
-        tracker = MlflowTracker(logger_cfg, name, Path(run_dir), config, run_id)
-    id_file.write_text(json.dumps(tracker.id, indent=2) + "\n")
-    log.info("tracking with %s: %s%s", kind, tracker.id[kind], " (resumed)" if stored else "")
-    return TrackedLogger(base, tracker)
+class MlflowLogger(TrackedLogger):
+    """``logger=mlflow``: TensorBoard plus an MLflow run (keys: ``rlgrasp.config.MlflowLoggerConfig``)."""
+
+    kind = "mlflow"
+
+    def __init__(
+        self,
+        run_dir: Path,
+        config: dict[str, Any],
+        resumed_frames: int | None,
+        console_interval_s: float = 5.0,
+        project: str = "rlgrasp",
+        tags: Sequence[str] = (),
+        run_name: str | None = None,
+        tracking_uri: str | None = None,
+    ) -> None:
+        self.tracking_uri = tracking_uri
+        super().__init__(run_dir, config, resumed_frames, console_interval_s, project, tags, run_name)
+
+    def open_tracker(self, name: str, run_dir: Path, config: dict[str, Any], ids: dict[str, Any]) -> Tracker:
+        return MlflowTracker(self, name, run_dir, config, ids)

@@ -18,18 +18,22 @@ from typing import Any
 
 import gymnasium as gym
 import torch
+from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 from torchrl.envs import ExplorationType, set_exploration_type
 from torchrl.objectives import BCLoss
 
-from rlgrasp.config import ConfigError, env_factory
+from rlgrasp.config import ConfigError
+from rlgrasp.envs.factory import env_factory
 from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
-from rlgrasp.train.batches import Batches, collects_ahead
-from rlgrasp.train.collect import EnvFactory, build_collector
+from rlgrasp.train.batches import Batches
+from rlgrasp.train.collect import EnvFactory
+from rlgrasp.train.collectors import collector_backend
 from rlgrasp.train.evaluate import periodic_evaluator
-from rlgrasp.train.logger import RunLogger, log, setup_text_log
-from rlgrasp.train.loop import finished_episodes, seed_everything
+from rlgrasp.train.logger import log, setup_text_log
+from rlgrasp.train.loop import seed_everything
+from rlgrasp.train.metrics import finished_episodes
 from rlgrasp.vision.dagger import LABEL_KEY, DAggerPolicy, LabelledFrames, load_teacher
 from rlgrasp.vision.models import IMAGE_KEYS, actor_norm, build_vision_actor
 
@@ -74,7 +78,9 @@ class Distiller:
         self.loss = BCLoss(self.student, loss_function="mse")
         self.optimizer = torch.optim.Adam(self.student.parameters(), lr=a.lr)
         self.data = LabelledFrames(self.student.in_keys, a.buffer_frames, a.minibatch_size)
-        self.logger = RunLogger(self.run_dir / "tensorboard", cfg.logger.backend)
+        self.logger = instantiate(cfg.logger, _partial_=True, _convert_="all")(
+            run_dir=self.run_dir, config=OmegaConf.to_container(cfg, resolve=True), resumed_frames=None
+        )
         self.logger.text("config", OmegaConf.to_yaml(cfg), 0)
         self.evaluator = periodic_evaluator(self.make_env, cfg)
         self.frames, self.batches_seen, self.last_eval = 0, 0, None
@@ -84,8 +90,9 @@ class Distiller:
         cfg = self.cfg
         budget_s = cfg.time_budget_min * 60 if cfg.time_budget_min else math.inf
         behaviour = copy.deepcopy(self.policy)
-        collector = build_collector(cfg, self.make_env, behaviour, 0, str(self.run_dir / "env_errors"))
-        batches = Batches(collector, self.policy, behaviour, collects_ahead(cfg))
+        backend = collector_backend(cfg.collector)
+        collector = backend.build(self.make_env, behaviour, cfg.seed, 0, str(self.run_dir / "env_errors"))
+        batches = Batches(collector, self.policy, behaviour, backend.collects_ahead)
         start = time.monotonic()
         next_eval = cfg.eval.interval_frames
         try:

@@ -6,7 +6,7 @@ position control, object at rest), ``substeps`` calls to ``stepSimulation`` per 
 moving arm makes contacts that an idle one does not, the table also gives the share of env time
 spent inside ``stepSimulation`` during the env run: 1 - that share is the env's own overhead.
 
-    python scripts/bench_env.py [--steps 1000] [--rounds 5] [--randomization default] [--objects cube]
+    python benchmarks/bench_env.py [--steps 1000] [--rounds 5] [--randomization default] [--objects cube]
 """
 
 from __future__ import annotations

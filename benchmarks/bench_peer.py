@@ -3,8 +3,8 @@
 Both run one after the other on the same machine, on the same wall-clock budget.
 
     pip install -c constraints.txt -e ".[peer]"
-    python scripts/bench_peer.py --minutes 5 --seed 0
-    python scripts/bench_peer.py --minutes 5 --only sb3 -- env.control_mode=ee_delta
+    python benchmarks/bench_peer.py --minutes 5 --seed 0
+    python benchmarks/bench_peer.py --minutes 5 --only sb3 -- env.control_mode=ee_delta
 
 rlgrasp runs as ``scripts/train.py experiment=<experiment>`` and is read back from its TensorBoard.
 SB3 runs PPO over a ``SubprocVecEnv`` of the same env (SB3's layout: one process per env) behind
@@ -37,7 +37,7 @@ from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a checkout, uninstalled
-sys.path.insert(0, str(ROOT / "scripts"))  # bench_learning, also when this file is loaded by path
+sys.path.insert(0, str(ROOT / "benchmarks"))  # bench_learning, also when this file is loaded by path
 
 INSTALL_HINT = 'Stable-Baselines3 is not installed: pip install -c constraints.txt -e ".[peer]"'
 
@@ -63,9 +63,9 @@ class LinearLR:
 
 def n_envs(cfg: Any) -> int:
     """SB3's env count: rlgrasp's workers x envs per worker (same frames per batch)."""
-    from rlgrasp.train.collect import frames_per_batch
+    from rlgrasp.train.collectors import collector_backend
 
-    return frames_per_batch(cfg) // cfg.collector.steps_per_env
+    return collector_backend(cfg.collector).frames_per_batch // cfg.collector.steps_per_env
 
 
 def sb3_kwargs(cfg: Any) -> dict[str, Any]:
@@ -127,7 +127,7 @@ def unmatched(cfg: Any) -> list[str]:
 def eval_policy(model: Any, vecnorm: Any) -> Any:
     """SB3's deterministic action (the mean, clipped to the bounds) on VecNormalize's view of the
     observation, as the TensorDict module rlgrasp's ``Evaluator`` rolls out."""
-    import torch
+    import torch  # imports inside functions: SB3's env workers re-run this file's top level
     from tensordict.nn import TensorDictModule
 
     def act(obs: torch.Tensor) -> torch.Tensor:
@@ -142,7 +142,8 @@ class PeriodicEval(BaseCallback):
     when one is due, then the budget check before the next rollout (SB3 stops at its first step)."""
 
     def __init__(self, cfg: Any, evaluator: Any, vecnorm: Any, start: float, budget_s: float) -> None:
-        from rlgrasp.train.loop import Due, Throughput  # the schedule and SPS training itself uses
+        # the schedule and SPS training itself uses (imported here: see the module docstring)
+        from rlgrasp.train.metrics import Due, Throughput
 
         super().__init__()
         self.cfg, self.evaluator, self.vecnorm = cfg, evaluator, vecnorm
@@ -184,11 +185,11 @@ class PeriodicEval(BaseCallback):
 def run_sb3(cfg: Any, out_json: Path) -> None:
     """Train SB3 PPO on ``cfg`` until its frames or time budget run out, then the final evaluation,
     as ``Trainer.finish`` does; writes the curve to ``out_json``."""
-    import torch
+    import torch  # imports inside functions: SB3's env workers re-run this file's top level
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
-    from rlgrasp.config import env_factory
+    from rlgrasp.envs.factory import env_factory
     from rlgrasp.train.collect import worker_seed
     from rlgrasp.train.evaluate import periodic_evaluator
     from rlgrasp.train.loop import resolve_device
@@ -217,7 +218,8 @@ def run_sb3(cfg: Any, out_json: Path) -> None:
 
 def sb3_child(args: argparse.Namespace) -> None:
     """``--sb3-child``: compose the config as training would and run the SB3 side in this process."""
-    from rlgrasp.config import compose_train, validate_train
+    from rlgrasp.compose import compose_train
+    from rlgrasp.config import validate_train
 
     run_dir = args.out / f"sb3_seed{args.seed}"
     cfg = compose_train([f"experiment={args.experiment}", f"seed={args.seed}",
@@ -350,7 +352,7 @@ def main() -> None:
     for side in sides:
         results[side] = rlgrasp_side(args) if side == "rlgrasp" else sb3_side(args)
     if "sb3" in results:
-        from rlgrasp.config import compose_train
+        from rlgrasp.compose import compose_train
 
         cfg = compose_train([f"experiment={args.experiment}", f"seed={args.seed}", *args.overrides])
         results["sb3"]["unmatched"] = unmatched(cfg)

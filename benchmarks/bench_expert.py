@@ -5,7 +5,7 @@ with. Seeds are 0..N-1, so the figures reproduce exactly. Each failure gets one 
 the episode's info by the rules the evaluation uses (``rlgrasp.evaluation.outcomes``): ``too wide``,
 ``tipped or rolled``, ``never grasped``, ``slipped`` or ``held, not lifted``.
 
-    python scripts/bench_expert.py [--episodes 100] [--presets none default wide] [--objects cube]
+    python benchmarks/bench_expert.py [--episodes 100] [--presets none default wide] [--objects cube]
 """
 
 from __future__ import annotations

@@ -5,9 +5,9 @@ the whole machine), under a wall-clock budget, then reads each run's ``eval/succ
 TensorBoard and writes a CSV and a PNG. Minutes count from the launch of the training process, so
 start-up time is charged to the run.
 
-    python scripts/bench_learning.py --seeds 0 1 2 --minutes 5 --out outputs/bench_learning
-    python scripts/bench_learning.py --minutes 30 --tag joint_delta -- env.control_mode=joint_delta
-    python scripts/bench_learning.py --experiment grasp_objects_ppo --tag grasp_objects_ppo --minutes 20 \
+    python benchmarks/bench_learning.py --seeds 0 1 2 --minutes 5 --out outputs/bench_learning
+    python benchmarks/bench_learning.py --minutes 30 --tag joint_delta -- env.control_mode=joint_delta
+    python benchmarks/bench_learning.py --experiment grasp_objects_ppo --tag grasp_objects_ppo --minutes 20 \
         --eval-objects random_urdfs_test train_mix --eval-episodes 200
 
 ``--eval-objects`` evaluates each run's last checkpoint after training with ``scripts/evaluate.py``
@@ -27,10 +27,11 @@ from pathlib import Path
 from omegaconf import OmegaConf
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))  # run from a checkout, uninstalled
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout, uninstalled
+from rlgrasp.stats import wilson_interval
+from rlgrasp.utils import pyplot
 
-from rlgrasp.stats import wilson_interval  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def run_seed(out: Path, tag: str, seed: int, minutes: float, experiment: str, overrides: list[str]) -> dict:
@@ -140,8 +141,6 @@ def main() -> None:
 
 
 def plot(rows: list[tuple], path: Path, title: str) -> None:
-    from rlgrasp.utils import pyplot
-
     plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.5))
     for seed in sorted({r[1] for r in rows}):

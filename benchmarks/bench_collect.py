@@ -1,6 +1,6 @@
 """Collection throughput, side by side: raw env vs gymnasium AsyncVectorEnv vs rlgrasp's collector.
 
-    python scripts/bench_collect.py [--seconds 20] [--train-frames 20480] [hydra overrides ...]
+    python benchmarks/bench_collect.py [--seconds 20] [--train-frames 20480] [hydra overrides ...]
 
 1. raw: one process per core, each stepping one env with random actions in a plain gymnasium loop
    (no torch in the loop) -- the ceiling for this machine;
@@ -24,6 +24,15 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout, uninstalled
+import gymnasium as gym
+import torch
+from omegaconf import OmegaConf
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+from rlgrasp.compose import compose_train
+from rlgrasp.envs.factory import env_factory
+from rlgrasp.train.loop import train
+from rlgrasp.train.parts import build_parts
 
 
 def _raw_worker(make_env, seconds: float, seed: int, out: mp.Queue) -> None:
@@ -54,8 +63,6 @@ def bench_raw(make_env, seconds: float, procs: int) -> float:
 
 
 def bench_async(make_env, seconds: float, num_envs: int) -> float:
-    import gymnasium as gym
-
     envs = gym.vector.AsyncVectorEnv([make_env] * num_envs, context="spawn")
     envs.reset(seed=0)
     for _ in range(20):
@@ -70,10 +77,6 @@ def bench_async(make_env, seconds: float, num_envs: int) -> float:
 
 
 def bench_collector(cfg, seconds: float) -> float:
-    import torch
-
-    from rlgrasp.train.parts import build_parts
-
     torch.set_num_threads(cfg.collector.torch_threads)
     parts = build_parts(cfg)
     collector = parts.make_collector()
@@ -89,11 +92,6 @@ def bench_collector(cfg, seconds: float) -> float:
 
 
 def bench_train(overrides: list[str], frames: int) -> float:
-    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
-
-    from rlgrasp.config import compose_train
-    from rlgrasp.train.loop import train
-
     with tempfile.TemporaryDirectory() as tmp:
         cfg = compose_train(
             [
@@ -122,10 +120,6 @@ def main() -> None:
     parser.add_argument("--train-frames", type=int, default=0, help="also train this many frames")
     parser.add_argument("overrides", nargs="*", help="Hydra overrides, e.g. experiment=grasp_ppo")
     args = parser.parse_args()
-
-    from omegaconf import OmegaConf
-
-    from rlgrasp.config import compose_train, env_factory
 
     overrides = args.overrides or ["experiment=grasp_ppo"]
     cfg = compose_train([*overrides, "paths.output_dir=/tmp/unused"])

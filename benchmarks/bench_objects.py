@@ -11,7 +11,7 @@ script times both in one process, one after the other:
   included (one 50-step episode per reset);
 - pool: ``restoreState`` + moving one parked body in, for pools of 5, 100 and 900 bodies.
 
-    python scripts/bench_objects.py [--objects cube primitives ...] [--resets 100] [--rounds 3]
+    python benchmarks/bench_objects.py [--objects cube primitives ...] [--resets 100] [--rounds 3]
 """
 
 from __future__ import annotations

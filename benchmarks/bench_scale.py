@@ -1,8 +1,8 @@
 """Frames/s of the collector backends side by side: process vs Ray (local, and a two-node Ray
 cluster on loopback). Same env, MLP actor, batch layout (grasp_ppo: 2 workers x 8 envs x 64 steps).
 
-    python scripts/bench_scale.py [--batches 8] [--warmup 2] [--setups process ray ray_2nodes]
-    python scripts/bench_scale.py --workers 1 2 4 8 [--setups process]
+    python benchmarks/bench_scale.py [--batches 8] [--warmup 2] [--setups process ray ray_2nodes]
+    python benchmarks/bench_scale.py --workers 1 2 4 8 [--setups process]
 
 Prints one markdown row per setup (and worker count, with ``--workers``): median and IQR of
 frames/s over the timed batches (each batch also pays the weight broadcast that training does after
@@ -19,16 +19,16 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout, uninstalled
 # Ray reads this when first imported (torchrl imports it with the collectors): without it a cluster
 # started on 127.0.0.1 advertises the machine's network address and the driver hangs connecting.
 os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
 
+from rlgrasp.compose import compose_train  # noqa: E402 - after the Ray setting above
+from rlgrasp.train.parts import build_parts  # noqa: E402
+
 
 def bench(setup: str, batches: int, warmup: int, extra: list[str]) -> list[float]:
-    from rlgrasp.config import compose_train
-    from rlgrasp.train.parts import build_parts
-
     tmp = tempfile.mkdtemp()
     overrides = ["experiment=grasp_ppo", f"paths.output_dir={tmp}", *extra]
     cluster = None
@@ -37,7 +37,7 @@ def bench(setup: str, batches: int, warmup: int, extra: list[str]) -> list[float
     else:
         overrides += ["collector=ray", "collector.ray.memory_per_worker_gb=0.5"]
         if setup == "ray_2nodes":
-            from ray.cluster_utils import Cluster
+            from ray.cluster_utils import Cluster  # an optional extra: only the Ray setups need it
 
             node = {"num_cpus": 1, "node_ip_address": "127.0.0.1"}
             cluster = Cluster(initialize_head=True, head_node_args={**node, "include_dashboard": False})
@@ -58,7 +58,7 @@ def bench(setup: str, batches: int, warmup: int, extra: list[str]) -> list[float
     finally:
         collector.shutdown()
         if setup != "process":
-            import ray
+            import ray  # an optional extra, as above
 
             ray.shutdown()
         if cluster is not None:

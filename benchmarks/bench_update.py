@@ -1,7 +1,7 @@
 """What one PPO update costs the learner, per frame: the ceiling on frames/s however many workers
 collect (with ``collector.overlap`` a batch takes about max(collection, update + evaluation)).
 
-    python scripts/bench_update.py [--threads 1 2] [--minibatch 512 1024] [--repeats 3] [overrides ...]
+    python benchmarks/bench_update.py [--threads 1 2] [--minibatch 512 1024] [--repeats 3] [overrides ...]
 
 Collects one batch of training's size in-process (default ``experiment=grasp_ppo``), then
 times ``PPOLearner.update`` on it for each torch thread count and minibatch size, with the target-KL
@@ -17,6 +17,12 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout, uninstalled
+import torch
+
+from rlgrasp.compose import compose_train
+from rlgrasp.train.collectors import collector_backend
+from rlgrasp.train.parts import build_parts
+from rlgrasp.train.ppo import PPOLearner
 
 
 def main() -> None:
@@ -29,19 +35,13 @@ def main() -> None:
     parser.add_argument("overrides", nargs="*", help="Hydra overrides (default experiment=grasp_ppo)")
     args = parser.parse_args()
 
-    import torch
-
-    from rlgrasp.config import compose_train
-    from rlgrasp.train.parts import build_parts
-    from rlgrasp.train.ppo import PPOLearner
-
     cfg = compose_train(args.overrides or ["experiment=grasp_ppo"])
-    workers = 1 if cfg.collector.backend == "single" else cfg.collector.num_workers
     # One in-process worker collects the batch training would get from all of them.
+    frames = collector_backend(cfg.collector).frames_per_batch
     cfg = compose_train([
         *(args.overrides or ["experiment=grasp_ppo"]),
         "collector=single",
-        f"collector.steps_per_env={cfg.collector.steps_per_env * workers}",
+        f"collector.steps_per_env={frames // cfg.collector.envs_per_worker}",
     ])
     torch.manual_seed(0)
     collector = build_parts(cfg).make_collector()

@@ -1,7 +1,7 @@
 """Where a collector worker's time goes: one process, one batch of envs and the PPO actor under
 TorchRL's ``Collector``, profiled with cProfile, then a plain ``env.step`` loop for comparison.
 
-    python scripts/profile_worker.py [--envs 8] [--batches 8] [--top 30] [hydra overrides ...]
+    python benchmarks/profile_worker.py [--envs 8] [--batches 8] [--top 30] [hydra overrides ...]
 """
 
 from __future__ import annotations
@@ -14,6 +14,12 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout, uninstalled
+import torch
+from torchrl.collectors import Collector
+
+from rlgrasp.compose import compose_train
+from rlgrasp.train.collect import make_batched_env
+from rlgrasp.train.parts import build_parts
 
 
 def main() -> None:
@@ -25,13 +31,6 @@ def main() -> None:
     parser.add_argument("--top", type=int, default=30, help="functions printed, by cumulative time")
     parser.add_argument("overrides", nargs="*", help="Hydra overrides (default experiment=grasp_ppo)")
     args = parser.parse_args()
-
-    import torch
-    from torchrl.collectors import Collector
-
-    from rlgrasp.config import compose_train
-    from rlgrasp.train.collect import make_batched_env
-    from rlgrasp.train.parts import build_parts
 
     cfg = compose_train([*(args.overrides or ["experiment=grasp_ppo"]), "paths.output_dir=/tmp/unused"])
     torch.manual_seed(0)

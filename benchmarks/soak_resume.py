@@ -1,15 +1,15 @@
 """Kill -9 soak of resume: N cycles of start-or-resume, a random wait, ``kill -9`` of the whole process
 group (learner and collector workers); then every check, and a final resume that runs to the end.
 
-    python scripts/soak_resume.py --cycles 3 [--out /tmp/soak] [--seed 0] [--wait 15 40] [--total-frames N]
+    python benchmarks/soak_resume.py --cycles 3 [--out /tmp/soak] [--seed 0] [--wait 15 40] [--total-frames N]
 
 Checks after each kill: the command was still running when killed (a cycle that reaches the end tests
 nothing); no process of the group is left; every file under ``checkpoints/`` loads
 (``weights_only``); the newest checkpoint's frames never go backwards; what the kill lost (frames the
 learner had reached minus the newest checkpoint's) is at most one checkpoint interval. At the end:
 the final resume exits 0 at ``total_frames`` and the TensorBoard curves have no duplicated or
-backwards steps. Prints one line per cycle and a Markdown table (docs/BENCHMARKS.md); exit code 1 if
-any check failed.
+backwards steps. Prints one line per cycle and a Markdown table (docs/benchmarks/reliability.md);
+exit code 1 if any check failed.
 """
 
 from __future__ import annotations
@@ -24,11 +24,15 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-PROGRESS = re.compile(r"frames ([\d,]+)/")
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from rlgrasp.utils import processes_in_group  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout, uninstalled
+from rlgrasp.train.checkpoint import CheckpointError, newest_readable, read_checkpoint
+from rlgrasp.utils import markdown_table
+from tests.procs import processes_in_group
+
+ROOT = Path(__file__).resolve().parents[1]
+PROGRESS = re.compile(r"frames ([\d,]+)/")
 
 
 def train_command(out: Path, seed: int, total: int, interval: int) -> list[str]:
@@ -45,7 +49,6 @@ def run_dirs(out: Path, seed: int) -> list[Path]:
 
 def check_checkpoints(run: Path) -> tuple[int, list[str]]:
     """(frames of the newest readable checkpoint, problems): every file must load."""
-    from rlgrasp.train.checkpoint import CheckpointError, newest_readable, read_checkpoint
 
     problems = []
     for path in sorted((run / "checkpoints").glob("*.pt")):
@@ -85,8 +88,6 @@ def kill_cycle(cmd: list[str], wait_s: float, log_file: Path) -> tuple[int, floa
 
 
 def tensorboard_problems(run: Path) -> list[str]:
-    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
-
     acc = EventAccumulator(str(run / "tensorboard"), size_guidance={"scalars": 0})
     acc.Reload()
     problems = []
@@ -131,8 +132,6 @@ def soak(args: argparse.Namespace) -> int:
 
 
 def finish(cmd: list[str], out: Path, args: argparse.Namespace, rows: list, failures: list[str]) -> int:
-    from rlgrasp.utils import markdown_table
-
     t0 = time.monotonic()
     with open(out / "soak_train_output.txt", "a") as log:
         proc = subprocess.run(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT, timeout=1800)

@@ -1,0 +1,20 @@
+"""The one way to build envs from a config: the ``env`` node's ``_target_`` with its fields as keywords."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from hydra.utils import instantiate
+from omegaconf import DictConfig
+
+
+def env_factory(env_cfg: DictConfig | Mapping[str, Any]) -> Callable[[], Any]:
+    """A picklable partial that builds one env per call.
+
+    Used by the collector workers, training's evaluation, ``rlgrasp-eval``, export and the
+    benchmarks. Being a partial, it travels to spawned workers and Ray actors as it is;
+    ``_convert_`` makes the keywords (``randomization`` as a preset name or a mapping) plain Python
+    values.
+    """
+    return instantiate(env_cfg, _partial_=True, _convert_="all")

@@ -1,0 +1,126 @@
+"""Where a training run lives: the run directory's name and layout, the Hydra files of each start,
+and what a refused start takes back.
+
+A run directory is ``outputs/train/<experiment>/<date>_<time>_s<seed>_<random>/`` holding
+``.hydra/`` (the launch's composed config; each later start's in ``.hydra/resume_<n>/``),
+``checkpoints/``, ``tensorboard/``, ``env_errors/`` and ``train.log``. Hydra names it through the
+``rlgrasp_run_dir`` resolver of ``configs/hydra/default.yaml``; ``resume=`` chooses an existing one.
+What a start continues from once it is there (which checkpoint, which config) is
+``rlgrasp.train.resume``.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import secrets
+import shutil
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from hydra.core.hydra_config import HydraConfig
+from hydra.experimental.callback import Callback
+from omegaconf import DictConfig, OmegaConf
+
+#: The layout of a run directory (``rlgrasp.train.loop.Trainer`` writes it).
+CHECKPOINTS = "checkpoints"
+TENSORBOARD = "tensorboard"
+ENV_ERRORS = "env_errors"
+TEXT_LOG = "train.log"
+
+#: Run directories this process chose that did not exist before (safe to remove on a start-up error).
+FRESH_RUN_DIRS: set[str] = set()
+_RUN_TOKEN = secrets.token_hex(3)  # one per process: every resolution of hydra.run.dir agrees
+#: ``hydra.output_subdir`` per run directory, chosen once per Hydra run (Hydra resolves it more than
+#: once, the last time after writing into it); ``RunDirCheck.on_run_start`` forgets earlier runs'.
+_OUTPUT_SUBDIRS: dict[str, str] = {}
+
+
+def run_dir(resume: str | None, base: str, seed: int) -> str:
+    """``hydra.run.dir``: a run directory named ``<date>_<time>_s<seed>_<random>`` under ``base``
+    (two runs started in the same second never share one); ``resume=<run dir>`` that directory,
+    ``resume=<run>/checkpoints/<file>.pt`` its run (any other resume: a new directory);
+    ``resume=auto`` the newest run of ``base`` with this seed that holds a checkpoint, else a new one."""
+    chosen = None
+    if resume == "auto":
+        runs = sorted(Path(base).glob(f"*_s{seed}_*/{CHECKPOINTS}/*.pt"), key=lambda p: p.parts[-3])
+        chosen = str(runs[-1].parents[1]) if runs else None
+    elif resume:  # a run, or a file in a run's checkpoints/; anything else fails later, in a new dir
+        path = Path(resume)
+        if path.is_dir() and any((path / CHECKPOINTS).glob("*.pt")):
+            chosen = str(path)
+        elif path.is_file() and path.parent.name == CHECKPOINTS:
+            chosen = str(path.parents[1])
+    if chosen is None:
+        chosen = f"{base}/{time.strftime('%Y-%m-%d_%H-%M-%S')}_s{seed}_{_RUN_TOKEN}"
+    if not Path(chosen).exists():
+        FRESH_RUN_DIRS.add(str(Path(chosen).resolve()))
+    return chosen
+
+
+def output_subdir(output_dir: str) -> str:
+    """``hydra.output_subdir``: ``.hydra`` for the first start in a run directory; every later start
+    there (a resume, a requeued job) ``.hydra/resume_<n>`` (n = 1, 2, ...). Hydra writes config.yaml,
+    hydra.yaml and overrides.yaml into it: in ``.hydra/`` itself a resume would overwrite the launch's."""
+    key = str(Path(output_dir).resolve())
+    if key not in _OUTPUT_SUBDIRS:
+        hydra_dir = Path(key) / ".hydra"
+        n = 0
+        if (hydra_dir / "config.yaml").exists():
+            n = 1
+            while (hydra_dir / f"resume_{n}").exists():
+                n += 1
+        _OUTPUT_SUBDIRS[key] = f".hydra/resume_{n}" if n else ".hydra"
+    return _OUTPUT_SUBDIRS[key]
+
+
+def register_resolvers() -> None:
+    """``rlgrasp_run_dir`` and ``rlgrasp_output_subdir``, which ``configs/hydra/default.yaml`` calls."""
+    if not OmegaConf.has_resolver("rlgrasp_run_dir"):
+        OmegaConf.register_new_resolver("rlgrasp_run_dir", run_dir)
+    if not OmegaConf.has_resolver("rlgrasp_output_subdir"):
+        OmegaConf.register_new_resolver("rlgrasp_output_subdir", output_subdir)
+
+
+def remove_refused_start(path: Path) -> None:
+    """After a refused start: remove the run directory if this process created it and it holds only
+    Hydra's files and the log; in an existing run, the ``.hydra/resume_<n>`` Hydra just wrote."""
+    if not path.is_dir():
+        return
+    if str(path.resolve()) in FRESH_RUN_DIRS:
+        if {p.name for p in path.iterdir()} <= {".hydra", TEXT_LOG}:
+            logging.shutdown()  # closes train.log before its directory goes
+            shutil.rmtree(path, ignore_errors=True)
+        return
+    subdir = HydraConfig.get().output_subdir if HydraConfig.initialized() else None
+    if subdir and subdir.startswith(".hydra/resume_"):
+        shutil.rmtree(path / subdir, ignore_errors=True)
+
+
+class RunDirCheck(Callback):
+    """Hydra callback (``configs/hydra/default.yaml``): an output directory that cannot be created
+    ends the command with one line instead of Hydra's traceback from inside its job runner."""
+
+    def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
+        _OUTPUT_SUBDIRS.clear()  # a new start in this process (tests run several): choose afresh
+        self._check(config.hydra.run.dir)
+
+    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        self._check(config.hydra.sweep.dir)
+
+    @staticmethod
+    def _check(path: Any) -> None:
+        # Creates nothing: hydra.run.dir holds the time, so this resolution may name another second
+        # than the one the job then creates; a directory made here would be left behind empty.
+        target = Path(str(path)).absolute()
+        existing = next(p for p in (target, *target.parents) if p.exists())
+        problem = None
+        if not existing.is_dir():
+            problem = "Not a directory"
+        elif not os.access(existing, os.W_OK | os.X_OK):
+            problem = f"{existing} is not writable"
+        if problem:
+            print(f"error: cannot create the run directory {path}: {problem}", file=sys.stderr)
+            sys.exit(2)
