@@ -222,6 +222,9 @@ class EvalConfig:
     # the imports first: use 2+ for long evaluations.
     workers: int = 1
     deterministic: bool = True  # false: sample from the policy's distribution (seeded per episode)
+    # A camera policy's teacher, evaluated on the same seeded episodes (it reads `privileged`):
+    # auto = the checkpoint's algo.teacher if it has one; none; or a checkpoint file / run directory.
+    teacher: str = "auto"
     video: bool = True
     video_episodes: int = 3  # the first K episodes are rendered
     video_format: str = "auto"  # auto (mp4 if ffmpeg exists, else gif) | gif | mp4

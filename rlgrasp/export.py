@@ -1,11 +1,10 @@
-"""Export a trained policy for deployment: one file, raw observation in, deterministic action out.
+"""Export a trained policy for deployment: one file, raw inputs in, deterministic action out.
 
-The checkpoint's actor is a TorchRL ``ProbabilisticActor`` reading and writing tensordicts, which no
-deployment runtime understands. ``DeployPolicy`` is the same computation as a plain ``nn.Module``
-(running-mean/std normalizer -> MLP -> loc -> the TanhNormal's deterministic sample, i.e. a clamped
-tanh affinely scaled to the action bounds), so TorchScript, ONNX and ``torch.export`` can all
-serialize it. Every export is checked against the checkpoint policy on observations recorded from
-env rollouts, and a JSON file beside it says what the vectors mean.
+The file holds ``rlgrasp.deploy``'s module: a state policy reads one ``observation`` vector, a camera
+policy also its images (``depth`` float32 metres, ``rgb`` uint8, channel first). Every export is
+checked against the checkpoint policy on observations recorded from env rollouts (the camera env's,
+for a camera policy), and a JSON file beside it names the inputs (names, shapes, dtypes) and says
+what the vectors mean.
 """
 
 from __future__ import annotations
@@ -13,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import importlib.util
+import inspect
 import io
 import json
 import logging
@@ -31,6 +31,8 @@ from hydra.core.config_store import ConfigStore
 from torch import nn
 
 from rlgrasp.config import CONFIG_DIR, env_factory
+from rlgrasp.deploy import DeployPolicy, deploy_module
+from rlgrasp.envs.observation import PROPRIOCEPTION
 from rlgrasp.evaluation.policies import CheckpointActor
 from rlgrasp.evaluation.source import (
     CKPT_KINDS,
@@ -42,13 +44,19 @@ from rlgrasp.evaluation.source import (
     resolve_checkpoint_path,
 )
 from rlgrasp.overrides import entry_point, unwritable
-from rlgrasp.train.checkpoint import package_versions, policy_from_checkpoint
+from rlgrasp.train.checkpoint import package_versions
+from rlgrasp.vision.models import image_specs
 
 log = logging.getLogger("rlgrasp.export")
 
 #: Format -> file extension. TorchScript keeps PyTorch's ``.pt`` convention for scripted modules.
 FORMATS = {"torchscript": ".pt", "onnx": ".onnx", "pt2": ".pt2"}
 ENV_ID = "rlgrasp/PandaGrasp-v0"
+#: Default ``tolerance`` per policy kind. A camera policy's convolutions sum thousands of terms, in
+#: another order in onnxruntime than in torch: its last bits differ more than an MLP's.
+TOLERANCE = {"state": 1e-5, "vision": 1e-4}
+#: An exported file's inputs by name (``observation``, and ``depth``/``rgb`` for a camera policy).
+Inputs = dict[str, np.ndarray]
 
 
 class ExportError(RuntimeError):
@@ -66,7 +74,8 @@ class ExportConfig:
     out: str | None = None
     verify: bool = True  # compare with the checkpoint policy on recorded observations
     verify_obs: int = 1000  # how many observations to record (episodes of the checkpoint's env)
-    tolerance: float = 1e-5  # largest allowed |exported action - checkpoint action|
+    # Largest allowed |exported action - checkpoint action|; null: TOLERANCE of the policy's kind.
+    tolerance: float | None = None
     seed: int = 0  # episode i of the recording is reset with seed + i
 
 
@@ -75,56 +84,37 @@ def register_export_config() -> None:
     ConfigStore.instance().store(name="export_schema", node=ExportConfig)
 
 
-# --- the deployable module ----------------------------------------------------------------------
-class DeployPolicy(nn.Module):
-    """Raw observation ``[..., obs_dim]`` float32 -> deterministic action ``[..., action_dim]``.
-
-    Matches ``TanhNormal.deterministic_sample`` of the training actor exactly: tanh of the MLP's
-    loc clamped to +-(1 - float32 resolution) (TorchRL's safe tanh), then scaled to the bounds.
-    """
-
-    def __init__(self, net: nn.Module, low: torch.Tensor, high: torch.Tensor) -> None:
-        super().__init__()
-        norm = net.norm
-        self.normalize = bool(norm.enabled)
-        self.clip, self.eps = float(norm.clip), float(norm.eps)
-        self.register_buffer("mean", norm.mean.detach().clone().float())
-        self.register_buffer("var", norm.var.detach().clone().float())
-        # A plain Sequential of the same layers (TorchRL's MLP.forward is not scriptable).
-        self.mlp = nn.Sequential(*[m for m in net.mlp.children()])
-        low, high = torch.as_tensor(low, dtype=torch.float32), torch.as_tensor(high, dtype=torch.float32)
-        self.rescale = bool((low != -1).any() or (high != 1).any())
-        self.register_buffer("mid", (high + low) / 2)
-        self.register_buffer("half_range", (high - low) / 2)
-        self.lim = 1.0 - float(torch.finfo(torch.float32).resolution)
-
-    def forward(self, observation: torch.Tensor) -> torch.Tensor:
-        x = observation
-        if self.normalize:
-            # The same operations in the same order as RunningNorm: bit-identical inputs to the MLP.
-            x = ((x - self.mean) / torch.sqrt(self.var + self.eps)).clamp(-self.clip, self.clip)
-        y = torch.tanh(self.mlp(x)).clamp(-self.lim, self.lim)
-        if self.rescale:
-            y = self.mid + self.half_range * y
-        return y
+__all__ = ["DeployPolicy", "ExportConfig", "ExportError", "deploy_module", "export", "load_exported", "main"]
 
 
-def deploy_module(ckpt: dict[str, Any]) -> DeployPolicy:
-    """The ``DeployPolicy`` of a loaded checkpoint, built from the very modules training uses."""
-    actor = policy_from_checkpoint(ckpt, "cpu")
-    net = actor.module[0].module
-    spec = ckpt["spec"]
-    return DeployPolicy(net, torch.as_tensor(spec["action_low"]), torch.as_tensor(spec["action_high"])).eval()
+# --- what goes in -------------------------------------------------------------------------------
+def input_specs(spec: dict[str, Any]) -> list[dict[str, Any]]:
+    """The exported file's inputs, in its signature's order: name, the env observation entry it is
+    fed from (``None``: the whole observation of an env without a camera), dtype, shape."""
+    images = image_specs(spec)
+    inputs = [{"name": "observation", "env_key": "state" if images else None, "dtype": "float32",
+               "shape": ["batch", int(spec["obs_dim"])]}]
+    for key, shape in images.items():
+        dtype = "uint8" if key == "rgb" else "float32"
+        inputs.append({"name": key, "env_key": key, "dtype": dtype, "shape": ["batch", *map(int, shape)]})
+    return inputs
+
+
+def example_inputs(inputs: list[dict[str, Any]], batch: int = 2) -> dict[str, torch.Tensor]:
+    return {i["name"]: torch.zeros(batch, *i["shape"][1:], dtype=getattr(torch, i["dtype"])) for i in inputs}
 
 
 # --- writing and loading the three formats ------------------------------------------------------
-def write_format(module: DeployPolicy, fmt: str, path: Path, obs_dim: int) -> Path:
-    """Serialize ``module`` as ``fmt`` to ``path``, with a dynamic batch dimension."""
+def write_format(module: nn.Module, fmt: str, path: Path, inputs: list[dict[str, Any]]) -> Path:
+    """Serialize ``module`` as ``fmt`` to ``path``, with a dynamic batch dimension on every input
+    (``inputs``: ``input_specs``)."""
     if fmt not in FORMATS:
         raise ExportError(f"format={fmt}: must be one of {', '.join(FORMATS)} or all")
     with _writing(path):
         path.parent.mkdir(parents=True, exist_ok=True)
-    example = torch.zeros(2, obs_dim)
+    example = example_inputs(inputs)
+    batch = torch.export.Dim("batch", min=1)
+    dynamic = {name: {0: batch} for name in example}
     with warnings.catch_warnings():
         # TorchScript and the dynamic-axes bridge warn about their own deprecation on every call.
         warnings.simplefilter("ignore")
@@ -133,12 +123,11 @@ def write_format(module: DeployPolicy, fmt: str, path: Path, obs_dim: int) -> Pa
             with _writing(path):
                 torch.jit.save(scripted, str(path))
         elif fmt == "pt2":
-            batch = torch.export.Dim("batch", min=1)
-            program = torch.export.export(module, (example,), dynamic_shapes={"observation": {0: batch}})
+            program = torch.export.export(module, tuple(example.values()), dynamic_shapes=dynamic)
             with _writing(path):
                 torch.export.save(program, str(path))
         else:
-            _write_onnx(module, example, path)
+            _write_onnx(module, example, dynamic, path)
     return path
 
 
@@ -152,18 +141,19 @@ def _writing(path: Path) -> Iterator[None]:
         raise ExportError(f"cannot write {path}: {str(exc).splitlines()[0]}") from exc
 
 
-def _write_onnx(module: DeployPolicy, example: torch.Tensor, path: Path) -> None:
+def _write_onnx(
+    module: nn.Module, example: dict[str, torch.Tensor], dynamic: dict[str, Any], path: Path
+) -> None:
     """The torch.export-based exporter (the legacy TorchScript one is deprecated); needs onnxscript."""
-    batch = torch.export.Dim("batch", min=1)
     # The exporter prints its optimization passes and warns about torchvision's ops: not ours.
     for name in ("torch.onnx", "onnxscript", "onnx_ir"):
         logging.getLogger(name).setLevel(logging.ERROR)
     with contextlib.redirect_stdout(io.StringIO()):
         program = torch.onnx.export(
             module,
-            (example,),
-            dynamic_shapes={"observation": {0: batch}},
-            input_names=["observation"],
+            tuple(example.values()),
+            dynamic_shapes=dynamic,
+            input_names=list(example),
             output_names=["action"],
             dynamo=True,
             external_data=False,  # one self-contained file, whatever the model's size
@@ -173,8 +163,9 @@ def _write_onnx(module: DeployPolicy, example: torch.Tensor, path: Path) -> None
             program.save(str(path))
 
 
-def load_exported(path: str | Path) -> Callable[[np.ndarray], np.ndarray]:
-    """``f(obs [B, obs_dim] float32) -> actions [B, action_dim]`` for a file of any format.
+def load_exported(path: str | Path) -> Callable[[np.ndarray | Inputs], np.ndarray]:
+    """``f(inputs) -> actions [B, action_dim]`` for a file of any format; ``inputs`` maps each input
+    name to its batch (``[B, ...]``, the dtype the file declares); a bare array is ``observation``.
 
     ONNX goes through onnxruntime, as a deployment would (not through torch).
     """
@@ -183,17 +174,24 @@ def load_exported(path: str | Path) -> Callable[[np.ndarray], np.ndarray]:
         import onnxruntime  # lazy: an optional dependency (the export extra), for ONNX files only
 
         session = onnxruntime.InferenceSession(str(path), providers=["CPUExecutionProvider"])
-        return lambda obs: session.run(None, {"observation": np.asarray(obs, np.float32)})[0]
+        return lambda inputs: session.run(None, _named(inputs))[0]
     if path.suffix == ".pt2":
         module = torch.export.load(str(path)).module()
+        names = list(inspect.signature(module.forward).parameters)
     else:
         module = torch.jit.load(str(path), map_location="cpu")
+        names = [a.name for a in module.forward.schema.arguments[1:]]  # [0] is self
 
-    def run(obs: np.ndarray) -> np.ndarray:
-        with torch.no_grad():
-            return module(torch.as_tensor(np.asarray(obs, np.float32))).numpy()
+    def run(inputs: np.ndarray | Inputs) -> np.ndarray:
+        named = _named(inputs)
+        with torch.no_grad():  # positional, in the file's order: a torch.export module takes no keywords
+            return module(*[torch.from_numpy(np.ascontiguousarray(named[n])) for n in names]).numpy()
 
     return run
+
+
+def _named(inputs: np.ndarray | Inputs) -> Inputs:
+    return dict(inputs) if isinstance(inputs, dict) else {"observation": np.asarray(inputs, np.float32)}
 
 
 # --- checking against the checkpoint policy ------------------------------------------------------
@@ -204,36 +202,43 @@ def make_env(env_cfg: dict[str, Any]) -> Any:
     return env_factory(cfg)()
 
 
-def record(ckpt: dict[str, Any], n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def record(ckpt: dict[str, Any], n: int, seed: int) -> tuple[Inputs, np.ndarray]:
     """``n`` observations from seeded episodes of the checkpoint's env driven by the checkpoint's
-    deterministic policy, and that policy's actions: evaluation's own ``CheckpointActor``, one
-    observation at a time, so the reference is exactly what ``rlgrasp-eval`` would do."""
+    deterministic policy, as the exported file's inputs (name -> ``[n, ...]``), and that policy's
+    actions: evaluation's own ``CheckpointActor``, one observation at a time, so the reference is
+    exactly what ``rlgrasp-eval`` would do."""
     actor = CheckpointActor(ckpt, deterministic=True)
+    inputs = input_specs(ckpt["spec"])
     env = make_env(ckpt["config"]["env"])
-    observations, actions = [], []
+    recorded: dict[str, list[np.ndarray]] = {i["name"]: [] for i in inputs}
+    actions = []
     try:
         episode = 0
-        while len(observations) < n:
+        while len(actions) < n:
             obs, _ = env.reset(seed=seed + episode)
             actor.reset(seed + episode)
             done = False
-            while not done and len(observations) < n:
+            while not done and len(actions) < n:
                 action = actor(obs)
-                observations.append(np.asarray(obs, np.float32))
+                for i in inputs:
+                    value = obs[i["env_key"]] if i["env_key"] else obs
+                    recorded[i["name"]].append(np.asarray(value, i["dtype"]))
                 actions.append(action)
                 obs, _, terminated, truncated, _ = env.step(action)
                 done = terminated or truncated
             episode += 1
     finally:
         env.close()
-    return np.stack(observations), np.stack(actions).astype(np.float32)
+    return {k: np.stack(v) for k, v in recorded.items()}, np.stack(actions).astype(np.float32)
 
 
-def max_abs_diff(path: Path, observations: np.ndarray, reference: np.ndarray) -> float:
+def max_abs_diff(path: Path, observations: Inputs, reference: np.ndarray) -> float:
     """Largest |exported - reference| over all observations, fed one at a time as in deployment (and
     as the reference was computed: a batch sums in another order, differing in the last bits)."""
     policy = load_exported(path)
-    exported = np.concatenate([policy(obs[None]) for obs in observations])
+    exported = np.concatenate(
+        [policy({k: v[i : i + 1] for k, v in observations.items()}) for i in range(len(reference))]
+    )
     if exported.shape != reference.shape:
         raise ExportError(f"{path}: actions of shape {exported.shape}, expected {reference.shape}")
     return float(np.abs(exported - reference).max())
@@ -262,35 +267,76 @@ def versions() -> dict[str, str]:
 
 
 def describe(ckpt: dict[str, Any], ckpt_path: Path, env: Any) -> dict[str, Any]:
-    """Everything a deployment needs to know about the vectors, without rlgrasp installed."""
+    """Everything a deployment needs to know about the inputs and the action, without rlgrasp."""
     spec, env_cfg = ckpt["spec"], dict(ckpt["config"]["env"])
     env_kwargs = {k: v for k, v in env_cfg.items() if k not in ("_target_", "render_mode")}
     model = ckpt["config"].get("model", {})
+    inputs = input_specs(spec)
+    normalization = "inside the file: running mean/std of the training observations, " + (
+        f"clipped to +-{model.get('obs_clip')}" if model.get("obs_norm", True) else "none"
+    )
     return {
-        "input": {"name": "observation", "dtype": "float32", "shape": ["batch", spec["obs_dim"]]},
+        "inputs": inputs,
+        # A state policy's one input, under the key earlier files had.
+        **({"input": {k: inputs[0][k] for k in ("name", "dtype", "shape")}} if len(inputs) == 1 else {}),
         "output": {"name": "action", "dtype": "float32", "shape": ["batch", spec["action_dim"]]},
-        # Envs without named parts (stand-ins, your own): one block.
-        "observation_layout": {k: [s.start, s.stop] for k, s in getattr(env, "obs_slices", {}).items()}
-        or {"observation": [0, spec["obs_dim"]]},
+        "observation_layout": observation_layout(env, spec),
+        **camera_description(env),
         "action_meaning": action_meaning(env_cfg),
         "action_low": list(spec["action_low"]),
         "action_high": list(spec["action_high"]),
         "control_mode": env_cfg.get("control_mode"),
         "control_hz": round(1.0 / (env_cfg.get("time_step", 1 / 240) * env_cfg.get("substeps", 12))),
-        "normalization": "inside the file: running mean/std of the training observations, "
-        f"clipped to +-{model.get('obs_clip')}" if model.get("obs_norm", True) else "none",
+        "normalization": normalization if model.get("obs_norm", True) else "none",
         "deterministic": "tanh of the Gaussian's mean, scaled to the action bounds",
         "env_id": ENV_ID,
         "env_kwargs": env_kwargs,
         "checkpoint": {
             "path": str(ckpt_path),
             "sha256": hashlib.sha256(ckpt_path.read_bytes()).hexdigest(),
+            "kind": ckpt.get("kind", "state"),
             "frames": ckpt.get("frames"),
             "best_eval_success": ckpt.get("best_eval_success"),
             "experiment_name": ckpt["config"].get("experiment_name"),
             "seed": ckpt["config"].get("seed"),
         },
         "versions": {"export": versions(), "training": ckpt.get("versions", {})},
+    }
+
+
+def observation_layout(env: Any, spec: dict[str, Any]) -> dict[str, list[int]]:
+    """Each named part's [start, stop) in the ``observation`` input: the whole state vector, or for
+    a camera env its proprioception (``state``) only. An env without named parts: one block."""
+    slices = getattr(env.unwrapped, "obs_slices", None)
+    if not slices:
+        return {"observation": [0, spec["obs_dim"]]}
+    if not image_specs(spec):
+        return {k: [s.start, s.stop] for k, s in slices.items()}
+    layout, start = {}, 0
+    for name in PROPRIOCEPTION:  # the order GraspEnv selects them in
+        size = slices[name].stop - slices[name].start
+        layout[name], start = [start, start + size], start + size
+    return layout
+
+
+def camera_description(env: Any) -> dict[str, Any]:
+    """The camera a deployment must reproduce (pose, field of view, clipping) and what the images
+    hold; nothing for an env without a camera."""
+    camera = getattr(env.unwrapped, "camera", None)
+    if camera is None:
+        return {}
+    s = camera.spec
+    pose = {k: [float(x) for x in v] for k, v in s.pose().items()}
+    frame = "the hand's frame (z along the fingers)" if s.mount == "wrist" else "the world frame"
+    return {
+        "camera": {"mount": s.mount, "modality": s.modality, "width": s.width, "height": s.height,
+                   "fov_deg_vertical": s.fov, "near": s.near, "far": s.far, **pose, "pose_frame": frame},
+        "images": {
+            "layout": "channel first, [batch, C, H, W], row 0 at the top",
+            "depth": f"float32 metres along the view axis, clipped to [{s.near}, {s.far}]; 0 = no reading "
+            f"(a sensor's missing pixel); scaled by 1/{s.far} inside the file",
+            "rgb": "uint8 0-255, RGB order; scaled by 1/255 inside the file",
+        },
     }
 
 
@@ -329,7 +375,7 @@ def check_request(cfg: Any, paths: dict[str, Path]) -> None:
     ONNX needs, and that every file can be written."""
     if cfg.verify and cfg.verify_obs < 1:
         raise ExportError(f"verify_obs={cfg.verify_obs}: must be at least 1 (or verify=false)")
-    if not cfg.tolerance >= 0:
+    if cfg.tolerance is not None and not cfg.tolerance >= 0:
         raise ExportError(f"tolerance={cfg.tolerance}: must be >= 0")
     if "onnx" in paths:
         needed = ["onnxscript", *(["onnxruntime"] if cfg.verify else [])]
@@ -345,12 +391,45 @@ def check_request(cfg: Any, paths: dict[str, Path]) -> None:
 def export(cfg: Any) -> dict[str, dict[str, Any]]:
     """Write the file(s) and their JSON; verify each on recorded observations. Returns, per format,
     the file and the largest action difference (``None`` with ``verify=false``)."""
+    ckpt, ckpt_path, paths, info, module = _prepare(cfg)
+    kind = "vision" if len(info["inputs"]) > 1 else "state"
+    tolerance = TOLERANCE[kind] if cfg.tolerance is None else cfg.tolerance
+    results = {}
+    with _one_thread():
+        recorded = record(ckpt, cfg.verify_obs, cfg.seed) if cfg.verify else None
+        for fmt, path in paths.items():
+            results[fmt] = _write_one(module, fmt, path, info, recorded, cfg, tolerance)
+    return results
+
+
+def _write_one(
+    module: nn.Module, fmt: str, path: Path, info: dict[str, Any],
+    recorded: tuple[Inputs, np.ndarray] | None, cfg: Any, tolerance: float,
+) -> dict[str, Any]:
+    """One format: the file, its JSON, its largest action difference on ``recorded`` (if any)."""
+    write_format(module, fmt, path, info["inputs"])
+    diff = max_abs_diff(path, *recorded) if recorded else None
+    check = {"observations": cfg.verify_obs, "seed": cfg.seed, "max_abs_action_diff": diff,
+             "tolerance": tolerance}
+    meta = {"format": fmt, "file": path.name, **info, "verification": check if recorded else None}
+    json_path = path.with_name(path.name + ".json")
+    json_path.write_text(_dumps(meta))
+    shown = "not verified" if diff is None else f"max |action diff| {diff:.2e} on {cfg.verify_obs} obs"
+    log.info("%s: %s (%s)", fmt, path, shown)
+    if diff is not None and not diff <= tolerance:
+        raise ExportError(f"{path}: exported actions differ from the checkpoint's by {diff:.3g} "
+                          f"> tolerance {tolerance}")
+    return {"path": str(path), "json": str(json_path), "max_abs_action_diff": diff}
+
+
+def _prepare(cfg: Any) -> tuple[dict[str, Any], Path, dict[str, Path], dict[str, Any], nn.Module]:
+    """Everything checked before any file is written: the checkpoint, the output paths, the env it
+    acts in (layout included); its description and its deployable module."""
     if cfg.ckpt_kind not in CKPT_KINDS:
         raise ExportError(f"ckpt_kind={cfg.ckpt_kind}: must be one of {', '.join(CKPT_KINDS)}")
     ckpt, ckpt_path = load_source(cfg.ckpt, cfg.ckpt_kind)
     paths = output_paths(cfg.format, cfg.out, ckpt_path)
     check_request(cfg, paths)
-    module = deploy_module(ckpt)
     try:
         env = make_env(ckpt["config"]["env"])
     except ENV_ERRORS as exc:
@@ -362,24 +441,23 @@ def export(cfg: Any) -> dict[str, dict[str, Any]]:
         raise ExportError(str(exc)) from exc
     finally:
         env.close()
-    observations = reference = None
-    if cfg.verify:
-        observations, reference = record(ckpt, cfg.verify_obs, cfg.seed)
-    results = {}
-    for fmt, path in paths.items():
-        write_format(module, fmt, path, ckpt["spec"]["obs_dim"])
-        diff = max_abs_diff(path, observations, reference) if cfg.verify else None
-        check = {"observations": cfg.verify_obs, "seed": cfg.seed, "max_abs_action_diff": diff}
-        meta = {"format": fmt, "file": path.name, **info, "verification": check if cfg.verify else None}
-        json_path = path.with_name(path.name + ".json")
-        json_path.write_text(_dumps(meta))
-        results[fmt] = {"path": str(path), "json": str(json_path), "max_abs_action_diff": diff}
-        shown = "not verified" if diff is None else f"max |action diff| {diff:.2e} on {cfg.verify_obs} obs"
-        log.info("%s: %s (%s)", fmt, path, shown)
-        if diff is not None and not diff <= cfg.tolerance:
-            raise ExportError(f"{path}: exported actions differ from the checkpoint's by {diff:.3g} "
-                              f"> tolerance {cfg.tolerance}")
-    return results
+    try:
+        module = deploy_module(ckpt)
+    except (RuntimeError, KeyError, TypeError, ValueError) as exc:
+        raise ExportError(f"corrupt checkpoint: {ckpt_path}: the policy cannot be rebuilt ({exc})") from exc
+    return ckpt, ckpt_path, paths, info, module
+
+
+@contextlib.contextmanager
+def _one_thread() -> Iterator[None]:
+    """One torch thread while recording and verifying: one observation at a time, as a robot runs it
+    (and as evaluation's workers do); threads only add contention at batch one."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)
 
 
 def _dumps(meta: dict[str, Any]) -> str:

@@ -28,6 +28,7 @@ from rlgrasp import demo
 from rlgrasp.config import compose_train
 from rlgrasp.train.loop import Trainer
 from rlgrasp.utils import markdown_table
+from tests.test_vision_eval import bad_input_files
 
 ROOT = Path(__file__).resolve().parents[1]
 SMOKE = ["experiment=smoke", "logger=none"]
@@ -89,7 +90,8 @@ def _files(root: Path) -> dict[str, str]:
     notes = root / "notes.txt"
     notes.write_text("not a model")
     return {"run": str(run), "empty": str(empty), "truncated": str(truncated), "foreign": str(foreign),
-            "unwritable": str(unwritable / "out"), "notamesh": str(notamesh), "notes": str(notes)}
+            "unwritable": str(unwritable / "out"), "notamesh": str(notamesh), "notes": str(notes),
+            **bad_input_files(root)}  # camera checkpoints: student, orphan, mismatched; the teacher
 
 
 # (entry point, what, arguments after BASE (placeholders filled by _fill), a fragment of the one line)
@@ -155,6 +157,26 @@ EVAL = [
     ("unknown video format", ["video=true", "video_format=avi"],
      "video_format=avi: must be auto, gif or mp4"),
     ("an unwritable output directory", ["out_dir={unwritable}"], "cannot write the evaluation to"),
+    ("unknown visual option (a typo of heldout)", ["visual=heldoutt"],
+     "visual=heldoutt: no such option; visual is one of default, heldout, none, wide"),
+    ("unknown cameras option", ["cameras=wrist"],
+     "cameras=wrist: no such option; cameras is one of fixed_depth"),
+    ("a camera policy in an env without a camera", ["ckpt={student}", "cameras=none"],
+     "is a camera policy (depth [1, 64, 64] + 29 state values) and the env has no camera (env.camera=null)"),
+    ("a state policy in an env with a camera", ["cameras=wrist_depth"],
+     "is a state policy (45 state values) and the env has a camera (env.camera={mount: wrist, "),
+    ("a camera policy given other images", ["ckpt={student}", "cameras=wrist_rgb"],
+     "image mismatch: checkpoint reads depth [1, 64, 64], env gives rgb [3, 64, 64]"),
+    ("unknown camera key", ["ckpt={student}", "env.camera.fvo=60"], "camera: unknown key 'fvo'; valid keys"),
+    ("a teacher for a state policy", ["teacher={teacher}"],
+     "only a camera policy is compared with a teacher, this is a state policy"),
+    ("a missing teacher", ["ckpt={student}", "teacher={root}/nowhere.pt"], "nowhere.pt: missing checkpoint"),
+    ("the checkpoint's teacher is gone", ["ckpt={orphan}"],
+     "teacher=auto: the checkpoint's teacher"),
+    ("a teacher of another control mode", ["ckpt={student}", "teacher={run}"],
+     "env.control_mode='ee_delta' in the teacher, 'joint_delta' here"),
+    ("a camera policy as the teacher", ["ckpt={student}", "teacher={student}"],
+     "the teacher must be a state policy"),
 ]
 EXPORT = [
     ("unknown format", ["format=tflite"], "format=tflite: must be one of torchscript, onnx, pt2 or all"),
@@ -167,6 +189,8 @@ EXPORT = [
     ("a file that is not a checkpoint", ["ckpt={foreign}"], "corrupt checkpoint: "),
     ("unknown checkpoint kind", ["ckpt_kind=worst"], "ckpt_kind=worst: must be one of best, last"),
     ("unknown key", ["formatt=onnx"], "formatt=onnx: unknown key 'formatt'; the config has ckpt"),
+    ("a camera checkpoint whose env gives other images", ["ckpt={mismatched}"],
+     "image mismatch: checkpoint reads rgb [3, 64, 64], env gives depth [1, 64, 64]"),
 ]
 ENJOY = [
     ("no episodes", ["episodes=0"], "episodes=0: must be at least 1"),
@@ -178,6 +202,9 @@ ENJOY = [
      "matches no .urdf or .obj file"),
     ("missing checkpoint", ["ckpt={root}/nowhere.pt"], "missing checkpoint: "),
     ("unknown key", ["episdoes=5"], "episdoes=5: unknown key 'episdoes'"),
+    ("unknown visual option", ["visual=heldoutt"], "visual=heldoutt: no such option; visual is one of"),
+    ("a camera policy in an env without a camera", ["ckpt={student}", "cameras=none"],
+     "is a camera policy (depth [1, 64, 64] + 29 state values) and the env has no camera"),
 ]
 SWEEP = [
     ("unknown sweep", ["sweep=bogus"], "sweep=bogus: no such option; sweep is one of grasp_ppo, smoke"),

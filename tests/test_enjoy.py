@@ -1,11 +1,13 @@
 """rlgrasp-enjoy without a GUI: the no-display line, real-time pacing, the per-episode outcome lines,
-and the same episodes as rlgrasp-eval (same seeds, same outcomes)."""
+and the same episodes as rlgrasp-eval (same seeds, same outcomes); with Xvfb, the GUI itself."""
 
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -90,3 +92,28 @@ def test_bad_input_says_what(tmp_path: Path) -> None:
         play(_cfg("render=none"), out=lambda s: None)
     with pytest.raises(EvaluationError, match="render=rgb: must be human or none"):
         play(_cfg("policy=scripted", "render=rgb"), out=lambda s: None)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(shutil.which("Xvfb") is None, reason="needs Xvfb for a display")
+@pytest.mark.parametrize("camera", [False, True])
+def test_the_gui_opens_on_a_virtual_display(tmp_path: Path, camera: bool) -> None:
+    """The GUI path itself (its visualizer settings, the camera preview panes), on Xvfb's display."""
+    from tests.test_vision_eval import make_student
+
+    ckpt = make_student(tmp_path) if camera else ROOT / "policies" / "grasp_ppo.pt"
+    display = f":{90 + camera + os.getpid() % 50 * 2}"
+    xvfb = subprocess.Popen(["Xvfb", display, "-screen", "0", "1024x768x24"], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    try:
+        time.sleep(1.0)
+        done = subprocess.run(
+            [sys.executable, str(ROOT / "scripts" / "enjoy.py"), f"ckpt={ckpt}", "episodes=1", "speed=0"],
+            capture_output=True, text=True, cwd=tmp_path, timeout=300, env={**os.environ, "DISPLAY": display},
+        )
+    finally:
+        xvfb.terminate()
+        xvfb.wait(timeout=10)
+    assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr[-2000:]
+    assert "episode 1/1 (seed 0" in done.stdout
+    assert ("camera: wrist depth 64x64" in done.stdout) == camera

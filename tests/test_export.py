@@ -49,7 +49,9 @@ def test_every_format_matches_the_checkpoint_on_1000_observations(tmp_path: Path
         assert Path(r["path"]).parent == run / "export"
         assert r["max_abs_action_diff"] <= 1e-5, (fmt, r)
         meta = json.loads(Path(r["json"]).read_text())
-        assert meta["verification"]["observations"] == 1000
+        assert meta["verification"]["observations"] == 1000 and meta["verification"]["tolerance"] == 1e-5
+        assert meta["inputs"] == [{"name": "observation", "env_key": None, "dtype": "float32",
+                                   "shape": meta["input"]["shape"]}] and "camera" not in meta
         obs_dim, act_dim = meta["input"]["shape"][1], meta["output"]["shape"][1]
         stops = sorted(stop for _, stop in meta["observation_layout"].values())
         assert stops[-1] == obs_dim and len(meta["action_meaning"]) == act_dim
@@ -59,13 +61,15 @@ def test_every_format_matches_the_checkpoint_on_1000_observations(tmp_path: Path
 
 def test_recorded_actions_saturate_and_batching_changes_nothing(tmp_path: Path) -> None:
     """The check is meaningful (some actions at the bounds), and one batch = one call per observation."""
-    from rlgrasp.export import deploy_module, load_exported, record, write_format
+    from rlgrasp.export import deploy_module, input_specs, load_exported, record, write_format
 
     run = _spread_run(tmp_path)
     ckpt = torch.load(run / "checkpoints" / "best.pt", weights_only=False)
-    obs, reference = record(ckpt, 200, seed=0)
+    recorded, reference = record(ckpt, 200, seed=0)
+    obs = recorded["observation"]
+    assert list(recorded) == ["observation"]  # a state policy: one input
     assert obs.shape == (200, ckpt["spec"]["obs_dim"]) and (np.abs(reference) > 0.999).any()
-    path = write_format(deploy_module(ckpt), "pt2", tmp_path / "p.pt2", ckpt["spec"]["obs_dim"])
+    path = write_format(deploy_module(ckpt), "pt2", tmp_path / "p.pt2", input_specs(ckpt["spec"]))
     policy = load_exported(path)
     one_by_one = np.stack([policy(o[None])[0] for o in obs[:20]])
     np.testing.assert_allclose(one_by_one, policy(obs)[:20], atol=1e-5)

@@ -25,9 +25,17 @@ from rlgrasp.config import CONFIG_DIR, register_configs
 from rlgrasp.envs import Randomizer
 from rlgrasp.evaluation import metrics as M
 from rlgrasp.evaluation.episodes import episode_seeds, timed_run
-from rlgrasp.evaluation.plots import return_histogram, success_by_object_plot, success_by_parameter
+from rlgrasp.evaluation.plots import (
+    return_histogram,
+    split_parameters,
+    success_by_object_plot,
+    success_by_parameter,
+    success_table,
+)
+from rlgrasp.evaluation.policies import PolicySource
 from rlgrasp.evaluation.source import EvaluationError, load_checked_checkpoint, prepare
 from rlgrasp.evaluation.tb_log import log_to_tensorboard
+from rlgrasp.evaluation.teacher import prepare_teacher
 from rlgrasp.evaluation.video import video_format, write_video
 from rlgrasp.overrides import entry_point, unwritable
 
@@ -56,43 +64,50 @@ def _randomization_ranges(spec: Any) -> dict[str, Any]:
 
 
 def evaluate(cfg: DictConfig) -> dict[str, Any]:
-    """Validate, run the episodes, write every artefact; return ``metrics.json``'s content."""
+    """Validate, run the episodes (and the teacher's, on the same seeds), write every artefact;
+    return ``metrics.json``'s content."""
     # --- validate everything before anything is written
-    source, fmt, out = _validate(cfg)
+    source, teacher, fmt, out = _validate(cfg)
     try:
         ranges = _randomization_ranges(source.env_cfg.get("randomization"))
     except ValueError as exc:
         raise EvaluationError(f"randomization: {exc}") from exc
     labels = conditions(source)
     log.info(
-        "evaluating %s: %d episodes, seeds %d.., objects %s, randomization %s, %d worker(s), %s actions",
+        "evaluating %s: %d episodes, seeds %d.., objects %s, randomization %s%s, %d worker(s), %s actions%s",
         source.ckpt_path or source.kind,
         cfg.episodes,
         cfg.seed,
         labels["objects"],
         labels["randomization"],
+        "".join(f", {k} {labels[k]}" for k in ("camera", "visual") if k in labels),
         cfg.workers,
         "deterministic" if cfg.deterministic else "stochastic",
+        f"; teacher {teacher.ckpt_path} on the same episodes" if teacher else "",
     )
 
     # --- run the episodes
+    run = {"episodes": cfg.episodes, "base_seed": cfg.seed, "workers": cfg.workers,
+           "deterministic": cfg.deterministic}
     results, seconds = timed_run(
-        source=source,
-        episodes=cfg.episodes,
-        base_seed=cfg.seed,
-        workers=cfg.workers,
-        deterministic=cfg.deterministic,
-        video_episodes=cfg.video_episodes if fmt else 0,
-        progress=_Progress(),
+        source=source, video_episodes=cfg.video_episodes if fmt else 0, progress=_Progress(), **run
     )
+    teacher_results: list = []
+    if teacher:
+        log.info("the teacher on the same %d episodes", cfg.episodes)
+        teacher_results, teacher_seconds = timed_run(source=teacher, progress=_Progress(), **run)
+        seconds += teacher_seconds
     metrics = _metrics(cfg, source, results, seconds, ranges)
+    if teacher:
+        metrics["teacher"] = M.compare_with_teacher(results, teacher_results, teacher.ckpt_path)
     table = metrics["summary_markdown"] = M.summary_table(metrics)
 
     # --- write: into a hidden staging folder renamed at the end, so an evaluation is complete or absent
     out.parent.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
     try:
-        files = _write_artefacts(stage, out.name, cfg, source, results, metrics, table, seconds, fmt)
+        files = _write_artefacts(stage, out.name, cfg, source, (results, teacher_results), metrics, table,
+                                 seconds, fmt)
         if out.exists():  # an empty folder made in the meantime
             out.rmdir()
         os.replace(stage, out)
@@ -110,8 +125,9 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
     return metrics
 
 
-def _validate(cfg: DictConfig) -> tuple[Any, str | None, Path]:
-    """The policy source (checkpoint, env and policy checked), the video format, the output folder."""
+def _validate(cfg: DictConfig) -> tuple[PolicySource, PolicySource | None, str | None, Path]:
+    """The policy source (checkpoint, env and policy checked), its teacher's if any, the video
+    format, the output folder."""
     for key, minimum in (("episodes", 1), ("workers", 1), ("video_episodes", 0), ("seed", 0)):
         if cfg[key] < minimum:
             raise EvaluationError(f"{key}={cfg[key]}: must be at least {minimum}")
@@ -122,13 +138,14 @@ def _validate(cfg: DictConfig) -> tuple[Any, str | None, Path]:
         except ValueError as exc:
             raise EvaluationError(str(exc)) from exc
     source = prepare(cfg.policy, cfg.ckpt, cfg.ckpt_kind, _plain(cfg.randomization), _plain(cfg.env))
+    teacher = prepare_teacher(cfg.teacher, source)
     out = output_dir(cfg, source)
     if (out / "metrics.json").exists():
         raise EvaluationError(f"{out} already holds an evaluation; pick another name=")
     problem = unwritable(out, folder=True)
     if problem:
         raise EvaluationError(f"cannot write the evaluation to {out}: {problem}")
-    return source, fmt, out
+    return source, teacher, fmt, out
 
 
 def describe(spec: Any) -> str:
@@ -141,13 +158,17 @@ def describe(spec: Any) -> str:
 
 
 def conditions(source: Any) -> dict[str, str]:
-    """The objects and the randomization the episodes use, and whether the checkpoint trained on
-    them: a held-out figure must say so, and so must one that is not."""
-    labels = {}
-    for key in ("objects", "randomization"):
+    """The objects and the randomization the episodes use (for a camera env also the camera and the
+    visuals), and whether the checkpoint trained on them: a held-out figure must say so, and so must
+    one that is not."""
+    keys = ["objects", "randomization"]
+    if source.env_cfg.get("camera"):
+        keys += ["camera", "visual"]
+    labels, info = {}, source.info or {}
+    for key in keys:
         used = describe(source.env_cfg.get(key))
-        trained = (source.info or {}).get(f"train_{key}")
-        if trained is None:
+        trained = info.get(f"train_{key}")
+        if trained is None and f"train_{key}" not in info:
             labels[key] = used
         else:
             trained = describe(trained)
@@ -177,6 +198,7 @@ def _metrics(cfg: DictConfig, source: Any, results: list, seconds: float, ranges
         "policy_label": source.ckpt_path or source.kind,
         "objects_label": labels["objects"],
         "randomization_label": labels["randomization"],
+        **{f"{k}_label": labels[k] for k in ("camera", "visual") if k in labels},
         **M.summarize(results),
         "seeds": episode_seeds(cfg.seed, cfg.episodes),
         "deterministic": bool(cfg.deterministic),
@@ -199,22 +221,32 @@ def _write_artefacts(
     name: str,
     cfg: DictConfig,
     source: Any,
-    results: list,
+    runs: tuple[list, list],
     metrics: dict,
     table: str,
     seconds: float,
     fmt: str | None,
 ) -> list[str]:
     """metrics.json, episodes.csv, summary.md, plots and videos into ``out`` (the staging folder
-    that becomes the evaluation ``name``)."""
-    M.write_episodes_csv(out / "episodes.csv", results)
+    that becomes the evaluation ``name``). ``runs``: the episodes and the teacher's (or none)."""
+    results, teacher = runs
+    M.write_episodes_csv(out / "episodes.csv", results, teacher)
     M.write_objects_csv(out / "objects.csv", metrics)
     files = ["metrics.json", "episodes.csv", "objects.csv", "summary.md"]
+    physics, visual = split_parameters(results)
+    metrics["success_by_parameter"] = success_table(results, physics)
+    if visual:  # what the camera saw: textures, light, camera pose, sensor noise
+        metrics["success_by_visual"] = success_table(results, visual)
     if cfg.plots:
-        metrics["success_by_parameter"] = success_by_parameter(results, out / "success_by_parameter.png")
+        success_by_parameter(results, out / "success_by_parameter.png", names=physics)
         return_histogram(results, out / "return_histogram.png")
         success_by_object_plot(metrics, out / "success_by_object.png")
         files += ["success_by_parameter.png", "return_histogram.png", "success_by_object.png"]
+        if visual:
+            success_by_parameter(
+                results, out / "success_by_visual.png", names=visual, what="visual randomization"
+            )
+            files.append("success_by_visual.png")
     if fmt:
         step_s = source.env_cfg.get("time_step", 1 / 240) * source.env_cfg.get("substeps", 12)
         for r in results:
@@ -225,9 +257,14 @@ def _write_artefacts(
                 files.append(path.name)
     metrics["files"] = files
     M.write_json(out / "metrics.json", metrics)
+    visual_section = (
+        f"## Success per visual parameter, most influential first (all bins: metrics.json)\n\n"
+        f"{M.parameter_table(metrics['success_by_visual'])}\n\n" if visual else ""
+    )
     (out / "summary.md").write_text(
         f"# Evaluation {name}\n\n{table}\n\n## Outcomes\n\n{M.outcome_table(metrics)}\n\n"
         f"## Success per object, lowest first (all of them: objects.csv)\n\n{M.object_table(metrics)}\n\n"
+        f"{visual_section}"
         f"Wall time {seconds:.1f} s on {cfg.workers} worker(s). Files: {', '.join(files)}\n"
     )
     return files

@@ -2,8 +2,9 @@
 
 The policy and the env are rebuilt from the checkpoint exactly as ``rlgrasp-eval`` does (same
 checks, same seeds, same episode loop and outcome rules); only the env opens the GUI and each step
-waits for its 1/20 s slot. Bad input is refused first, display or not (one line, exit code 2); then,
-without a display, it says so in one line and exits with code 1.
+waits for its 1/20 s slot. For a camera policy the GUI's preview panes show what the camera
+renders. Bad input is refused first, display or not (one line, exit code 2); then, without a
+display, it says so in one line and exits with code 1.
 """
 
 from __future__ import annotations
@@ -78,7 +79,7 @@ class PacedActor(Actor):
         self.actor.reset(seed)
         self.next_tick = None
 
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
+    def __call__(self, obs: Any) -> np.ndarray:
         action = self.actor(obs)
         now = self.clock()
         if self.next_tick is None:
@@ -99,14 +100,39 @@ def episode_line(i: int, n: int, r: Any) -> str:
     )
 
 
-def _point_camera(env: Any) -> None:
-    """The GUI's camera where the videos look from, and its side panels off."""
-    client = getattr(env, "client", None)
-    if client is None:
-        return
-    distance, yaw, pitch = getattr(env, "camera", (1.1, 60.0, -25.0))
-    client.configureDebugVisualizer(pybullet.COV_ENABLE_GUI, 0)
-    client.resetDebugVisualizerCamera(distance, yaw, pitch, [0.45, 0.0, 0.2])
+def gui_settings(env: Any) -> list[tuple[int, int]]:
+    """``configureDebugVisualizer`` flags for watching ``env``: the side panels off for a state env;
+    for a camera env on, with the synthetic camera's preview panes of what the policy reads (the
+    env's ``getCameraImage`` calls appear there, before the sensor noise is added)."""
+    camera = getattr(env.unwrapped, "camera", None)
+    if camera is None:
+        return [(pybullet.COV_ENABLE_GUI, 0)]
+    keys = camera.spec.keys
+    return [
+        (pybullet.COV_ENABLE_GUI, 1),
+        (pybullet.COV_ENABLE_RGB_BUFFER_PREVIEW, int("rgb" in keys)),
+        (pybullet.COV_ENABLE_DEPTH_BUFFER_PREVIEW, int("depth" in keys)),
+        (pybullet.COV_ENABLE_SEGMENTATION_MARK_PREVIEW, 0),
+    ]
+
+
+def set_up_gui(env: Any, client: Any = None) -> None:
+    """The GUI's panels (``gui_settings``) and its camera where the videos look from."""
+    client = client or env.unwrapped.client
+    for flag, value in gui_settings(env):
+        client.configureDebugVisualizer(flag, value)
+    viewer = env.unwrapped.viewer
+    client.resetDebugVisualizerCamera(viewer["distance"], viewer["yaw"], viewer["pitch"], [0.45, 0.0, 0.2])
+
+
+def camera_line(env: Any) -> str | None:
+    """What a camera env's policy sees, and where to watch it; ``None`` without a camera."""
+    camera = getattr(env.unwrapped, "camera", None)
+    if camera is None:
+        return None
+    s = camera.spec
+    return (f"camera: {s.mount} {s.modality} {s.width}x{s.height}; the GUI's preview panes show what it "
+            "renders (before the sensor noise the policy also gets)")
 
 
 def _print(line: str) -> None:
@@ -137,12 +163,14 @@ def play(
     env = env_factory({**source.env_cfg, "render_mode": "human" if cfg.render == "human" else None})()
     try:
         if cfg.render == "human":
-            _point_camera(env)
+            set_up_gui(env)
         fps = env.metadata.get("render_fps", 20)
         actor = build_policy(source, env, cfg.deterministic)
         if cfg.speed > 0:
             actor = PacedActor(actor, 1.0 / (fps * cfg.speed), sleep=sleep)
         out(f"playing {cfg.episodes} episodes of {source.ckpt_path or cfg.policy} at {fps * cfg.speed:g} Hz")
+        if camera_line(env):
+            out(camera_line(env))
         results = []
         for i in range(cfg.episodes):
             start = time.perf_counter()

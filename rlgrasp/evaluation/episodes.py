@@ -26,6 +26,7 @@ import torch
 
 from rlgrasp.evaluation.outcomes import SUCCESS, failure_reason
 from rlgrasp.evaluation.policies import Actor, PolicySource, build_policy
+from rlgrasp.evaluation.views import render_frame
 
 
 @dataclass
@@ -49,10 +50,11 @@ class EpisodeResult:
 
 
 def run_episode(env: Any, actor: Actor, index: int, seed: int, render: bool) -> EpisodeResult:
-    """One full episode from ``env.reset(seed=seed)`` to termination or the time limit."""
+    """One full episode from ``env.reset(seed=seed)`` to termination or the time limit; rendered
+    frames show a camera env's view (what the policy acts on next) beside the scene."""
     obs, info = env.reset(seed=seed)
     actor.reset(seed)
-    frames = [env.render()] if render else None
+    frames = [render_frame(env, obs)] if render else None
     total, steps, first, success, max_lift = 0.0, 0, None, False, 0.0
     # From the reset on, as the env reports them: what failure_reason reads.
     held, tilts = [bool(info.get("grasped", False))], [float(info.get("object_tilt", 0.0))]
@@ -69,7 +71,7 @@ def run_episode(env: Any, actor: Actor, index: int, seed: int, render: bool) -> 
         held.append(bool(info.get("grasped", False)))
         tilts.append(float(info.get("object_tilt", 0.0)))
         if render:
-            frames.append(env.render())
+            frames.append(render_frame(env, obs))
         if terminated or truncated:
             break
     return EpisodeResult(

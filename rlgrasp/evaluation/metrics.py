@@ -68,13 +68,42 @@ def summarize(results: Sequence[EpisodeResult]) -> dict[str, Any]:
     }
 
 
-def episode_rows(results: Sequence[EpisodeResult]) -> tuple[list[str], list[dict[str, Any]]]:
-    """CSV columns (fixed fields, then every randomization parameter) and one row per episode."""
+def compare_with_teacher(
+    student: Sequence[EpisodeResult], teacher: Sequence[EpisodeResult], path: str
+) -> dict[str, Any]:
+    """The teacher's figures on the student's very episodes, the student/teacher success ratio and
+    the paired outcomes (which episodes only one of them solves: where the camera falls short)."""
+    if [r.seed for r in student] != [r.seed for r in teacher]:
+        raise ValueError("the student and its teacher must run the same seeded episodes")
+    s, t = rate([r.success_at_end for r in student]), rate([r.success_at_end for r in teacher])
+    pairs = collections.Counter((a.success_at_end, b.success_at_end) for a, b in zip(student, teacher))
+    return {
+        "path": path,
+        "success_at_end": t,
+        "success_once": rate([r.success_once for r in teacher]),
+        "return_mean": float(np.mean([r.episode_return for r in teacher])),
+        # null when the teacher solved nothing: no ratio to speak of.
+        "student_over_teacher": s["rate"] / t["rate"] if t["successes"] else None,
+        "paired": {
+            "both": pairs[(True, True)],
+            "student_only": pairs[(True, False)],
+            "teacher_only": pairs[(False, True)],
+            "neither": pairs[(False, False)],
+        },
+    }
+
+
+def episode_rows(
+    results: Sequence[EpisodeResult], teacher: Sequence[EpisodeResult] = ()
+) -> tuple[list[str], list[dict[str, Any]]]:
+    """CSV columns (fixed fields, the teacher's outcome on the same episode if any, then every
+    randomization parameter) and one row per episode."""
     params: list[str] = []
     for r in results:
         params += [k for k in r.randomization if k not in params]
+    extra = ["teacher_success_at_end", "teacher_return"] if teacher else []
     rows = []
-    for r in results:
+    for i, r in enumerate(results):
         row = {
             "episode": r.index,
             "seed": r.seed,
@@ -88,13 +117,18 @@ def episode_rows(results: Sequence[EpisodeResult]) -> tuple[list[str], list[dict
             "grasped_at_end": int(r.grasped_at_end),
             "max_lift_height": round(r.max_lift_height, 6),
         }
+        if teacher:
+            row.update(teacher_success_at_end=int(teacher[i].success_at_end),
+                       teacher_return=round(teacher[i].episode_return, 6))
         row.update({k: r.randomization.get(k, "") for k in params})
         rows.append(row)
-    return list(EPISODE_FIELDS) + params, rows
+    return list(EPISODE_FIELDS) + extra + params, rows
 
 
-def write_episodes_csv(path: Path, results: Sequence[EpisodeResult]) -> Path:
-    fields, rows = episode_rows(results)
+def write_episodes_csv(
+    path: Path, results: Sequence[EpisodeResult], teacher: Sequence[EpisodeResult] = ()
+) -> Path:
+    fields, rows = episode_rows(results, teacher)
     with open(path, "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=fields)
         writer.writeheader()
@@ -118,6 +152,7 @@ def summary_table(metrics: dict[str, Any]) -> str:
         ("policy", m.get("policy_label", m.get("policy", ""))),
         ("objects", m.get("objects_label", "")),
         ("randomization", m.get("randomization_label", "")),
+        *((key, m[f"{key}_label"]) for key in ("camera", "visual") if m.get(f"{key}_label")),
         (
             "episodes (seeds)",
             f"{m['episodes']} ({m['seeds'][0]}..{m['seeds'][-1]})" if m.get("seeds") else m["episodes"],
@@ -128,8 +163,23 @@ def summary_table(metrics: dict[str, Any]) -> str:
         ("return mean +- std", f"{_fmt(m['return']['mean'])} +- {_fmt(m['return']['std'])}"),
         ("mean episode length", _fmt(m["mean_length"], ".1f")),
         ("mean steps to first success", _fmt(m["mean_steps_to_first_success"], ".1f")),
+        *teacher_rows(m.get("teacher")),
     ]
     return markdown_table(("metric", "value"), rows)
+
+
+def teacher_rows(t: dict[str, Any] | None) -> list[tuple[str, str]]:
+    """The teacher's lines of the summary table (none without a teacher)."""
+    if not t:
+        return []
+    p = t["paired"]
+    return [
+        ("teacher", t["path"]),
+        ("teacher success at end, same episodes [95% Wilson]", _fmt_rate(t["success_at_end"])),
+        ("student / teacher success at end", _fmt(t["student_over_teacher"])),
+        ("episodes solved by both / student only / teacher only / neither",
+         f"{p['both']} / {p['student_only']} / {p['teacher_only']} / {p['neither']}"),
+    ]
 
 
 def outcome_table(metrics: dict[str, Any]) -> str:
@@ -147,6 +197,22 @@ def object_table(metrics: dict[str, Any], most: int = 20) -> str:
         for r in metrics["success_by_object"][:most]
     ]
     return markdown_table(("object", "episodes", "successes", "rate", "95% Wilson", "main failure"), rows)
+
+
+def parameter_table(table: dict[str, list[dict[str, Any]]], most: int = 10) -> str:
+    """The ``most`` parameters whose bins differ most (``rlgrasp.evaluation.plots.success_table``):
+    the bins with the lowest and the highest success, each with its range and episodes."""
+
+    def shown(b: dict[str, Any]) -> str:
+        span = f"{b['low']:.3g}" if b["low"] == b["high"] else f"{b['low']:.3g}..{b['high']:.3g}"
+        return f"{span}: {b['rate']:.0%} ({b['successes']}/{b['n']})"
+
+    rows = []
+    for name, bins in list(table.items())[:most]:
+        ordered = sorted(bins, key=lambda b: b["rate"])
+        low, high = ordered[0], ordered[-1]
+        rows.append((name, shown(low), shown(high), f"{high['rate'] - low['rate']:.0%}"))
+    return markdown_table(("parameter", "lowest bin", "highest bin", "spread"), rows)
 
 
 def write_objects_csv(path: Path, metrics: dict[str, Any]) -> Path:

@@ -1,4 +1,5 @@
-"""Plots a user reads at a glance: success against each randomization parameter, return distribution."""
+"""Plots a user reads at a glance: success against each randomization parameter (the physics ones
+and, for a camera env, the visual ones in a figure of their own), return distribution."""
 
 from __future__ import annotations
 
@@ -59,18 +60,45 @@ def varying_parameters(results: Sequence[EpisodeResult]) -> list[str]:
     return [k for k in names if len({r.randomization.get(k) for r in results}) > 1]
 
 
-def success_by_parameter(results: Sequence[EpisodeResult], path: Path, max_bins: int = 5) -> dict[str, Any]:
-    """One panel per varying parameter, the most influential first (largest spread between bins)."""
-    plt = pyplot()
+#: The visual randomization's parameters (``rlgrasp.envs.visuals``) begin so.
+VISUAL_PREFIX = "visual_"
+
+
+def split_parameters(results: Sequence[EpisodeResult]) -> tuple[list[str], list[str]]:
+    """The varying parameters as (physics, visual): what the robot meets and what the camera sees."""
+    varying = varying_parameters(results)
+    visual = [k for k in varying if k.startswith(VISUAL_PREFIX)]
+    return [k for k in varying if k not in visual], visual
+
+
+def success_table(
+    results: Sequence[EpisodeResult], names: Sequence[str] | None = None, max_bins: int = 5
+) -> dict[str, list[dict[str, Any]]]:
+    """Binned success per parameter of ``names`` (default: every varying one), the most influential
+    first (largest spread between bins)."""
     success = np.array([r.success_at_end for r in results])
-    overall = success.mean()
     table = {
         name: binned_success(np.array([r.randomization[name] for r in results]), success, max_bins)
-        for name in varying_parameters(results)
+        for name in (varying_parameters(results) if names is None else names)
     }
     order = sorted(
         table, key=lambda k: -(max(b["rate"] for b in table[k]) - min(b["rate"] for b in table[k]))
     )
+    return {name: table[name] for name in order}
+
+
+def success_by_parameter(
+    results: Sequence[EpisodeResult],
+    path: Path,
+    max_bins: int = 5,
+    names: Sequence[str] | None = None,
+    what: str = "randomization",
+) -> dict[str, Any]:
+    """One panel per parameter of ``success_table``; ``what`` names them in the title. Returns the table."""
+    plt = pyplot()
+    overall = np.mean([r.success_at_end for r in results])
+    table = success_table(results, names, max_bins)
+    order = list(table)
     cols = 4
     rows = max(1, math.ceil(len(order) / cols))
     fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 2.7 * rows), squeeze=False)
@@ -94,15 +122,15 @@ def success_by_parameter(results: Sequence[EpisodeResult], path: Path, max_bins:
     for ax in list(axes.flat)[len(order) :]:
         ax.axis("off")
     if not order:
-        axes.flat[0].text(0.5, 0.5, "no randomization parameter varies", ha="center", va="center")
+        axes.flat[0].text(0.5, 0.5, f"no {what} parameter varies", ha="center", va="center")
     fig.suptitle(
-        f"success at end vs randomization (bins with 95% Wilson intervals; dashed: overall {overall:.0%})",
+        f"success at end vs {what} (bins with 95% Wilson intervals; dashed: overall {overall:.0%})",
         fontsize=10,
     )
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
-    return {name: table[name] for name in order}
+    return table
 
 
 def return_histogram(results: Sequence[EpisodeResult], path: Path) -> Path:

@@ -14,6 +14,7 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import torch
 from hydra.errors import InstantiationException
@@ -24,10 +25,13 @@ from rlgrasp.config import EnvConfig
 from rlgrasp.evaluation.policies import POLICIES, PolicySource, build_policy
 from rlgrasp.overrides import explain
 from rlgrasp.train.checkpoint import unpickler_reason
+from rlgrasp.vision.models import image_specs
 
 CKPT_KINDS = ("best", "last")
 # What a checkpoint must hold for evaluation (see rlgrasp.train.checkpoint's docstring).
 REQUIRED_KEYS = ("actor", "config", "spec")
+#: What the policy is rebuilt from: the required entries and, for a camera policy, ``kind``.
+POLICY_KEYS = (*REQUIRED_KEYS, "kind")
 REQUIRED_SPEC = ("obs_dim", "action_dim", "action_low", "action_high")
 #: What building an env from user input raises: a bad keyword (ValueError, TypeError), a missing or
 #: unreadable object file (OSError), a ``_target_`` that does not import.
@@ -98,7 +102,12 @@ def build_env_cfg(
     """The env's ``_target_`` node: a training ``env`` config (``None``: the env's defaults), with
     evaluation's overrides on top and rendering on. Keys of the grasp env are type-checked."""
     cfg = _upgrade_env_cfg(dict(env_cfg or asdict(EnvConfig())))
-    cfg.update(overrides or {})
+    overrides = dict(overrides or {})
+    camera = overrides.get("camera")
+    if isinstance(camera, dict) and isinstance(cfg.get("camera"), dict):
+        # env.camera.fov=60 changes one key of the checkpoint's camera, not the whole camera.
+        overrides["camera"] = {**cfg["camera"], **camera}
+    cfg.update(overrides)
     if randomization is not None:
         cfg["randomization"] = randomization
     cfg["render_mode"] = "rgb_array"
@@ -121,30 +130,69 @@ def _upgrade_env_cfg(cfg: dict[str, Any]) -> dict[str, Any]:
     return {"_target_": f"{module}.{name}", **cfg, **extra}
 
 
+def describe_policy(spec: dict[str, Any]) -> str:
+    """``a camera policy (depth [1, 64, 64] + 29 state values)`` or ``a state policy (42 values)``."""
+    images = image_specs(spec)
+    if images:
+        seen = " + ".join(f"{k} {list(shape)}" for k, shape in images.items())
+        return f"a camera policy ({seen} + {spec['obs_dim']} state values)"
+    return f"a state policy ({spec['obs_dim']} state values)"
+
+
+def describe_camera(env: Any) -> str:
+    """The env's camera as its config names it: ``env.camera={mount: wrist, modality: depth, 64x64}``."""
+    camera = getattr(env.unwrapped, "camera", None)
+    if camera is None:
+        return "no camera (env.camera=null)"
+    s = camera.spec
+    return f"a camera (env.camera={{mount: {s.mount}, modality: {s.modality}, {s.width}x{s.height}}})"
+
+
 def check_layout(spec: dict[str, Any], env: Any, where: str) -> None:
-    """The checkpoint's observation and action layout must match the env being built."""
-    obs_shape = tuple(env.observation_space.shape)
-    act_space = env.action_space
+    """The checkpoint's observation and action layout must match the env being built: a camera
+    policy needs the same images and state size, a state policy an env without a camera."""
+    space = env.observation_space
+    camera_env = isinstance(space, gym.spaces.Dict)
+    images = image_specs(spec)
+    if bool(images) != camera_env:
+        fix = "use cameras=none (env.camera=null)" if camera_env else "drop cameras=none / env.camera=null"
+        raise EvaluationError(
+            f"{where} is {describe_policy(spec)} and the env has {describe_camera(env)}: {fix}"
+        )
     problems = []
+    obs_shape = tuple(space["state"].shape if camera_env else space.shape)
     if obs_shape != (int(spec["obs_dim"]),):
         problems.append(
             f"observation layout mismatch: checkpoint obs_dim={spec['obs_dim']}, "
-            f"env observation shape {obs_shape}"
+            f"env {'state' if camera_env else 'observation'} shape {obs_shape}"
         )
-    if tuple(act_space.shape) != (int(spec["action_dim"]),):
+    env_images = {k: tuple(space[k].shape) for k in ("depth", "rgb") if camera_env and k in space.spaces}
+    if env_images != images:
         problems.append(
-            f"action layout mismatch: checkpoint action_dim={spec['action_dim']}, "
-            f"env action shape {tuple(act_space.shape)}"
+            f"image mismatch: checkpoint reads {_images(images)}, env gives {_images(env_images)}"
         )
-    else:
-        low, high = np.asarray(spec["action_low"], float), np.asarray(spec["action_high"], float)
-        if not (np.allclose(low, act_space.low) and np.allclose(high, act_space.high)):
-            problems.append(
-                f"action bounds mismatch: checkpoint [{low.tolist()}, {high.tolist()}], "
-                f"env [{act_space.low.tolist()}, {act_space.high.tolist()}]"
-            )
+    problems += _action_problems(spec, env.action_space)
     if problems:
         raise EvaluationError(f"{where}: " + "; ".join(problems))
+
+
+def _images(shapes: dict[str, tuple[int, ...]]) -> str:
+    return ", ".join(f"{k} {list(v)}" for k, v in shapes.items()) or "none"
+
+
+def _action_problems(spec: dict[str, Any], act_space: Any) -> list[str]:
+    if tuple(act_space.shape) != (int(spec["action_dim"]),):
+        return [
+            f"action layout mismatch: checkpoint action_dim={spec['action_dim']}, "
+            f"env action shape {tuple(act_space.shape)}"
+        ]
+    low, high = np.asarray(spec["action_low"], float), np.asarray(spec["action_high"], float)
+    if not (np.allclose(low, act_space.low) and np.allclose(high, act_space.high)):
+        return [
+            f"action bounds mismatch: checkpoint [{low.tolist()}, {high.tolist()}], "
+            f"env [{act_space.low.tolist()}, {act_space.high.tolist()}]"
+        ]
+    return []
 
 
 def prepare(
@@ -167,7 +215,7 @@ def prepare(
         env_cfg = full["config"].get("env") or {}
         if not env_cfg:
             raise EvaluationError(f"corrupt checkpoint: {path} has no config['env'] to rebuild the env from")
-        trimmed = {k: full[k] for k in REQUIRED_KEYS}
+        trimmed = {k: full[k] for k in POLICY_KEYS if k in full}
         info = {
             "path": str(path.resolve()),
             "kind": ckpt_kind if Path(ckpt).is_dir() else "file",
@@ -182,6 +230,9 @@ def prepare(
             # What it was trained on: an evaluation elsewhere says so (rlgrasp.evaluation.cli.conditions).
             "train_objects": env_cfg.get("objects", "cube"),
             "train_randomization": env_cfg.get("randomization", "default"),
+            "train_visual": env_cfg.get("visual", "none"),
+            "train_camera": env_cfg.get("camera"),
+            "teacher": (full["config"].get("algo") or {}).get("teacher"),
         }
         # The run this checkpoint belongs to: checkpoints/<file>.pt sits in <run dir>/checkpoints.
         run_dir = path.resolve().parent.parent if path.parent.name == "checkpoints" else None

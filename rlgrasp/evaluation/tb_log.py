@@ -28,6 +28,9 @@ def log_to_tensorboard(
         writer.add_scalar(f"{prefix}/success_at_end", metrics["success_at_end"]["rate"], step)
         writer.add_scalar(f"{prefix}/success_once", metrics["success_once"]["rate"], step)
         writer.add_scalar(f"{prefix}/return_mean", metrics["return"]["mean"], step)
+        if metrics.get("teacher"):  # a camera policy's teacher on the same episodes
+            teacher = metrics["teacher"]["success_at_end"]["rate"]
+            writer.add_scalar(f"{prefix}/teacher_success_at_end", teacher, step)
         writer.add_text(f"{prefix}/summary", metrics.get("summary_markdown", ""), step)
         for r in videos:
             if r.frames:

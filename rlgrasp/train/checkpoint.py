@@ -40,6 +40,7 @@ from omegaconf import OmegaConf
 from tensordict.nn import TensorDictModuleBase
 
 from rlgrasp.train.models import OBS_KEY, RunningNorm, build_actor
+from rlgrasp.vision.models import vision_policy
 
 FORMAT = 2
 _NUMBERED = re.compile(r"ckpt_(\d+)\.pt$")
@@ -197,13 +198,19 @@ def policy_from_checkpoint(
 ) -> TensorDictModuleBase:
     """The deterministic policy (normalizer included) from a checkpoint alone.
 
-    Reads ``ckpt["observation"]`` from a tensordict and writes ``"action"`` (the distribution's mode).
+    Reads ``ckpt["observation"]`` from a tensordict (a camera policy, ``kind == "vision"``, also its
+    image entries) and writes ``"action"`` (the distribution's mode).
     Accepts a loaded dict, a checkpoint path or a run directory.
     """
     if not isinstance(ckpt, dict):
         ckpt = load_checkpoint(ckpt, map_location=device)
     spec = ckpt["spec"]
     model_cfg = OmegaConf.create(ckpt["config"]["model"])
+    if ckpt.get("kind") == "vision":  # a camera student (rlgrasp.vision.distill): state + images in
+        try:
+            return vision_policy(spec, model_cfg, ckpt["actor"]).to(device)
+        except RuntimeError as exc:
+            raise CheckpointError(f"checkpoint does not fit its own model: {_first_line(exc)}") from exc
     norm = RunningNorm(spec["obs_dim"], clip=model_cfg.obs_clip, enabled=model_cfg.obs_norm)
     actor = build_actor(
         norm,
