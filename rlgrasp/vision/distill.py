@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import copy
 import math
+import os
 import time
 from pathlib import Path
 from typing import Any
@@ -68,7 +69,9 @@ class Distiller:
         self.cfg, a = cfg, cfg.algo
         self.run_dir = Path(cfg.paths.output_dir)
         setup_text_log(self.run_dir)
-        torch.set_num_threads(cfg.collector.torch_threads)
+        # The student's updates, not the workers, bound a distillation run (the workers wait for
+        # the next weights), so the learner takes every core by default.
+        torch.set_num_threads(a.get("learner_threads") or os.cpu_count() or 1)
         seed_everything(cfg.seed)
         self.make_env = env_factory(cfg.env)
         self.spec = vision_spec(self.make_env)
@@ -130,6 +133,9 @@ class Distiller:
         actor_norm(self.student).update(batch["observation"])
         self.data.extend(batch)
         updates = max(1, math.ceil(a.epochs * batch.numel() / a.minibatch_size))
+        lr = a.lr * max(a.get("min_lr_frac", 1.0), 1.0 - self.frames / self.cfg.total_frames)
+        for group in self.optimizer.param_groups:
+            group["lr"] = lr
         total = 0.0
         for _ in range(updates):
             sample = self.data.sample()
@@ -146,6 +152,7 @@ class Distiller:
         return {
             "losses/bc_loss": total / updates,
             "charts/beta": beta,
+            "charts/learning_rate": lr,
             "charts/dataset_frames": len(self.data),
             "time/train_s": time.perf_counter() - t0,
         }
