@@ -132,6 +132,40 @@ class CollectorConfig:
 
 
 @dataclass
+class DistillConfig:
+    """DAgger distillation of a state teacher into a camera student (``rlgrasp.vision.distill``)."""
+
+    name: str = "distill"
+    # A state policy's checkpoint or run directory (its last.pt); relative paths are tried from the
+    # working directory, then from the repository root (policies/grasp_ppo.pt).
+    teacher: str = MISSING
+    beta0: float = 1.0  # probability that the teacher acts, in the first batch
+    beta_decay: float = 0.8  # ... times this per batch: soon the student acts, the teacher labels
+    # Gradient samples per batch = epochs x the batch's frames, drawn from every labelled frame so far.
+    epochs: int = 16
+    minibatch_size: int = 512
+    lr: float = 1e-3
+    min_lr_frac: float = 0.1  # the learning rate anneals linearly to this fraction at total_frames
+    buffer_frames: int = 60_000  # labelled frames kept (the oldest go first); 64x64 depth: 16 kB each
+    learner_threads: int | None = None  # null: every core (the learner, not the workers, is the bound)
+
+
+@dataclass
+class CNNConfig:
+    """A small CNN per image (8x8/4, 4x4/2, 3x3/1) joined with the normalized state in an MLP."""
+
+    name: str = "cnn"
+    channels: list[int] = field(default_factory=lambda: [16, 32, 32])
+    image_features: int = 256
+    hidden_sizes: list[int] = field(default_factory=lambda: [256, 256])
+    activation: str = "elu"  # tanh | relu | elu
+    init_log_std: float = -0.5
+    min_std: float = 0.05
+    obs_norm: bool = True
+    obs_clip: float = 10.0
+
+
+@dataclass
 class RayConfig:
     """Where ``collector=ray`` runs its collector actors (one per worker)."""
 
@@ -219,8 +253,9 @@ class TrainConfig:
 
     # A `_target_` node, validated by its group's schema (env_schema for env=grasp).
     env: Any = MISSING
-    algo: PPOConfig = field(default_factory=PPOConfig)
-    model: MLPConfig = field(default_factory=MLPConfig)
+    # The `algo` and `model` groups choose a schema each (ppo | distill, mlp | cnn).
+    algo: Any = MISSING
+    model: Any = MISSING
     collector: CollectorConfig = field(default_factory=CollectorConfig)
     logger: LoggerConfig = field(default_factory=LoggerConfig)
     eval: PeriodicEvalConfig = field(default_factory=PeriodicEvalConfig)
@@ -349,7 +384,9 @@ def register_configs() -> None:
     cs.store(name="train_schema", node=TrainConfig)
     cs.store(group="env", name="env_schema", node=EnvConfig)
     cs.store(group="algo", name="ppo_schema", node=PPOConfig)
+    cs.store(group="algo", name="distill_schema", node=DistillConfig)
     cs.store(group="model", name="mlp_schema", node=MLPConfig)
+    cs.store(group="model", name="cnn_schema", node=CNNConfig)
     cs.store(group="collector", name="collector_schema", node=CollectorConfig)
     cs.store(group="collector", name="ray_collector_schema", node=RayCollectorConfig)
     cs.store(group="logger", name="logger_schema", node=LoggerConfig)
@@ -379,14 +416,8 @@ def _train_problems(cfg: Any, batch: int) -> list[str]:
         ("collector.steps_per_env", c.steps_per_env, c.steps_per_env >= 1, "must be >= 1"),
         ("collector.torch_threads", c.torch_threads, c.torch_threads >= 1, "must be >= 1"),
         ("algo.epochs", a.epochs, a.epochs >= 1, "must be >= 1"),
-        ("algo.minibatch_size", a.minibatch_size, 1 <= a.minibatch_size <= max(batch, 1),
-         f"must be between 1 and the batch size ({batch:,} frames = workers x envs_per_worker x "
-         "steps_per_env)"),
         ("algo.lr", a.lr, a.lr > 0, "must be > 0"),
-        ("algo.gamma", a.gamma, 0 < a.gamma <= 1, "must be in (0, 1]"),
-        ("algo.gae_lambda", a.gae_lambda, 0 <= a.gae_lambda <= 1, "must be in [0, 1]"),
-        ("algo.clip_epsilon", a.clip_epsilon, a.clip_epsilon > 0, "must be > 0"),
-        ("algo.max_grad_norm", a.max_grad_norm, a.max_grad_norm > 0, "must be > 0"),
+        *(_ppo_checks(a, batch) if a.name == "ppo" else _distill_checks(a)),
         ("model.hidden_sizes", list(m.hidden_sizes), len(m.hidden_sizes) > 0 and all(
             _positive(h) for h in m.hidden_sizes), "must be a non-empty list of positive sizes"),
         ("model.activation", m.activation, m.activation in ("tanh", "relu", "elu"),
@@ -402,6 +433,31 @@ def _train_problems(cfg: Any, batch: int) -> list[str]:
     return [f"{key}={value!r}: {allowed}" for key, value, ok, allowed in checks if not ok] + _device_problems(
         cfg.device
     )
+
+
+def _ppo_checks(a: Any, batch: int) -> list[tuple[str, Any, bool, str]]:
+    return [
+        ("algo.minibatch_size", a.minibatch_size, 1 <= a.minibatch_size <= max(batch, 1),
+         f"must be between 1 and the batch size ({batch:,} frames = workers x envs_per_worker x "
+         "steps_per_env)"),
+        ("algo.gamma", a.gamma, 0 < a.gamma <= 1, "must be in (0, 1]"),
+        ("algo.gae_lambda", a.gae_lambda, 0 <= a.gae_lambda <= 1, "must be in [0, 1]"),
+        ("algo.clip_epsilon", a.clip_epsilon, a.clip_epsilon > 0, "must be > 0"),
+        ("algo.max_grad_norm", a.max_grad_norm, a.max_grad_norm > 0, "must be > 0"),
+    ]
+
+
+def _distill_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
+    return [
+        ("algo.minibatch_size", a.minibatch_size, a.minibatch_size >= 1, "must be >= 1"),
+        ("algo.beta0", a.beta0, 0 <= a.beta0 <= 1, "must be in [0, 1]"),
+        ("algo.beta_decay", a.beta_decay, 0 < a.beta_decay <= 1, "must be in (0, 1]"),
+        ("algo.min_lr_frac", a.min_lr_frac, 0 <= a.min_lr_frac <= 1, "must be in [0, 1]"),
+        ("algo.buffer_frames", a.buffer_frames, a.buffer_frames >= a.minibatch_size,
+         f"must be >= algo.minibatch_size ({a.minibatch_size})"),
+        ("algo.learner_threads", a.learner_threads, a.learner_threads is None or a.learner_threads >= 1,
+         "must be >= 1 or null"),
+    ]
 
 
 def _device_problems(device: str) -> list[str]:

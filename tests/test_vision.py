@@ -117,3 +117,59 @@ def test_a_teacher_of_another_control_mode_is_refused():
         CheckpointError, match="env.control_mode='joint_delta' in the teacher, 'ee_delta' here"
     ):
         load_teacher("policies/grasp_ppo.pt", spec, {"control_mode": "ee_delta", "ee_yaw": False})
+
+
+SMALL_DISTILL = (
+    "experiment=grasp_vision_distill",
+    "total_frames=2048",
+    "collector.envs_per_worker=2",
+    "collector.steps_per_env=256",
+    "eval.interval_frames=1024",
+    "eval.episodes=2",
+    "eval.final_episodes=2",
+    "eval.num_envs=2",
+    "checkpoint.interval_frames=1024",
+    "logger=none",
+    "time_budget_min=null",
+)
+
+
+def test_distillation_trains_checkpoints_resumes_and_evaluates(tmp_path, train_cfg):
+    from rlgrasp.train.checkpoint import load_checkpoint, policy_from_checkpoint
+    from rlgrasp.vision.distill import distill
+
+    run = tmp_path / "run"
+    success = distill(train_cfg(*SMALL_DISTILL, run_dir=run))
+    assert 0.0 <= success <= 1.0
+    ckpt = load_checkpoint(run)
+    assert (
+        ckpt["kind"] == "vision"
+        and ckpt["frames"] == 2048
+        and ckpt["spec"]["images"] == {"depth": [1, 64, 64]}
+    )
+    assert ckpt["last_eval"]["teacher_success_rate"] >= 0.0
+    policy = policy_from_checkpoint(ckpt)
+    assert set(policy.in_keys) == {"observation", "depth"}
+    distill(train_cfg(*SMALL_DISTILL, f"resume={run}", "total_frames=3072", run_dir=run))
+    resumed = load_checkpoint(run)
+    assert resumed["frames"] == 3072 and resumed["generation"] == 1 and resumed["updates"] > ckpt["updates"]
+
+
+@pytest.mark.parametrize(
+    "override, match",
+    [
+        ("algo.teacher=/nowhere/teacher.pt", "/nowhere/teacher.pt"),
+        ("algo.beta_decay=0", "algo.beta_decay=0.0: must be in (0, 1]"),
+        ("algo.beta0=1.5", "algo.beta0=1.5: must be in [0, 1]"),
+        ("cameras=none", "env.camera=null: a camera policy needs a camera"),
+        ("env.control_mode=ee_delta", "it reads 49 state values, this env's privileged state has 45"),
+    ],
+)
+def test_bad_distillation_input_is_one_line_before_any_worker(override, match, tmp_path, train_cfg):
+    from rlgrasp.config import ConfigError
+    from rlgrasp.vision.distill import distill
+
+    with pytest.raises((ConfigError, CheckpointError, FileNotFoundError)) as info:
+        distill(train_cfg(*SMALL_DISTILL, override))
+    message = str(info.value)
+    assert match in message and "\n" not in message, message

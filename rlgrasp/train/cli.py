@@ -21,20 +21,23 @@ from rlgrasp.train.checkpoint import CheckpointError
 from rlgrasp.train.loop import TrainingError, train
 from rlgrasp.train.resume import command_line_keys
 from rlgrasp.train.rundir import remove_refused_start
+from rlgrasp.vision.distill import distill
 
 register_configs()
 log = logging.getLogger("rlgrasp.train")
 
 
 def run(cfg: DictConfig) -> float:
-    """Train and return the final evaluation success rate (what a Hydra sweeper optimizes).
+    """Train (PPO, or with ``algo=distill`` a camera student from a state teacher) and return the final
+    evaluation success rate (what a Hydra sweeper optimizes).
 
     Bad input (a bad value, a resume that cannot be done) ends the process with exit code 2 and one
     line, and removes the run directory this command created; a fault (env crash, NaN) with exit
     code 1 and its message. Neither prints a traceback.
     """
     try:
-        return train(cfg, changed=_command_line_keys(cfg))
+        learn = distill if cfg.algo.name == "distill" else train
+        return learn(cfg, changed=_command_line_keys(cfg))
     except (ConfigError, CheckpointError) as exc:
         log.error("%s", exc)
         remove_refused_start(Path(cfg.paths.output_dir))

@@ -10,9 +10,11 @@ and the student is regressed onto the labels with TorchRL's ``BCLoss``.
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import math
 import os
+import signal
 import time
 from pathlib import Path
 from typing import Any
@@ -24,17 +26,19 @@ from omegaconf import DictConfig, OmegaConf
 from torchrl.envs import ExplorationType, set_exploration_type
 from torchrl.objectives import BCLoss
 
-from rlgrasp.config import ConfigError
+from rlgrasp.config import CONFIG_DIR, ConfigError
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.batches import Batches
 from rlgrasp.train.collect import EnvFactory
-from rlgrasp.train.collectors import collector_backend
+from rlgrasp.train.collectors import collector_backend, shut_down
 from rlgrasp.train.evaluate import periodic_evaluator
 from rlgrasp.train.logger import log, setup_text_log
 from rlgrasp.train.loop import seed_everything
-from rlgrasp.train.metrics import finished_episodes
+from rlgrasp.train.metrics import Due, finished_episodes
+from rlgrasp.train.preemption import StopSignals
+from rlgrasp.train.resume import prepare_run
 from rlgrasp.vision.dagger import LABEL_KEY, DAggerPolicy, LabelledFrames, load_teacher
 from rlgrasp.vision.models import IMAGE_KEYS, actor_norm, build_vision_actor
 
@@ -63,68 +67,100 @@ def vision_spec(make_env: EnvFactory) -> dict[str, Any]:
 
 class Distiller:
     """One distillation run: collect labelled frames, regress the student, evaluate it beside its
-    teacher on the same seeded episodes, checkpoint."""
+    teacher on the same seeded episodes, checkpoint. ``resumed``: a checkpoint to continue from (the
+    student, its optimizer, frames and ``beta``; the labelled frames are not in checkpoints, so a
+    resumed run aggregates anew)."""
 
-    def __init__(self, cfg: DictConfig) -> None:
+    def __init__(self, cfg: DictConfig, resumed: dict[str, Any] | None = None) -> None:
         self.cfg, a = cfg, cfg.algo
         self.run_dir = Path(cfg.paths.output_dir)
         setup_text_log(self.run_dir)
         # The student's updates, not the workers, bound a distillation run (the workers wait for
         # the next weights), so the learner takes every core by default.
-        torch.set_num_threads(a.get("learner_threads") or os.cpu_count() or 1)
+        torch.set_num_threads(a.learner_threads or os.cpu_count() or 1)
         seed_everything(cfg.seed)
         self.make_env = env_factory(cfg.env)
         self.spec = vision_spec(self.make_env)
-        self.teacher, _ = load_teacher(a.teacher, self.spec, cfg.env)
+        self.teacher, _ = load_teacher(teacher_path(a.teacher), self.spec, cfg.env)
         self.student = build_vision_actor(self.spec, cfg.model)
         self.policy = DAggerPolicy(self.student, self.teacher, a.beta0)
         self.loss = BCLoss(self.student, loss_function="mse")
         self.optimizer = torch.optim.Adam(self.student.parameters(), lr=a.lr)
         self.data = LabelledFrames(self.student.in_keys, a.buffer_frames, a.minibatch_size)
+        self.frames, self.batches_seen, self.generation, self.last_eval = 0, 0, 0, None
+        self.best_success = -math.inf
+        if resumed is not None:
+            self.load_state_dict(resumed)
         self.logger = instantiate(cfg.logger, _partial_=True, _convert_="all")(
-            run_dir=self.run_dir, config=OmegaConf.to_container(cfg, resolve=True), resumed_frames=None
+            run_dir=self.run_dir,
+            config=OmegaConf.to_container(cfg, resolve=True),
+            resumed_frames=self.frames if resumed is not None else None,
         )
-        self.logger.text("config", OmegaConf.to_yaml(cfg), 0)
+        if resumed is None:
+            self.logger.text("config", OmegaConf.to_yaml(cfg), 0)
         self.evaluator = periodic_evaluator(self.make_env, cfg)
-        self.frames, self.batches_seen, self.last_eval = 0, 0, None
         self._teacher_evals: dict[int, dict[str, float]] = {}
+        self.signals = StopSignals()
 
     def run(self) -> float:
+        """Distill until the frame or time budget is spent (or a stop signal: checkpoint and return)."""
+        with self.signals, contextlib.ExitStack() as cleanup:
+            cleanup.callback(self.logger.close)
+            cleanup.callback(self.evaluator.close)
+            if self.frames < self.cfg.total_frames:
+                self._loop()
+            if self.signals.received is not None:
+                log.warning(
+                    "%s at %s frames: saving a checkpoint",
+                    signal.Signals(self.signals.received).name,
+                    f"{self.frames:,}",
+                )
+                self.save()
+                return float((self.last_eval or {}).get("success_rate", math.nan))
+            result = self.evaluate(self.cfg.eval.final_episodes or self.cfg.eval.episodes, final=True)
+            self.save(is_best=result >= self.best_success)
+            return result
+
+    def _loop(self) -> None:
         cfg = self.cfg
         budget_s = cfg.time_budget_min * 60 if cfg.time_budget_min else math.inf
+        eval_due, ckpt_due = (
+            Due(cfg.eval.interval_frames, self.frames),
+            Due(cfg.checkpoint.interval_frames, self.frames),
+        )
         behaviour = copy.deepcopy(self.policy)
         backend = collector_backend(cfg.collector)
-        collector = backend.build(self.make_env, behaviour, cfg.seed, 0, str(self.run_dir / "env_errors"))
+        collector = backend.build(
+            self.make_env, behaviour, cfg.seed, self.generation, str(self.run_dir / "env_errors")
+        )
         batches = Batches(collector, self.policy, behaviour, backend.collects_ahead)
         start = time.monotonic()
-        next_eval = cfg.eval.interval_frames
         try:
             while self.frames < cfg.total_frames and time.monotonic() - start < budget_s:
                 t0 = time.perf_counter()
                 batch = next(batches).reshape(-1)
+                if self.signals.received is not None:  # a batch collected while stopping is dropped
+                    return
                 self.frames += batch.numel()
                 metrics = {
                     "time/collect_s": time.perf_counter() - t0,
                     **finished_episodes(batch.unsqueeze(0)),
                 }
                 metrics.update(self.learn(batch))
-                metrics["charts/SPS"] = self.frames / (time.monotonic() - start)
+                metrics["charts/SPS"] = batch.numel() / max(time.perf_counter() - t0, 1e-9)
                 self.logger.scalars(metrics, self.frames)
-                if (
-                    cfg.eval.interval_frames > 0
-                    and self.frames >= next_eval
-                    and self.frames < cfg.total_frames
-                ):
-                    next_eval += cfg.eval.interval_frames
-                    self.evaluate(cfg.eval.episodes)
+                is_best = eval_due(self.frames) and self.frames < cfg.total_frames and self._periodic_eval()
+                if ckpt_due(self.frames) or is_best:
+                    self.save(is_best)
         finally:
             batches.close()
-            collector.shutdown()
-        result = self.evaluate(cfg.eval.final_episodes or cfg.eval.episodes, final=True)
-        self.save()
-        self.logger.close()
-        self.evaluator.close()
-        return result
+            shut_down(collector)
+
+    def _periodic_eval(self) -> bool:
+        success = self.evaluate(self.cfg.eval.episodes)
+        is_best = success > self.best_success
+        self.best_success = max(self.best_success, success)
+        return is_best
 
     def learn(self, batch) -> dict[str, float]:
         """Add the batch to the dataset and regress the student on samples of all of it."""
@@ -133,7 +169,7 @@ class Distiller:
         actor_norm(self.student).update(batch["observation"])
         self.data.extend(batch)
         updates = max(1, math.ceil(a.epochs * batch.numel() / a.minibatch_size))
-        lr = a.lr * max(a.get("min_lr_frac", 1.0), 1.0 - self.frames / self.cfg.total_frames)
+        lr = a.lr * max(a.min_lr_frac, 1.0 - self.frames / self.cfg.total_frames)
         for group in self.optimizer.param_groups:
             group["lr"] = lr
         total = 0.0
@@ -190,13 +226,19 @@ class Distiller:
         )
         return s
 
-    def save(self) -> None:
-        state = {
+    # --- checkpoint state ---------------------------------------------------------------------
+    def state_dict(self) -> dict[str, Any]:
+        """A checkpoint that evaluation, export and the GUI read like a PPO one (``kind`` says how to
+        rebuild the policy)."""
+        return {
             "format": ckpt_lib.FORMAT,
             "kind": "vision",
             "actor": self.student.state_dict(),
             "optimizer": self.optimizer.state_dict(),
             "frames": self.frames,
+            "updates": self.batches_seen,
+            "generation": self.generation,
+            "best_eval_success": self.best_success,
             "last_eval": self.last_eval,
             "rng": ckpt_lib.rng_state(),
             "config": OmegaConf.to_container(self.cfg, resolve=True),
@@ -204,12 +246,46 @@ class Distiller:
             "versions": ckpt_lib.package_versions(),
             "run_dir": str(self.run_dir),
         }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        try:
+            self.student.load_state_dict(state["actor"])
+        except (RuntimeError, KeyError) as exc:
+            raise ConfigError(
+                f"checkpoint does not fit the camera student: {str(exc).splitlines()[0][:200]}"
+            ) from exc
+        self.optimizer.load_state_dict(state["optimizer"])
+        ckpt_lib.set_rng_state(state["rng"])
+        self.frames, self.batches_seen = state["frames"], state["updates"]
+        self.generation = state.get("generation", 0) + 1
+        self.best_success = state.get("best_eval_success", -math.inf)
+        self.last_eval = state.get("last_eval")
+        self.policy.beta.fill_(self.cfg.algo.beta0 * self.cfg.algo.beta_decay**self.batches_seen)
+        log.info("resumed from %s at %s frames", self.cfg.resume, f"{self.frames:,}")
+
+    def save(self, is_best: bool = False) -> None:
         path = ckpt_lib.write_checkpoints(
-            self.run_dir / "checkpoints", state, self.cfg.checkpoint.keep_last, True
+            self.run_dir / "checkpoints", self.state_dict(), self.cfg.checkpoint.keep_last, is_best
         )
         log.info("checkpoint %s", path)
 
 
-def distill(cfg: DictConfig) -> float:
-    """Distill ``cfg.algo.teacher`` into a camera student; returns the student's final success."""
-    return Distiller(cfg).run()
+def teacher_path(path: str) -> str:
+    """``algo.teacher`` as given, or, when relative and not found from here, from the repository root
+    (the shipped policies are named ``policies/<name>.pt`` in the experiments)."""
+    candidate = Path(path).expanduser()
+    if not candidate.is_absolute() and not candidate.exists():
+        from_root = Path(CONFIG_DIR).parent / candidate
+        if from_root.exists():
+            return str(from_root)
+    return str(candidate)
+
+
+def distill(cfg: DictConfig, changed: set[str] | None = None) -> float:
+    """Distill ``cfg.algo.teacher`` into a camera student; returns the student's final success.
+    Resume, stop signals and preemption behave as in PPO training (``rlgrasp.train.loop.train``)."""
+    cfg, resumed = prepare_run(cfg, changed)
+    distiller = Distiller(cfg, resumed)
+    result = distiller.run()
+    distiller.signals.after_checkpoint(finished=distiller.frames >= cfg.total_frames)
+    return result
