@@ -422,6 +422,7 @@ def _train_problems(cfg: Any, batch: int) -> list[str]:
             _positive(h) for h in m.hidden_sizes), "must be a non-empty list of positive sizes"),
         ("model.activation", m.activation, m.activation in ("tanh", "relu", "elu"),
          "must be tanh, relu or elu"),
+        *_model_camera_checks(m, cfg.env.get("camera"), a.name),
         ("eval.episodes", e.episodes, e.episodes >= 1, "must be >= 1"),
         ("eval.final_episodes", e.final_episodes, e.final_episodes is None or e.final_episodes >= 1,
          "must be >= 1 or null"),
@@ -433,6 +434,16 @@ def _train_problems(cfg: Any, batch: int) -> list[str]:
     return [f"{key}={value!r}: {allowed}" for key, value, ok, allowed in checks if not ok] + _device_problems(
         cfg.device
     )
+
+
+def _model_camera_checks(m: Any, camera: Any, algo: str) -> list[tuple[str, Any, bool, str]]:
+    """A camera env needs a camera policy (model=cnn), a state env a state one (model=mlp); distill
+    refuses a camera-less env itself, naming its student."""
+    if camera:
+        return [("model", m.name, m.name == "cnn", "must be cnn with a camera (or cameras=none for mlp)")]
+    if algo == "ppo":
+        return [("model", m.name, m.name != "cnn", "needs a camera (e.g. cameras=wrist_depth) or model=mlp")]
+    return []
 
 
 def _ppo_checks(a: Any, batch: int) -> list[tuple[str, Any, bool, str]]:

@@ -115,6 +115,8 @@ TRAIN = [
     ("no substeps", ["env.substeps=0"], "env: substeps must be a positive integer, got 0"),
     ("unknown control mode", ["env.control_mode=fly"], "env: unknown control_mode 'fly'; valid modes"),
     ("no hidden layers", ["model.hidden_sizes=[]"], "model.hidden_sizes=[]: must be a non-empty list"),
+    ("a camera policy without a camera", ["model=cnn"], "model='cnn': needs a camera (e.g. cameras="),
+    ("a state policy with a camera", ["cameras=wrist_depth"], "model='mlp': must be cnn with a camera"),
     ("inverted randomization range", ["env.randomization={object_mass:[1.0,0.5]}"],
      "'object_mass': low (1.0) is greater than high (0.5)"),
     ("negative randomization range", ["randomization={object_mass:[-1.0,0.5]}"],

@@ -88,7 +88,7 @@ class Trainer:
             raise ConfigError(f"env: {exc}".splitlines()[0]) from exc
         self.actor = self.parts.actor
         self.learner = PPOLearner(
-            self.actor, self.parts.critic, self.parts.norm, cfg.algo, self.device,
+            self.actor, self.parts.critic, self.parts.norms, cfg.algo, self.device,
             stale_batches=self.parts.collector.collects_ahead,
         )
 
@@ -111,7 +111,7 @@ class Trainer:
     # --- checkpoint state ---------------------------------------------------------------------
     def state_dict(self) -> dict[str, Any]:
         """The checkpoint (its layout is documented in ``rlgrasp.train.checkpoint``)."""
-        return {
+        state = {
             "format": ckpt_lib.FORMAT,
             "actor": self.actor.state_dict(),
             "critic": self.parts.critic.state_dict(),
@@ -127,6 +127,9 @@ class Trainer:
             "versions": ckpt_lib.package_versions(),
             "run_dir": str(self.run_dir),
         }
+        if self.parts.kind == "vision":  # how evaluation and export rebuild the policy
+            state["kind"] = "vision"
+        return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Continue from a checkpoint: weights, optimizer, RNG, counters; the generation moves on."""

@@ -141,8 +141,10 @@ def _bound(b: torch.Tensor) -> float | torch.Tensor:
     return float(b[0]) if bool((b == b[0]).all()) else b
 
 
-def build_critic(norm: RunningNorm, obs_dim: int, model_cfg) -> ValueOperator:
-    return ValueOperator(CriticNet(norm, obs_dim, model_cfg), in_keys=[OBS_KEY])
+def build_critic(norm: RunningNorm, obs_dim: int, model_cfg, in_key: str = OBS_KEY) -> ValueOperator:
+    """A value MLP reading ``in_key`` (a camera run's critic reads ``privileged``, see
+    ``rlgrasp.train.parts``)."""
+    return ValueOperator(CriticNet(norm, obs_dim, model_cfg), in_keys=[in_key])
 
 
 def build_models(

@@ -4,7 +4,7 @@ all build them here."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import torch
@@ -13,7 +13,11 @@ from torchrl.collectors import BaseCollector
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.train.collect import EnvFactory, env_spec
 from rlgrasp.train.collectors import CollectorBackend, collector_backend
-from rlgrasp.train.models import RunningNorm, build_models
+from rlgrasp.train.models import OBS_KEY, RunningNorm, build_critic, build_models
+from rlgrasp.vision.models import actor_norm, build_vision_actor
+
+#: The entry a camera run's critic reads: the full state no robot senses (asymmetric actor-critic).
+PRIVILEGED_KEY = "privileged"
 
 
 @dataclass
@@ -23,12 +27,19 @@ class Parts:
     spec: dict[str, Any]
     actor: torch.nn.Module
     critic: torch.nn.Module
-    norm: RunningNorm
+    norm: RunningNorm  # the actor's state normalizer
     collector: CollectorBackend
+    #: Each normalizer and the batch entry it learns from (the learner updates them all).
+    norms: dict[str, RunningNorm] = field(default_factory=dict)
 
     @property
     def frames_per_batch(self) -> int:
         return self.collector.frames_per_batch
+
+    @property
+    def kind(self) -> str:
+        """``vision`` for a camera policy (how checkpoints say to rebuild it), else ``state``."""
+        return "vision" if self.spec.get("images") else "state"
 
     def make_collector(
         self, generation: int = 0, error_dir: str | None = None, policy: torch.nn.Module | None = None
@@ -41,9 +52,27 @@ class Parts:
 def build_parts(cfg: Any, device: torch.device | str = "cpu") -> Parts:
     """Env factory and spec, then the models (their init draws from torch's global RNG: seed first)."""
     make_env = env_factory(cfg.env)
-    spec = env_spec(make_env)
-    actor, critic, norm = build_models(
-        spec["obs_dim"], torch.tensor(spec["action_low"]), torch.tensor(spec["action_high"]), cfg.model
-    )
     collector = collector_backend(cfg.collector)
-    return Parts(cfg, make_env, spec, actor.to(device), critic.to(device), norm, collector)
+    if cfg.env.get("camera"):
+        spec, actor, critic, norms = _camera_models(make_env, cfg.model)
+    else:
+        spec = env_spec(make_env)
+        actor, critic, norm = build_models(
+            spec["obs_dim"], torch.tensor(spec["action_low"]), torch.tensor(spec["action_high"]), cfg.model
+        )
+        norms = {OBS_KEY: norm}
+    return Parts(cfg, make_env, spec, actor.to(device), critic.to(device), norms[OBS_KEY], collector, norms)
+
+
+def _camera_models(make_env: EnvFactory, model_cfg: Any) -> tuple[dict, Any, Any, dict[str, RunningNorm]]:
+    """The camera actor (proprioception + images) and an MLP critic on the privileged state, each
+    with its own normalizer: the critic is never deployed, so it may read what no robot senses
+    (Pinto et al. 2018), which gives the advantages a value that does not have to be seen."""
+    # Imported here: rlgrasp.vision.distill imports the training loop, which imports this module.
+    from rlgrasp.vision.distill import vision_spec
+
+    spec = vision_spec(make_env)
+    actor = build_vision_actor(spec, model_cfg)
+    critic_norm = RunningNorm(spec["privileged_dim"], clip=model_cfg.obs_clip, enabled=model_cfg.obs_norm)
+    critic = build_critic(critic_norm, spec["privileged_dim"], model_cfg, in_key=PRIVILEGED_KEY)
+    return spec, actor, critic, {OBS_KEY: actor_norm(actor), PRIVILEGED_KEY: critic_norm}

@@ -17,6 +17,7 @@ docs/benchmarks/throughput.md.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import torch
@@ -25,7 +26,7 @@ from torchrl.data import LazyTensorStorage, ReplayBuffer, SamplerWithoutReplacem
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
-from rlgrasp.train.models import RunningNorm
+from rlgrasp.train.models import OBS_KEY, RunningNorm
 
 
 class NonFiniteError(RuntimeError):
@@ -39,13 +40,15 @@ class PPOLearner:
         self,
         actor,
         critic,
-        norm: RunningNorm,
+        norm: RunningNorm | Mapping[str, RunningNorm],
         algo_cfg: Any,
         device: torch.device,
         stale_batches: bool = False,
     ):
+        """``norm``: the normalizer of ``observation``, or each normalizer by the batch entry it learns
+        from (a camera run's actor and critic read different entries, each through its own)."""
         self.cfg = algo_cfg
-        self.norm = norm
+        self.norms = dict(norm) if isinstance(norm, Mapping) else {OBS_KEY: norm}
         self.device = device
         self.loss = ClipPPOLoss(
             actor,
@@ -128,7 +131,8 @@ class PPOLearner:
         self.check_params()
         # The statistics move only after the update: the batch's log-probs were computed with the
         # old ones, and updating first would make the ratio differ from 1 before any step is taken.
-        self.norm.update(batch["observation"])
+        for key, norm in self.norms.items():
+            norm.update(batch[key])
         metrics = {k: v / max(count, 1) for k, v in sums.items()}
         metrics["explained_variance"] = explained_variance(batch)
         metrics["epochs"] = float(epoch + 1)
