@@ -28,7 +28,9 @@ sys.path.insert(0, str(ROOT))  # run from a checkout, uninstalled
 from rlgrasp.train import checkpoint as ckpt_lib  # noqa: E402
 from rlgrasp.train.legacy import upgrade_config  # noqa: E402
 
-POLICY_KEYS = ("kind", "actor", "config", "spec", "frames", "updates", "best_eval_success", "last_eval", "versions")
+POLICY_KEYS = (
+    "kind", "actor", "config", "spec", "frames", "updates", "best_eval_success", "last_eval", "versions"
+)
 
 
 def load(path: Path, trust: bool) -> dict:

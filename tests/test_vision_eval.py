@@ -29,8 +29,8 @@ from rlgrasp.evaluation.teacher import prepare_teacher
 from rlgrasp.evaluation.views import beside, camera_view, depth_image, upscale
 from rlgrasp.export import ExportError, export, load_exported, record, register_export_config
 from rlgrasp.train.checkpoint import FORMAT, policy_from_checkpoint
-from rlgrasp.vision.distill import vision_spec
 from rlgrasp.vision.models import actor_norm, build_vision_actor
+from rlgrasp.vision.spec import vision_spec
 from tests.test_eval import make_run
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -15,6 +15,7 @@ from rlgrasp.train.collect import EnvFactory, env_spec
 from rlgrasp.train.collectors import CollectorBackend, collector_backend
 from rlgrasp.train.models import OBS_KEY, RunningNorm, build_critic, build_models
 from rlgrasp.vision.models import actor_norm, build_vision_actor
+from rlgrasp.vision.spec import vision_spec
 
 #: The entry a camera run's critic reads: the full state no robot senses (asymmetric actor-critic).
 PRIVILEGED_KEY = "privileged"
@@ -68,9 +69,6 @@ def _camera_models(make_env: EnvFactory, model_cfg: Any) -> tuple[dict, Any, Any
     """The camera actor (proprioception + images) and an MLP critic on the privileged state, each
     with its own normalizer: the critic is never deployed, so it may read what no robot senses
     (Pinto et al. 2018), which gives the advantages a value that does not have to be seen."""
-    # Imported here: rlgrasp.vision.distill imports the training loop, which imports this module.
-    from rlgrasp.vision.distill import vision_spec
-
     spec = vision_spec(make_env)
     actor = build_vision_actor(spec, model_cfg)
     critic_norm = RunningNorm(spec["privileged_dim"], clip=model_cfg.obs_clip, enabled=model_cfg.obs_norm)

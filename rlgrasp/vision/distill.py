@@ -19,7 +19,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import torch
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
@@ -31,7 +30,6 @@ from rlgrasp.envs.factory import env_factory
 from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.batches import Batches
-from rlgrasp.train.collect import EnvFactory
 from rlgrasp.train.collectors import collector_backend, shut_down
 from rlgrasp.train.evaluate import periodic_evaluator
 from rlgrasp.train.logger import log, setup_text_log
@@ -40,29 +38,8 @@ from rlgrasp.train.metrics import Due, finished_episodes
 from rlgrasp.train.preemption import StopSignals
 from rlgrasp.train.resume import prepare_run
 from rlgrasp.vision.dagger import LABEL_KEY, DAggerPolicy, LabelledFrames, load_teacher
-from rlgrasp.vision.models import IMAGE_KEYS, actor_norm, build_vision_actor
-
-
-def vision_spec(make_env: EnvFactory) -> dict[str, Any]:
-    """Sizes of a camera env's observation parts and action, from one throw-away env."""
-    env = make_env()
-    try:
-        space = env.observation_space
-        if not isinstance(space, gym.spaces.Dict) or not any(k in space.spaces for k in IMAGE_KEYS):
-            raise ConfigError("env.camera=null: a camera policy needs a camera (e.g. cameras=wrist_depth)")
-        spec = {
-            "obs_key": "observation",
-            "obs_dim": int(space["state"].shape[-1]),
-            "privileged_dim": int(space["privileged"].shape[-1]),
-            "images": {k: list(space[k].shape) for k in IMAGE_KEYS if k in space.spaces},
-            "far": float(env.unwrapped.camera.spec.far),
-            "action_dim": int(env.action_space.shape[0]),
-            "action_low": [float(x) for x in env.action_space.low],
-            "action_high": [float(x) for x in env.action_space.high],
-        }
-    finally:
-        env.close()
-    return spec
+from rlgrasp.vision.models import actor_norm, build_vision_actor
+from rlgrasp.vision.spec import vision_spec
 
 
 class Distiller:
