@@ -25,7 +25,7 @@ from omegaconf import DictConfig, OmegaConf
 from torchrl.envs import ExplorationType, set_exploration_type
 from torchrl.objectives import BCLoss
 
-from rlgrasp.config import CONFIG_DIR, ConfigError
+from rlgrasp.config import ConfigError
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
@@ -37,7 +37,7 @@ from rlgrasp.train.loop import seed_everything
 from rlgrasp.train.metrics import Due, finished_episodes
 from rlgrasp.train.preemption import StopSignals
 from rlgrasp.train.resume import prepare_run
-from rlgrasp.vision.dagger import LABEL_KEY, DAggerPolicy, LabelledFrames, load_teacher
+from rlgrasp.vision.dagger import LABEL_KEY, DAggerPolicy, LabelledFrames, load_teacher, resolve_teacher
 from rlgrasp.vision.models import actor_norm, build_vision_actor
 from rlgrasp.vision.spec import vision_spec
 
@@ -58,7 +58,7 @@ class Distiller:
         seed_everything(cfg.seed)
         self.make_env = env_factory(cfg.env)
         self.spec = vision_spec(self.make_env)
-        self.teacher, _ = load_teacher(teacher_path(a.teacher), self.spec, cfg.env)
+        self.teacher, _ = load_teacher(resolve_teacher(a.teacher), self.spec, cfg.env)
         self.student = build_vision_actor(self.spec, cfg.model)
         self.policy = DAggerPolicy(self.student, self.teacher, a.beta0)
         self.loss = BCLoss(self.student, loss_function="mse")
@@ -245,17 +245,6 @@ class Distiller:
             self.run_dir / "checkpoints", self.state_dict(), self.cfg.checkpoint.keep_last, is_best
         )
         log.info("checkpoint %s", path)
-
-
-def teacher_path(path: str) -> str:
-    """``algo.teacher`` as given, or, when relative and not found from here, from the repository root
-    (the shipped policies are named ``policies/<name>.pt`` in the experiments)."""
-    candidate = Path(path).expanduser()
-    if not candidate.is_absolute() and not candidate.exists():
-        from_root = Path(CONFIG_DIR).parent / candidate
-        if from_root.exists():
-            return str(from_root)
-    return str(candidate)
 
 
 def distill(cfg: DictConfig, changed: set[str] | None = None) -> float:
