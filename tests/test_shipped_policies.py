@@ -16,6 +16,7 @@ POLICIES = Path(__file__).resolve().parents[1] / "policies"
 CASES = [
     ("grasp_objects_ppo.pt", "random_urdfs_test", 17, 14),
     ("grasp_ppo.pt", "cube", 17, 14),
+    ("grasp_vision_depth.pt", "cube", 12, 8),  # a wrist depth camera student of grasp_ppo.pt
 ]
 
 
@@ -26,7 +27,7 @@ def test_shipped_policy_still_succeeds(
     m = evaluate(
         compose_eval(
             [f"ckpt={POLICIES / name}", f"objects={objects}", "episodes=20", "video=false",
-             "plots=false", f"outputs_root={tmp_path}", "name=ship"]
+             "plots=false", "teacher=none", f"outputs_root={tmp_path}", "name=ship"]
         )
     )
     successes = m["success_at_end"]["successes"]
