@@ -6,10 +6,30 @@ sets), ``randomization`` (per-episode physics and sensing), ``observation`` (nam
 ``grasp_env`` (the gymnasium env that sequences them).
 """
 
-from rlgrasp.envs.control import CONTROL_MODES
-from rlgrasp.envs.expert import ScriptedExpert
-from rlgrasp.envs.grasp_env import GraspEnv
-from rlgrasp.envs.randomization import PARAMS, PRESETS, Randomizer, Range
+import os
+import sys
+
+
+def _import_pybullet_quietly() -> None:
+    """PyBullet prints its build time on stderr, from C, when first imported: every entry point's
+    one-line error would be two lines. Imported here first with stderr muted, it never prints."""
+    sys.stderr.flush()
+    saved, devnull = os.dup(2), os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 2)
+        import pybullet  # noqa: F401
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(devnull)
+
+
+_import_pybullet_quietly()
+
+from rlgrasp.envs.control import CONTROL_MODES  # noqa: E402
+from rlgrasp.envs.expert import ScriptedExpert  # noqa: E402
+from rlgrasp.envs.grasp_env import GraspEnv  # noqa: E402
+from rlgrasp.envs.randomization import PARAMS, PRESETS, Randomizer, Range  # noqa: E402
 
 #: The name configs and checkpoints written before the robot seam use as ``env._target_``.
 PandaGraspEnv = GraspEnv
