@@ -97,10 +97,25 @@ class GraspEnv(gym.Env):
                            yaw=camera_yaw, pitch=camera_pitch)
         self.metadata = {**self.metadata, "render_fps": round(1.0 / (time_step * substeps))}
 
-        self.scene = Scene(time_step, gui=render_mode == "human", solver_iterations=solver_iterations)
+        self._build_world(time_step, solver_iterations, robot, robot_urdf, camera_spec, visual)
+        self._build_task(objects, reward, weights, success_height)
+        self.control_mode = control_mode
+        self.control = make_control(
+            control_mode, self.robot, ee_step=ee_step, ee_yaw=ee_yaw, yaw_step=yaw_step,
+            joint_step=joint_step, torque_fraction=torque_fraction,
+            gravity_compensation=gravity_compensation,
+        )
+        self._build_spaces()
+
+    def _build_world(
+        self, time_step: float, solver_iterations: int, robot: str, robot_urdf: str | None,
+        camera_spec: CameraSpec | None, visual: str | None,
+    ) -> None:
+        """The physics client, the robot (its cheap render model when a camera looks), the camera and
+        the visual randomizer; the saved world each reset restores."""
+        self.scene = Scene(time_step, gui=self.render_mode == "human", solver_iterations=solver_iterations)
         self.client = self.scene.client
         try:
-            self.task = LiftTask(self.scene, objects, reward, weights, success_height)
             render = None if camera_spec is None else "wrist" if camera_spec.mount == "wrist" else "low_poly"
             self.robot = make_robot(robot, self.client, robot_urdf, render)
             self.visuals = VisualRandomizer(visual, self.client)
@@ -108,17 +123,19 @@ class GraspEnv(gym.Env):
         except BaseException:
             self.close()
             raise
-        self.control_mode = control_mode
-        self.control = make_control(
-            control_mode, self.robot, ee_step=ee_step, ee_yaw=ee_yaw, yaw_step=yaw_step,
-            joint_step=joint_step, torque_fraction=torque_fraction,
-            gravity_compensation=gravity_compensation,
-        )
         self.robot.reset(self.robot.neutral_pose)
         if self.camera is not None:
             self._prepare_rendering()
         self.scene.save()
 
+    def _build_task(self, objects: Any, reward: str, weights: RewardWeights, success_height: float) -> None:
+        try:
+            self.task = LiftTask(self.scene, objects, reward, weights, success_height)
+        except BaseException:
+            self.close()
+            raise
+
+    def _build_spaces(self) -> None:
         self.action_dim = self.control.action_dim
         self.action_space = gym.spaces.Box(-1.0, 1.0, (self.action_dim,), np.float32)
         self.layout = ObservationLayout(full_parts(self.robot.arm_dof, self.action_dim))
@@ -126,7 +143,6 @@ class GraspEnv(gym.Env):
         self.observation_space = self._observation_space()
         self._visual_rng: np.random.Generator | None = None
         self._visual: dict[str, float] = {}
-
         self._idle_action = np.zeros(self.action_dim, np.float32)
         self._idle_action[-1] = 1.0  # fingers open
         self._steps = 0
