@@ -157,7 +157,6 @@ class Panda(Robot):
         self.movable = self.arm + self.fingers
         self.position_gain = self.NOMINAL_POSITION_GAIN
         self.finger_force = 20.0
-        self.torque_mode = False
 
     # --- state ---------------------------------------------------------------------------------
     def reset(self, arm_q: Sequence[float], finger_width: float | None = None) -> None:
@@ -196,13 +195,11 @@ class Panda(Robot):
 
     # --- control -------------------------------------------------------------------------------
     def use_position_control(self, gain_scale: float = 1.0, finger_force: float = 20.0) -> None:
-        self.torque_mode = False
         self.position_gain = self.NOMINAL_POSITION_GAIN * gain_scale
         self.finger_force = finger_force
 
     def use_torque_control(self, finger_force: float = 20.0) -> None:
         """Release the default velocity motors, which would otherwise cancel applied torques."""
-        self.torque_mode = True
         self.finger_force = finger_force
         self.client.setJointMotorControlArray(
             self.body, self.arm, pybullet.VELOCITY_CONTROL, forces=[0.0] * len(self.arm)
@@ -259,7 +256,7 @@ def low_poly_urdf(path: str, visible_links: Sequence[str] | None = None) -> str:
     ``visible_links``, the other links lose their visuals altogether (a wrist camera never sees them).
 
     Rendering cost on the CPU follows the robot's visual triangles: the Panda's visual meshes make a
-    64x64 image cost ~16 ms, its collision meshes ~1.5 ms, and every visual shape costs a sync per
+    64x64 image cost ten times what its collision meshes do, and every visual shape costs a sync per
     image even when transparent. Physics reads only the collision shapes, so the robot moves exactly
     as before. Written once per machine into the temp directory (mesh paths made absolute),
     atomically: several workers may ask at once.

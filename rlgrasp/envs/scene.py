@@ -54,7 +54,7 @@ class Scene:
 
     def use_compact_ground(self, half_size: float = 1.0) -> None:
         """Show the ground to cameras as a 2 m square instead of the URDF's 200 m plane, which the CPU
-        renderer rasterizes at ~0.9 ms an image (its collision box, and so the physics, stay)."""
+        renderer rasterizes slowly (its collision box, and so the physics, stay)."""
         self.client.changeVisualShape(self.plane, -1, rgbaColor=[1.0, 1.0, 1.0, 0.0])
         visual = self.client.createVisualShape(
             pybullet.GEOM_BOX, halfExtents=[half_size, half_size, 0.0005], rgbaColor=GROUND_COLOUR

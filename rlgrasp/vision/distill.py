@@ -158,7 +158,7 @@ class Distiller:
             self.optimizer.zero_grad()
             loss.backward()
             self.optimizer.step()
-            total += float(loss)
+            total += loss.item()
         beta = self.policy.beta.item()
         self.batches_seen += 1
         self.policy.beta.fill_(a.beta0 * a.beta_decay**self.batches_seen)
