@@ -15,10 +15,7 @@ from rlgrasp.train.collect import EnvFactory, env_spec
 from rlgrasp.train.collectors import CollectorBackend, collector_backend
 from rlgrasp.train.models import OBS_KEY, RunningNorm, build_critic, build_models
 from rlgrasp.vision.models import actor_norm, build_vision_actor
-from rlgrasp.vision.spec import vision_spec
-
-#: The entry a camera run's critic reads: the full state no robot senses (asymmetric actor-critic).
-PRIVILEGED_KEY = "privileged"
+from rlgrasp.vision.spec import PRIVILEGED_KEY, vision_spec
 
 
 @dataclass

@@ -17,8 +17,8 @@ from torchrl.envs import ExplorationType, set_exploration_type
 from rlgrasp.config import CONFIG_DIR
 from rlgrasp.train.checkpoint import CheckpointError, load_checkpoint, policy_from_checkpoint
 from rlgrasp.train.models import OBS_KEY
+from rlgrasp.vision.spec import PRIVILEGED_KEY
 
-PRIVILEGED_KEY = "privileged"
 LABEL_KEY = "teacher_action"
 
 

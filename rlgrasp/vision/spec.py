@@ -10,6 +10,9 @@ from rlgrasp.config import ConfigError
 from rlgrasp.train.collect import EnvFactory
 from rlgrasp.vision.models import IMAGE_KEYS
 
+#: The entry holding the full state no robot senses: what a teacher or an asymmetric critic reads.
+PRIVILEGED_KEY = "privileged"
+
 
 def vision_spec(make_env: EnvFactory) -> dict[str, Any]:
     """Sizes of a camera env's observation parts and action, from one throw-away env."""
