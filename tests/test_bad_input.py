@@ -117,6 +117,8 @@ TRAIN = [
     ("no hidden layers", ["model.hidden_sizes=[]"], "model.hidden_sizes=[]: must be a non-empty list"),
     ("a camera policy without a camera", ["model=cnn"], "model='cnn': needs a camera (e.g. cameras="),
     ("a state policy with a camera", ["cameras=wrist_depth"], "model='mlp': must be cnn with a camera"),
+    ("a camera inside the robot", ["cameras=fixed_depth", "model=cnn", "+env.camera.eye=[0,0,0.3]"],
+     "camera.eye=[0.0, 0.0, 0.3] (the world frame): inside the robot's link panda_link1"),
     ("inverted randomization range", ["env.randomization={object_mass:[1.0,0.5]}"],
      "'object_mass': low (1.0) is greater than high (0.5)"),
     ("negative randomization range", ["randomization={object_mass:[-1.0,0.5]}"],

@@ -132,6 +132,18 @@ def test_bad_camera_config_names_the_key(camera, match):
         CameraSpec.from_config(camera)
 
 
+@pytest.mark.parametrize(
+    "camera, link",
+    [
+        ({"mount": "fixed", "eye": [0.0, 0.0, 0.3]}, "panda_link1"),  # in the arm's shoulder
+        ({"mount": "wrist", "eye": [0.0, 0.0, 0.0]}, "panda_link7"),  # in the wrist it hangs from
+    ],
+)
+def test_a_camera_inside_the_robot_is_refused(cam_env, camera, link):
+    with pytest.raises(ValueError, match=rf"camera.eye=.*inside the robot's link {link}"):
+        cam_env(camera=camera)
+
+
 def test_unknown_visual_preset_names_the_valid_ones(cam_env):
     with pytest.raises(ValueError, match="unknown visual preset 'bright'; valid presets: none, default"):
         cam_env(camera=WRIST_DEPTH, visual="bright")

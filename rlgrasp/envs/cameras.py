@@ -132,8 +132,9 @@ class Camera:
         self.fov = float(np.clip(self.spec.fov + fov_delta, 1.0, 179.0))
         self.lighting = lighting
 
-    def view_matrix(self, mount_pose: tuple[np.ndarray, np.ndarray] | None) -> list[float]:
-        """``mount_pose`` is the wrist's (position, quaternion); None for a fixed camera."""
+    def world_pose(self, mount_pose: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, ...]:
+        """Eye, target and up in the world; ``mount_pose`` is the wrist's (position, quaternion),
+        None for a fixed camera."""
         eye = self.base_pose["eye"] + self.offset
         target = self.base_pose["target"] + self.tilt
         up = self.base_pose["up"]
@@ -141,7 +142,29 @@ class Camera:
             position, quat = mount_pose
             rotation = np.array(self.client.getMatrixFromQuaternion(quat)).reshape(3, 3)
             eye, target, up = position + rotation @ eye, position + rotation @ target, rotation @ up
+        return eye, target, up
+
+    def view_matrix(self, mount_pose: tuple[np.ndarray, np.ndarray] | None) -> list[float]:
+        eye, target, up = self.world_pose(mount_pose)
         return self.client.computeViewMatrix(eye.tolist(), target.tolist(), up.tolist())
+
+    def check_outside(self, body: int, mount_pose: tuple[np.ndarray, np.ndarray] | None) -> None:
+        """A camera inside a link sees the inside of one mesh for ever: refuse it when the env is
+        built (the robot at its neutral pose). A point-sized collision query, no body is added, so
+        the physics of a seed stays as it is. The probe shape stays: PyBullet's removeCollisionShape
+        only prints a warning that it does not free it."""
+        probe = self.client.createCollisionShape(pybullet.GEOM_SPHERE, radius=1e-3)
+        eye = self.world_pose(mount_pose)[0]
+        hits = self.client.getClosestPoints(bodyA=-1, bodyB=body, distance=0.0, collisionShapeA=probe,
+                                            collisionShapePositionA=eye.tolist())
+        inside = [hit[4] for hit in hits if hit[8] < 0.0]
+        if inside:
+            link = inside[0]
+            name = "base" if link < 0 else self.client.getJointInfo(body, link)[12].decode()
+            frame = "the hand's frame" if mount_pose is not None else "the world frame"
+            raise ValueError(
+                f"camera.eye={[round(float(x), 3) for x in self.base_pose['eye']]} ({frame}): inside the "
+                f"robot's link {name} at its neutral pose; move the camera outside the robot")
 
     def render(self, mount_pose: tuple[np.ndarray, np.ndarray] | None) -> dict[str, np.ndarray]:
         s = self.spec

@@ -125,6 +125,7 @@ class GraspEnv(gym.Env):
             raise
         self.robot.reset(self.robot.neutral_pose)
         if self.camera is not None:
+            self._check_camera_pose()
             self._prepare_rendering()
         self.scene.save()
 
@@ -172,6 +173,14 @@ class GraspEnv(gym.Env):
         self.episode = ep
         obs, readings = self._observe()
         return obs, self._info(readings, success=False)
+
+    def _check_camera_pose(self) -> None:
+        mount = self.robot.camera_mount() if self.camera.spec.mount == "wrist" else None
+        try:
+            self.camera.check_outside(self.robot.body, mount)
+        except BaseException:
+            self.close()
+            raise
 
     def _prepare_rendering(self) -> None:
         """What cameras render, made cheap: a small ground, and for a wrist camera only the links
