@@ -45,7 +45,9 @@ class EnvConfig:
     time_step: float = 1.0 / 240.0
     substeps: int = 12
     reward: str = "dense"
-    reward_weights: dict[str, float] | None = None
+    # null: the default weights; a mapping of rlgrasp.envs.task.RewardWeights keys, e.g. {lift: 3}.
+    # Typed Any: OmegaConf cannot merge `env.reward_weights={lift:3}` into a None Dict node.
+    reward_weights: Any = None
     success_height: float = 0.05
     terminate_on_success: bool = False
     ee_step: float = 0.04

@@ -90,7 +90,7 @@ class GraspEnv(gym.Env):
         _check_args(control_mode, render_mode, max_episode_steps, substeps, time_step)
         camera_spec = CameraSpec.from_config(camera) if camera else None
         self.randomizer = Randomizer(randomization)
-        weights = RewardWeights(**(reward_weights or {}))
+        weights = RewardWeights.from_mapping(reward_weights)
         self.max_episode_steps, self.substeps = int(max_episode_steps), int(substeps)
         self.terminate_on_success, self.render_mode = terminate_on_success, render_mode
         self.viewer = dict(width=render_width, height=render_height, distance=camera_distance,

@@ -7,7 +7,8 @@ sets, at the drawn pose and dynamics), so the env only resets the robot and then
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -27,6 +28,16 @@ class RewardWeights:
     grasp: float = 1.0
     lift: float = 2.0
     success: float = 1.0
+
+    @staticmethod
+    def from_mapping(weights: Mapping[str, float] | None) -> RewardWeights:
+        """Weights from a config mapping (None: the defaults); an unknown name fails naming it."""
+        names = [f.name for f in fields(RewardWeights)]
+        unknown = sorted(set(weights or {}) - set(names))
+        if unknown:
+            raise ValueError(f"unknown reward weight {unknown[0]!r} (env.reward_weights); weights: "
+                             + ", ".join(names))
+        return RewardWeights(**(weights or {}))
 
     def __post_init__(self):
         for name in ("reach", "grasp", "lift", "success"):

@@ -39,7 +39,8 @@ def run(cfg: DictConfig) -> float:
         learn = distill if cfg.algo.name == "distill" else train
         return learn(cfg, changed=_command_line_keys(cfg))
     except (ConfigError, CheckpointError) as exc:
-        log.error("%s", exc)
+        # As every entry point refuses bad input: one line on stderr (the run's log goes with its dir)
+        print(f"error: {exc}", file=sys.stderr)
         remove_refused_start(Path(cfg.paths.output_dir))
         sys.exit(2)
     except TrainingError as exc:
