@@ -74,7 +74,7 @@ class EEDelta(ControlMode):
         if not self.ee_yaw:
             return robot.inverse_kinematics(target)
         self.yaw = float(np.clip(self.yaw + action[3] * self.yaw_step, -math.pi / 2, math.pi / 2))
-        return robot.inverse_kinematics(target, robot.client.getQuaternionFromEuler((math.pi, 0.0, self.yaw)))
+        return robot.inverse_kinematics(target, robot.gripper_down(self.yaw))
 
 
 class JointDelta(ControlMode):
