@@ -8,6 +8,7 @@ import os
 import re
 import tempfile
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import pybullet
@@ -43,6 +44,7 @@ class ArmRobot(Robot):
             links[info[12].decode()] = j
         check_model(spec, client, self.body, joints, links, path)
         self._index(joints, links)
+        self._tie_mimic_joints(joints)
         self.neutral_pose = tuple(getattr(type(self), "neutral_pose", None) or spec.neutral_pose)
         self.max_finger_width = spec.max_finger_width
         self.down_euler = tuple(spec.gripper_down)
@@ -76,7 +78,7 @@ class ArmRobot(Robot):
         self.grasp_link = links[spec.grasp_link]
         self.mount_link = links[spec.camera_link or spec.grasp_link]
         self.link_names = {j: name for name, j in links.items()}
-        self.hold = [(joints[n], float(q)) for n, q in spec.hold_joints.items()]
+        self.hold = [(joints[n], *hold_target(q, spec.hold_force)) for n, q in spec.hold_joints.items()]
         closed = np.array([f.closed for f in spec.fingers])
         # Position = closed + scale x width, per finger joint (scale < 0 for a finger that opens
         # towards negative angles).
@@ -93,6 +95,26 @@ class ArmRobot(Robot):
         self._arm_in_dofs = [self._dofs.index(j) for j in self.arm]
         self._offset = np.array(spec.grasp_offset, dtype=float)
 
+    def _tie_mimic_joints(self, joints: dict[str, int]) -> None:
+        """A gear constraint per mimic finger joint (at the ratio of the two joints' ranges), and no
+        motor of its own: its velocity motor would hold it against the constraint."""
+        by_name = {f.joint: f for f in self.spec.fingers}
+        mimics = [f for f in self.spec.fingers if f.mimic]
+        for f in mimics:
+            lead = by_name[f.mimic]
+            ratio = (f.open - f.closed) / (lead.open - lead.closed)
+            tie = self.client.createConstraint(
+                self.body, joints[f.mimic], self.body, joints[f.joint], pybullet.JOINT_GEAR, [1, 0, 0],
+                [0, 0, 0], [0, 0, 0],
+            )
+            self.client.changeConstraint(tie, gearRatio=-ratio, maxForce=self.spec.hold_force, erp=1.0)
+        if mimics:
+            self.client.setJointMotorControlArray(
+                self.body, [joints[f.joint] for f in mimics], pybullet.VELOCITY_CONTROL,
+                forces=[0.0] * len(mimics),
+            )
+        self._driven = [i for i, f in enumerate(self.spec.fingers) if not f.mimic]
+
     # --- state ---------------------------------------------------------------------------------
     def finger_positions(self, width: float) -> list[float]:
         return [float(q) for q in self._closed + self._scale * width]
@@ -103,7 +125,7 @@ class ArmRobot(Robot):
             self.client.resetJointState(self.body, j, q)
         for j, q in zip(self.fingers, self.finger_positions(width)):
             self.client.resetJointState(self.body, j, q)
-        for j, q in self.hold:
+        for j, q, _ in self.hold:
             self.client.resetJointState(self.body, j, q)
 
     def joint_state(self) -> tuple[np.ndarray, np.ndarray, float]:
@@ -161,17 +183,19 @@ class ArmRobot(Robot):
 
     def command_fingers(self, width: float) -> None:
         force = self.finger_force * self.spec.finger_force_scale
+        driven = self._driven
+        targets = self.finger_positions(float(np.clip(width, 0.0, self.max_finger_width)))
         self.client.setJointMotorControlArray(
             self.body,
-            self.fingers,
+            [self.fingers[i] for i in driven],
             pybullet.POSITION_CONTROL,
-            targetPositions=self.finger_positions(float(np.clip(width, 0.0, self.max_finger_width))),
-            forces=[force] * len(self.fingers),
+            targetPositions=[targets[i] for i in driven],
+            forces=[force] * len(driven),
         )
         if self.hold:
             self.client.setJointMotorControlArray(
-                self.body, [j for j, _ in self.hold], pybullet.POSITION_CONTROL,
-                targetPositions=[q for _, q in self.hold], forces=[force] * len(self.hold),
+                self.body, [j for j, _, _ in self.hold], pybullet.POSITION_CONTROL,
+                targetPositions=[q for _, q, _ in self.hold], forces=[f for _, _, f in self.hold],
             )
 
     def apply_torques(self, tau: np.ndarray) -> None:
@@ -199,6 +223,14 @@ class ArmRobot(Robot):
             self.body, self.grasp_link, position, orientation, maxNumIterations=self.spec.ik_iterations,
         )
         return np.clip(np.array(q)[self._arm_in_dofs], self.lower, self.upper)
+
+
+def hold_target(value: Any, default_force: float) -> tuple[float, float]:
+    """A hold joint's (angle, motor force) from ``angle`` or ``[angle, force]``."""
+    if isinstance(value, (int, float)):
+        return float(value), float(default_force)
+    angle, force = value
+    return float(angle), float(force)
 
 
 class Panda(ArmRobot):

@@ -53,6 +53,11 @@ def check_model(spec: RobotSpec, client: BulletClient, body: int, joints: dict[s
             if name not in links:
                 raise ValueError(f"robot.{key}: {name!r} is not a link of {path}; its links: "
                                  f"{', '.join(links)}")
+    driven = [f.joint for f in spec.fingers if not f.mimic]
+    for f in spec.fingers:
+        if f.mimic and f.mimic not in driven:
+            raise ValueError(f"robot.fingers: {f.joint} mimics {f.mimic!r}, which must be a finger joint "
+                             f"with a motor of its own: {', '.join(driven) or 'none is'}")
     _check_neutral_pose(spec, client, body, [joints[n] for n in spec.arm_joints])
     _check_fingers(spec, client, body, joints, links)
 

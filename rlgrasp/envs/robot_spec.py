@@ -21,12 +21,15 @@ from typing import Any
 @dataclass(frozen=True)
 class FingerJoint:
     """One gripper joint and its positions at the closed (width 0) and widest opening; positions in
-    between are linear in the width. Mimic and linkage joints are listed too (PyBullet does not
-    enforce URDF mimic joints): each is driven to its own mapped position."""
+    between are linear in the width. Mimic and linkage joints are listed too, since PyBullet does
+    not enforce URDF mimic joints: with ``mimic`` (another finger joint's name) a joint follows that
+    one through a gear constraint instead of a motor of its own, which keeps a linkage gripper's
+    pads parallel when the object stops the drive."""
 
     joint: str
     open: float
     closed: float = 0.0
+    mimic: str = ""
 
 
 @dataclass(frozen=True)
@@ -48,9 +51,11 @@ class RobotSpec:
     gripper_down: tuple[float, float, float] = (math.pi, 0.0, 0.0)
     base_position: tuple[float, float, float] = (0.0, 0.0, 0.0)
     base_orientation: tuple[float, float, float] = (0.0, 0.0, 0.0)  # Euler, rad
-    #: Passive joints of the gripper held at a fixed angle by a position motor (a wrist joint with
-    #: no effort, fingertip joints), by name.
-    hold_joints: Mapping[str, float] = field(default_factory=dict)
+    #: Passive joints of the gripper held at an angle by a position motor (a wrist joint with no
+    #: effort, fingertip joints), by name: the angle, or [angle, motor force] (a weak motor lets a
+    #: fingertip comply with the object's face).
+    hold_joints: Mapping[str, Any] = field(default_factory=dict)
+    hold_force: float = 100.0  # N m (or N): the motor force of a hold joint given by its angle alone
     position_gain: float = 0.2  # the arm's position-control gain at gain scale 1
     #: Finger motor force (N, or N m for a revolute finger) per N of the episode's ``finger_force``.
     finger_force_scale: float = 1.0
@@ -126,12 +131,14 @@ def _fingers(value: Any) -> tuple[FingerJoint, ...]:
         if isinstance(entry, FingerJoint):
             out.append(entry)
             continue
-        ok = isinstance(entry, Mapping) and set(entry) <= {"joint", "open", "closed"} and "joint" in entry
+        keys = {"joint", "open", "closed", "mimic"}
+        ok = isinstance(entry, Mapping) and set(entry) <= keys and "joint" in entry
         ok = ok and "open" in entry and all(_number(entry[k]) for k in ("open", "closed") if k in entry)
         if not ok:
             raise ValueError(f"robot.fingers[{i}]={entry!r}: must be {{joint: <name>, open: <position>, "
-                             "closed: <position>}")
-        out.append(FingerJoint(str(entry["joint"]), float(entry["open"]), float(entry.get("closed", 0.0))))
+                             "closed: <position>[, mimic: <finger joint>]}")
+        out.append(FingerJoint(str(entry["joint"]), float(entry["open"]), float(entry.get("closed", 0.0)),
+                               str(entry.get("mimic") or "")))
     return tuple(out)
 
 
@@ -164,7 +171,11 @@ KUKA_IIWA = RobotSpec(
     max_finger_width=0.1,
     gripper_down=(0.0, math.pi, math.pi / 2),
     base_position=(-0.1, 0.0, 0.07),
-    hold_joints={"gripper_to_arm": 0.0, "left_base_tip_joint": 0.0, "right_base_tip_joint": 0.0},
+    # The wrist joint is stiff; the fingertips comply (2 N m, as pybullet_envs' Kuka does) and lie
+    # flat on the object's faces instead of wedging it out of the grip.
+    hold_joints={"gripper_to_arm": 0.0, "left_base_tip_joint": [0.0, 2.0],
+                 "right_base_tip_joint": [0.0, 2.0]},
+    finger_force_scale=0.3,  # N m per N: 3-12 N m for the `default` finger forces of 10-40 N
     camera_link="base_link",
 )
 
@@ -174,12 +185,17 @@ XARM6 = RobotSpec(
     arm_joints=tuple(f"joint{i}" for i in range(1, 7)),
     grasp_link="xarm_gripper_base_link",
     grasp_offset=(0.0, 0.0, 0.17),
-    fingers=tuple(FingerJoint(j, 0.0, 0.85) for j in (
-        "drive_joint", "left_finger_joint", "left_inner_knuckle_joint", "right_outer_knuckle_joint",
-        "right_finger_joint", "right_inner_knuckle_joint")),
+    # One motor on the drive joint; the linkage's five other joints follow it (gear constraints).
+    fingers=(FingerJoint("drive_joint", 0.0, 0.85), *(
+        FingerJoint(j, 0.0, 0.85, mimic="drive_joint") for j in (
+            "left_finger_joint", "left_inner_knuckle_joint", "right_outer_knuckle_joint", "right_finger_joint",
+            "right_inner_knuckle_joint"))),
     finger_links=("left_finger", "right_finger"),
     neutral_pose=(0.0, 0.449, -1.701, 0.0, 1.251, 0.0),  # IK: grasp point at (0.6, 0, 0.2)
     max_finger_width=0.085,
+    # The drive joint's torque reaches the pads through a ~5 cm lever: 0.6 N m per 20 N keeps the
+    # pad force near a parallel gripper's; a full 20 N m squeezes the cube out of the grip.
+    finger_force_scale=0.03,
     base_position=(0.0, 0.0, 0.0),
     camera_link="xarm_gripper_base_link",
 )
