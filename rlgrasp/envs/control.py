@@ -127,5 +127,8 @@ def make_control(mode: str, robot: Robot, **settings: Any) -> ControlMode:
     if mode == "joint_delta":
         return JointDelta(robot, settings["joint_step"])
     if mode == "joint_torque":
+        if not robot.torque_control:
+            raise ValueError("control_mode=joint_torque: this arm's model has no meaningful dynamics "
+                             "(robot.torque_control=false); use ee_delta or joint_delta")
         return JointTorque(robot, settings["torque_fraction"], settings["gravity_compensation"])
     raise ValueError(f"unknown control_mode {mode!r}; valid modes: {', '.join(CONTROL_MODES)}")

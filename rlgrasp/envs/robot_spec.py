@@ -67,7 +67,8 @@ class RobotSpec:
     #: A low-poly render model: (visual mesh folder, collision mesh folder) rewritten in the URDF;
     #: null: cameras render the model as it is.
     low_poly_meshes: tuple[str, str] | None = None
-    #: Whether joint torques are a meaningful action (the model's inertias are realistic).
+    #: Whether joint torques are a meaningful action: false for a model whose masses and inertias
+    #: are placeholders (control_mode=joint_torque is then refused).
     torque_control: bool = True
 
     @property
@@ -188,8 +189,8 @@ XARM6 = RobotSpec(
     # One motor on the drive joint; the linkage's five other joints follow it (gear constraints).
     fingers=(FingerJoint("drive_joint", 0.0, 0.85), *(
         FingerJoint(j, 0.0, 0.85, mimic="drive_joint") for j in (
-            "left_finger_joint", "left_inner_knuckle_joint", "right_outer_knuckle_joint", "right_finger_joint",
-            "right_inner_knuckle_joint"))),
+            "left_finger_joint", "left_inner_knuckle_joint", "right_outer_knuckle_joint",
+            "right_finger_joint", "right_inner_knuckle_joint"))),
     finger_links=("left_finger", "right_finger"),
     neutral_pose=(0.0, 0.449, -1.701, 0.0, 1.251, 0.0),  # IK: grasp point at (0.6, 0, 0.2)
     max_finger_width=0.085,
