@@ -95,8 +95,8 @@ def _files(root: Path) -> dict[str, str]:
 
 
 #: A user's arm (the Panda's model) naming a joint its model does not have.
-BAD_ARM = ("model:franka_panda/panda.urdf,arm_joints:[panda_joint1,panda_joint9],grasp_link:panda_grasptarget,"
-           "fingers:[{joint:panda_finger_joint1,open:0.04}],finger_links:[panda_leftfinger,panda_rightfinger],"
+BAD_ARM = ("model:franka_panda/panda.urdf,arm_joints:[panda_joint1,panda_joint9],"
+           "grasp_link:panda_grasptarget,fingers:[{joint:panda_finger_joint1,open:0.04}],finger_links:[panda_leftfinger,panda_rightfinger],"
            "neutral_pose:[0,0],max_finger_width:0.08")
 # (entry point, what, arguments after BASE (placeholders filled by _fill), a fragment of the one line)
 TRAIN = [
