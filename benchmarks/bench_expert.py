@@ -3,7 +3,8 @@
 The expert is the proof that the task is solvable and the baseline a learned policy is compared
 with. Seeds are first-seed..first-seed+N-1 (default 0..N-1), so the figures reproduce exactly.
 Each failure gets one reason, read from the episode's info by the rules the evaluation uses
-(``rlgrasp.evaluation.outcomes``): ``too wide``, ``tipped or rolled``, ``never grasped``, ``slipped`` or ``held, not lifted``.
+(``rlgrasp.evaluation.outcomes``): ``too wide``, ``tipped or rolled``, ``never grasped``,
+``slipped`` or ``held, not lifted``.
 
     python benchmarks/bench_expert.py [--episodes 100] [--presets none default wide] [--objects cube]
         [--robot panda kuka_iiwa xarm6]
