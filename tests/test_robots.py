@@ -123,7 +123,6 @@ def test_a_wrist_camera_rides_on_each_arm(robot, arm_env):
     assert np.median(depth) < 0.5 and depth.max() - depth.min() > 0.02
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("robot", ARMS)
 def test_each_arms_expert_lifts_the_cube(robot, arm_env):
     env = arm_env(robot)
