@@ -1,17 +1,20 @@
 """Success of the scripted expert over seeded episodes, per object set and randomization preset.
 
 The expert is the proof that the task is solvable and the baseline a learned policy is compared
-with. Seeds are 0..N-1, so the figures reproduce exactly. Each failure gets one reason, read from
-the episode's info by the rules the evaluation uses (``rlgrasp.evaluation.outcomes``): ``too wide``,
-``tipped or rolled``, ``never grasped``, ``slipped`` or ``held, not lifted``.
+with. Seeds are first-seed..first-seed+N-1 (default 0..N-1), so the figures reproduce exactly.
+Each failure gets one reason, read from the episode's info by the rules the evaluation uses
+(``rlgrasp.evaluation.outcomes``): ``too wide``, ``tipped or rolled``, ``never grasped``,
+``slipped`` or ``held, not lifted``.
 
     python benchmarks/bench_expert.py [--episodes 100] [--presets none default wide] [--objects cube]
+        [--robot panda kuka_iiwa xarm6]
 """
 
 from __future__ import annotations
 
 import argparse
 import collections
+import itertools
 
 from rlgrasp.envs import PandaGraspEnv, ScriptedExpert
 from rlgrasp.evaluation.outcomes import failure_reason as classify
@@ -26,11 +29,11 @@ def failure_reason(infos: list[dict]) -> str:
     )
 
 
-def run(preset: str, objects, episodes: int, ee_yaw: bool) -> dict:
-    env = PandaGraspEnv(randomization=preset, objects=objects, ee_yaw=ee_yaw)
+def run(preset: str, objects, episodes: int, ee_yaw: bool, robot: str = "panda", first_seed: int = 0) -> dict:
+    env = PandaGraspEnv(randomization=preset, objects=objects, ee_yaw=ee_yaw, robot=robot)
     expert = ScriptedExpert(env.obs_slices, action_dim=env.action_dim)
     successes, steps_to_success, reasons, failed = 0, [], collections.Counter(), []
-    for seed in range(episodes):
+    for seed in range(first_seed, first_seed + episodes):
         obs, info = env.reset(seed=seed)
         expert.reset()
         infos, first = [info], None
@@ -58,20 +61,21 @@ def main() -> None:
     parser.add_argument("--presets", nargs="+", default=["none", "default", "wide"])
     parser.add_argument("--objects", nargs="+", default=["cube"], help="object sets, one row each")
     parser.add_argument("--no-yaw", action="store_true", help="keep the hand at yaw 0 (ee_yaw=False)")
+    parser.add_argument("--robot", nargs="+", default=["panda"], help="arms (configs/robot), one row each")
+    parser.add_argument("--first-seed", type=int, default=0,
+                        help="seeds first-seed.. (a long measurement in parts: their counts add up)")
     parser.add_argument("--list-failures", action="store_true", help="print seed:object:reason")
     args = parser.parse_args()
-    print(f"{'objects':<20}{'preset':<9}{'success at end':>16}{'95% Wilson':>16}{'steps to success':>18}"
-          "  failure reasons")
-    for objects in args.objects:
-        for preset in args.presets:
-            r = run(preset, objects, args.episodes, ee_yaw=not args.no_yaw)
-            low, high = wilson_interval(r["successes"], args.episodes)
-            reasons = ", ".join(f"{k} {v}" for k, v in r["reasons"].most_common()) or "-"
-            print(f"{objects:<20}{preset:<9}{r['successes']:>9d}/{args.episodes:<6d}"
-                  f"{f'[{low:.2f}, {high:.2f}]':>16}{r['mean_steps']:>18.1f}  {reasons}", flush=True)
-            if args.list_failures:
-                print("   ", " ".join(r["failed"]))
-
+    print(f"{'robot':<11}{'objects':<20}{'preset':<9}{'success at end':>16}{'95% Wilson':>16}"
+          f"{'steps to success':>18}  failure reasons")
+    for robot, objects, preset in itertools.product(args.robot, args.objects, args.presets):
+        r = run(preset, objects, args.episodes, not args.no_yaw, robot, args.first_seed)
+        low, high = wilson_interval(r["successes"], args.episodes)
+        reasons = ", ".join(f"{k} {v}" for k, v in r["reasons"].most_common()) or "-"
+        print(f"{robot:<11}{objects:<20}{preset:<9}{r['successes']:>9d}/{args.episodes:<6d}"
+              f"{f'[{low:.2f}, {high:.2f}]':>16}{r['mean_steps']:>18.1f}  {reasons}", flush=True)
+        if args.list_failures:
+            print("   ", " ".join(r["failed"]))
 
 if __name__ == "__main__":
     main()

@@ -63,7 +63,9 @@ class EnvConfig:
     camera_yaw: float = 60.0
     camera_pitch: float = -25.0
     solver_iterations: int = 20
-    robot: str = "panda"  # an arm of rlgrasp.envs.robot.ROBOTS
+    # An arm of rlgrasp.envs.robot.ROBOTS (the `robot` config group sets it) or a user's arm as a
+    # mapping of rlgrasp.envs.robot_spec.RobotSpec keys (docs/robots.md).
+    robot: Any = "panda"
     robot_urdf: str | None = None  # null: the arm's own model file
     # A set name (the `objects` config group sets it), a list of set names, or a mapping with
     # sets / paths / max_width / scale: see rlgrasp/envs/objects.py.

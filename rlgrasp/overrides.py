@@ -33,11 +33,11 @@ from rlgrasp.compose import compose_config
 from rlgrasp.config import CONFIG_DIR
 
 #: Groups whose files set one ``env`` key; a dict (or, for objects, a list) value is that key's value.
-ENV_GROUPS = {"objects": ("{", "["), "randomization": ("{",)}
+ENV_GROUPS = {"objects": ("{", "["), "randomization": ("{",), "robot": ("{",)}
 #: An option of each group setting a plain name: chosen first, so that the value replaces what an
 #: experiment's option set (Hydra merges a dict into a dict, and refuses one into a list:
 #: experiment=grasp_objects_ppo's objects are a list).
-NEUTRAL = {"objects": "cube", "randomization": "default"}
+NEUTRAL = {"objects": "cube", "randomization": "default", "robot": "panda"}
 #: Hydra's flags after which the command line is not one run's overrides (help, multirun, ...).
 _NOT_A_RUN = ("help", "hydra_help", "cfg", "info", "shell_completion", "multirun", "experimental_rerun",
               "config_path", "config_name", "config_dir")
@@ -57,7 +57,7 @@ def rewrite(overrides: Sequence[str], open_env: bool = False) -> list[str]:
         key, eq, value = item.partition("=")
         name = key.lstrip("+")
         if eq and name in ENV_GROUPS and value.startswith(ENV_GROUPS[name]):
-            if open_env and name == "objects":  # nothing to replace: env holds only what is given
+            if open_env and name in ("objects", "robot"):  # nothing to replace: env holds only what is given
                 item = f"++env.{name}={value}"
             elif not open_env:  # (evaluation has its own `randomization` key)
                 out.append(f"{name}={NEUTRAL[name]}")

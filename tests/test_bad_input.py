@@ -94,6 +94,10 @@ def _files(root: Path) -> dict[str, str]:
             **bad_input_files(root)}  # camera checkpoints: student, orphan, mismatched; the teacher
 
 
+#: A user's arm (the Panda's model) naming a joint its model does not have.
+BAD_ARM = ("model:franka_panda/panda.urdf,arm_joints:[panda_joint1,panda_joint9],"
+           "grasp_link:panda_grasptarget,fingers:[{joint:panda_finger_joint1,open:0.04}],finger_links:[panda_leftfinger,panda_rightfinger],"
+           "neutral_pose:[0,0],max_finger_width:0.08")
 # (entry point, what, arguments after BASE (placeholders filled by _fill), a fragment of the one line)
 TRAIN = [
     ("unknown key", ["algo.lrr=1"], "algo.lrr=1: unknown key 'lrr'; algo has name, gamma"),
@@ -128,6 +132,12 @@ TRAIN = [
     ("own objects: nothing matches", ["objects={paths:[{root}/nowhere/*.obj]}"],
      "nowhere/*.obj' matches no .urdf or .obj file"),
     ("own objects: not a mesh", ["env.objects={paths:[{notamesh}]}"], "has no usable vertices"),
+    ("unknown robot option", ["robot=ur5"],
+     "robot=ur5: no such option; robot is one of kuka_iiwa, panda, xarm6"),
+    ("own arm: a joint not in the model", [f"robot={{{BAD_ARM}}}"],
+     "env: robot.arm_joints: 'panda_joint9' is not a movable joint of "),
+    ("own arm: a required key missing", ["robot={model:{root}/nowhere/arm.urdf}"],
+     "env: robot.arm_joints: missing; a robot needs model, arm_joints"),
     ("CUDA on a machine without it", ["device=cuda"], "device='cuda': CUDA is not available"),
     ("no eval episodes", ["eval.episodes=0"], "eval.episodes=0: must be >= 1"),
     ("keep no checkpoints", ["checkpoint.keep_last=0"], "checkpoint.keep_last=0: must be >= 1"),
@@ -160,6 +170,8 @@ EVAL = [
     ("truncated checkpoint", ["ckpt={truncated}"], "corrupt checkpoint: "),
     ("unknown env keyword", ["env.grip=1"], "env.grip: unknown key 'grip'; env has _target_, control_mode"),
     ("env the checkpoint cannot act in", ["env.control_mode=joint_delta"], "action layout mismatch"),
+    ("a checkpoint of another arm", ["robot=kuka_iiwa"],
+     "was trained on the robot 'panda' and the env has the robot 'kuka_iiwa': a policy does not"),
     ("unknown video format", ["video=true", "video_format=avi"],
      "video_format=avi: must be auto, gif or mp4"),
     ("an unwritable output directory", ["out_dir={unwritable}"], "cannot write the evaluation to"),
@@ -211,6 +223,8 @@ ENJOY = [
     ("unknown visual option", ["visual=heldoutt"], "visual=heldoutt: no such option; visual is one of"),
     ("a camera policy in an env without a camera", ["ckpt={student}", "cameras=none"],
      "is a camera policy (depth [1, 64, 64] + 29 state values) and the env has no camera"),
+    ("a checkpoint of another arm", ["robot=xarm6"], "was trained on the robot 'panda' and the env has the "
+     "robot 'xarm6'"),
 ]
 SWEEP = [
     ("unknown sweep", ["sweep=bogus"], "sweep=bogus: no such option; sweep is one of grasp_ppo, smoke"),

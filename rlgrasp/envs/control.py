@@ -74,7 +74,7 @@ class EEDelta(ControlMode):
         if not self.ee_yaw:
             return robot.inverse_kinematics(target)
         self.yaw = float(np.clip(self.yaw + action[3] * self.yaw_step, -math.pi / 2, math.pi / 2))
-        return robot.inverse_kinematics(target, robot.client.getQuaternionFromEuler((math.pi, 0.0, self.yaw)))
+        return robot.inverse_kinematics(target, robot.gripper_down(self.yaw))
 
 
 class JointDelta(ControlMode):
@@ -127,5 +127,8 @@ def make_control(mode: str, robot: Robot, **settings: Any) -> ControlMode:
     if mode == "joint_delta":
         return JointDelta(robot, settings["joint_step"])
     if mode == "joint_torque":
+        if not robot.torque_control:
+            raise ValueError("control_mode=joint_torque: this arm's model has no meaningful dynamics "
+                             "(robot.torque_control=false); use ee_delta or joint_delta")
         return JointTorque(robot, settings["torque_fraction"], settings["gravity_compensation"])
     raise ValueError(f"unknown control_mode {mode!r}; valid modes: {', '.join(CONTROL_MODES)}")

@@ -41,7 +41,8 @@ class GraspEnv(gym.Env):
     """A robot arm grasps an object on the ground and lifts it.
 
     ``objects`` says which objects episodes draw (``rlgrasp.envs.objects``; default the cube),
-    ``robot`` which arm (``rlgrasp.envs.robot.ROBOTS``). Observation: one float32 vector of named
+    ``robot`` which arm (a name of ``rlgrasp.envs.robot.ROBOTS``, or a user's arm as a mapping of
+    ``rlgrasp.envs.robot_spec.RobotSpec`` keys: docs/robots.md). Observation: one float32 vector of named
     parts (``obs_slices``; ``rlgrasp.envs.observation``): ``object_pos``/``object_quat`` are the
     object's base (centre of mass) pose, ``object_minus_grasp`` is its bounding-box centre minus the
     grasp point and ``object_extents`` the bounding box's size in the object's own frame.
@@ -81,7 +82,7 @@ class GraspEnv(gym.Env):
         camera_yaw: float = 60.0,
         camera_pitch: float = -25.0,
         solver_iterations: int = 20,
-        robot: str = "panda",
+        robot: str | Mapping[str, Any] = "panda",
         robot_urdf: str | None = None,
         objects: str | list[str] | Mapping[str, Any] | None = "cube",
         camera: Mapping[str, Any] | None = None,
@@ -108,8 +109,8 @@ class GraspEnv(gym.Env):
         self._build_spaces()
 
     def _build_world(
-        self, time_step: float, solver_iterations: int, robot: str, robot_urdf: str | None,
-        camera_spec: CameraSpec | None, visual: str | None,
+        self, time_step: float, solver_iterations: int, robot: str | Mapping[str, Any],
+        robot_urdf: str | None, camera_spec: CameraSpec | None, visual: str | None,
     ) -> None:
         """The physics client, the robot (its cheap render model when a camera looks), the camera and
         the visual randomizer; the saved world each reset restores."""

@@ -22,6 +22,7 @@ from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from rlgrasp.config import EnvConfig
+from rlgrasp.envs.robot import robot_label
 from rlgrasp.evaluation.policies import POLICIES, PolicySource, build_policy
 from rlgrasp.overrides import explain
 from rlgrasp.train.checkpoint import unpickler_reason
@@ -251,8 +252,21 @@ def prepare(
         run_dir=str(run_dir) if run_dir else None,
         info=info,
     )
+    if source.ckpt is not None:
+        check_robot(env_cfg, source.env_cfg, f"checkpoint {source.ckpt_path}")
     _dry_run(source)
     return source
+
+
+def check_robot(trained_env: dict[str, Any], env_cfg: dict[str, Any], where: str) -> None:
+    """A policy never leaks across arms: another arm may share the observation's size (the Panda and
+    the iiwa both have 7 joints) while every joint means something else."""
+    trained, here = (robot_label(cfg.get("robot", "panda")) for cfg in (trained_env, env_cfg))
+    if trained != here:
+        raise EvaluationError(
+            f"{where} was trained on the robot {trained!r} and the env has the robot {here!r}: a policy "
+            f"does not transfer between arms (drop robot=/env.robot=, or evaluate a checkpoint of {here!r})"
+        )
 
 
 def _dry_run(source: PolicySource) -> None:

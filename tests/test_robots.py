@@ -1,0 +1,235 @@
+"""Every arm rlgrasp ships, and a user's arm from a YAML file: each builds, resets deterministically,
+passes gymnasium's checker, drives its three control modes, takes the robot's randomization, gives
+camera observations and is grasped with by the scripted expert; bad descriptions fail in one line;
+a checkpoint of one arm is refused by an env of another."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pybullet_data
+import pytest
+from gymnasium.utils.env_checker import check_env
+from omegaconf import OmegaConf
+
+from rlgrasp.envs import PandaGraspEnv, ScriptedExpert
+from rlgrasp.envs.robot import ROBOTS, robot_label
+from rlgrasp.envs.robot_spec import KUKA_IIWA, PANDA, XARM6
+from rlgrasp.evaluation.source import EvaluationError, check_robot
+from rlgrasp.overrides import rewrite
+
+ARMS = {"panda": (PANDA, 7), "kuka_iiwa": (KUKA_IIWA, 7), "xarm6": (XARM6, 6)}
+
+
+@pytest.fixture
+def arm_env():
+    """``arm_env(robot, **kwargs)``: a grasp env of that arm, closed at the end of the test."""
+    envs = []
+
+    def make(robot, **kwargs):
+        env = PandaGraspEnv(robot=robot, **kwargs)
+        envs.append(env)
+        return env
+
+    yield make
+    for env in envs:
+        env.close()
+
+
+def test_the_shipped_arms_are_registered():
+    assert {n: ROBOTS[n] for n in ARMS} == {n: spec for n, (spec, _) in ARMS.items()}
+
+
+@pytest.mark.parametrize("robot", ARMS)
+def test_each_arm_builds_sized_from_its_joints_and_passes_the_checker(robot, arm_env):
+    env = arm_env(robot)
+    dof = ARMS[robot][1]
+    assert env.robot.arm_dof == dof
+    assert env.obs_slices["arm_q"].stop - env.obs_slices["arm_q"].start == dof
+    obs, _ = env.reset(seed=0)
+    assert np.allclose(obs[env.obs_slices["arm_q"]], ARMS[robot][0].neutral_pose, atol=0.1)  # default noise
+    assert obs[env.obs_slices["finger_width"]][0] == pytest.approx(ARMS[robot][0].max_finger_width, abs=0.01)
+    check_env(env, skip_render_check=True)
+
+
+@pytest.mark.parametrize("robot", ARMS)
+def test_each_arm_resets_and_steps_deterministically(robot, arm_env):
+    a, b = arm_env(robot, randomization="wide"), arm_env(robot, randomization="wide")
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-1, 1, (10, a.action_dim)).astype(np.float32)
+    for env in (a, b):
+        env.reset(seed=3)
+    np.testing.assert_array_equal(a.reset(seed=7)[0], b.reset(seed=7)[0])
+    for action in actions:
+        np.testing.assert_array_equal(a.step(action)[0], b.step(action)[0])
+
+
+@pytest.mark.parametrize("robot", ARMS)
+def test_the_grasp_point_follows_ee_delta_and_ik_reaches_down(robot, arm_env):
+    env = arm_env(robot, randomization="none")
+    env.reset(seed=0)
+    start = env.robot.grasp_point()[0]
+    for _ in range(3):
+        env.step(np.array([0.0, 0.0, -1.0, 1.0], np.float32))
+    moved = env.robot.grasp_point()[0] - start
+    assert moved[2] < -0.08 and np.abs(moved[:2]).max() < 0.02
+    target = np.array([0.65, 0.08, 0.02])  # a corner of the object's region, at grasp height
+    for _ in range(5):
+        env.robot.reset(env.robot.inverse_kinematics(target))
+    assert np.linalg.norm(env.robot.grasp_point()[0] - target) < 0.01
+
+
+@pytest.mark.parametrize("robot", ARMS)
+def test_joint_modes_move_the_arm_and_gravity_compensation_holds_it(robot, arm_env):
+    dof = ARMS[robot][1]
+    for mode in ("joint_delta", "joint_torque"):
+        env = arm_env(robot, control_mode=mode, randomization="none")
+        assert env.action_space.shape == (dof + 1,)
+        env.reset(seed=0)
+        q0 = env.robot.joint_state()[0]
+        idle = np.zeros(dof + 1, np.float32)
+        idle[-1] = 1.0
+        for _ in range(10):
+            env.step(idle)
+        assert np.abs(env.robot.joint_state()[0] - q0).max() < 0.01, mode
+        push = idle.copy()
+        push[0] = 1.0
+        for _ in range(3):
+            env.step(push)
+        assert env.robot.joint_state()[0][0] - q0[0] > 0.05, mode
+
+
+@pytest.mark.parametrize("robot", ARMS)
+def test_the_robot_randomization_reaches_each_arm(robot, arm_env):
+    env = arm_env(robot, randomization="wide")
+    _, info = env.reset(seed=1)
+    ep, r, c = info["randomization"], env.robot, env.client
+    assert r.finger_force == pytest.approx(ep["finger_force"])
+    assert r.position_gain == pytest.approx(ARMS[robot][0].position_gain * ep["position_gain_scale"])
+    assert c.getDynamicsInfo(r.body, r.finger_links[1])[1] == pytest.approx(ep["finger_friction"])
+    q = r.joint_state()[0]
+    assert 0 < np.abs(q - np.asarray(r.neutral_pose)).max() < 0.5  # start-pose noise, within reason
+
+
+@pytest.mark.parametrize("robot", ARMS)
+def test_a_wrist_camera_rides_on_each_arm(robot, arm_env):
+    env = arm_env(robot, randomization="none", objects="primitives",
+                  camera={"mount": "wrist", "modality": "depth", "width": 32, "height": 32})
+    obs, _ = env.reset(seed=0)
+    depth = obs["depth"]
+    assert depth.shape == (1, 32, 32) and np.isfinite(depth).all()
+    # It looks down along the fingers: the ground and the object are in view, nearer than `far`.
+    assert np.median(depth) < 0.5 and depth.max() - depth.min() > 0.02
+
+
+@pytest.mark.parametrize("robot", ARMS)
+def test_each_arms_expert_lifts_the_cube(robot, arm_env):
+    env = arm_env(robot)
+    expert = ScriptedExpert(env.obs_slices, action_dim=env.action_dim)
+    successes = 0
+    for seed in range(10):
+        obs, info = env.reset(seed=seed)
+        expert.reset()
+        for _ in range(env.max_episode_steps):
+            obs, _, _, _, info = env.step(expert(obs))
+        successes += bool(info["is_success"])
+    assert successes >= 7
+
+
+# --- a user's arm: a YAML file and a model file, no code ---------------------------------------
+def _yaml_arm(tmp_path, spec, **changes):
+    """The arm's description written to a YAML file as a user would, read back as the config would."""
+    data = {**spec.as_mapping(), **changes}
+    data["model"] = f"{pybullet_data.getDataPath()}/{spec.model}"
+    path = tmp_path / "my_arm.yaml"
+    path.write_text(OmegaConf.to_yaml(OmegaConf.create({"robot": data})))
+    return OmegaConf.load(path).robot
+
+
+def test_an_arm_from_yaml_is_the_shipped_arm(tmp_path, arm_env):
+    robot = _yaml_arm(tmp_path, XARM6, name="")
+    env, shipped = arm_env(robot, randomization="wide"), arm_env("xarm6", randomization="wide")
+    np.testing.assert_array_equal(env.reset(seed=5)[0], shipped.reset(seed=5)[0])
+    action = np.array([0.3, -0.2, -1.0, 1.0], np.float32)
+    np.testing.assert_array_equal(env.step(action)[0], shipped.step(action)[0])
+    assert robot_label(robot) == "xarm6_with_gripper"  # no name: the model file's stem
+
+
+def test_a_user_arm_on_the_command_line_reaches_env_robot(train_cfg):
+    arm = "{model:franka_panda/panda.urdf,name:mine}"
+    assert rewrite([f"robot={arm}"]) == ["robot=panda", f"env.robot={arm}"]
+    cfg = train_cfg(*rewrite(["robot=kuka_iiwa"]))
+    assert cfg.env.robot == "kuka_iiwa"
+    cfg = train_cfg(*rewrite([f"robot={arm}"]))
+    assert dict(cfg.env.robot) == {"model": "franka_panda/panda.urdf", "name": "mine"}
+
+
+PANDA_FINGERS = [{"joint": f"panda_finger_joint{i}", "open": 0.04} for i in (1, 2)]
+BAD_ARMS = [
+    ("missing model file", {"model": "/tmp/nowhere/arm.urdf"}, FileNotFoundError,
+     "robot.model: model file not found: /tmp/nowhere/arm.urdf"),
+    ("not a model file", {"model": "franka_panda/meshes/collision/hand.obj"}, ValueError,
+     "hand.obj': must be a .urdf or .sdf file"),
+    ("joint not in the model", {"arm_joints": [*PANDA.arm_joints[:6], "panda_joint9"]}, ValueError,
+     "robot.arm_joints: 'panda_joint9' is not a movable joint of .*panda.urdf; its movable joints: "
+     "panda_joint1"),
+    ("grasp link not in the model", {"grasp_link": "panda_tcp"}, ValueError,
+     "robot.grasp_link: 'panda_tcp' is not a link of .*; its links: panda_link1"),
+    ("finger joint not in the model", {"fingers": [{"joint": "panda_finger", "open": 0.04}]}, ValueError,
+     "robot.fingers: 'panda_finger' is not a movable joint"),
+    ("fingers that do not open", {"fingers": [{**f, "open": 0.0, "closed": 0.04} for f in PANDA_FINGERS]},
+     ValueError, "robot.fingers: the finger links panda_leftfinger, panda_rightfinger are 0.080 m apart "
+     "closed and 0.000 m open"),
+    ("finger position outside its limits", {"fingers": [{**f, "open": 0.4} for f in PANDA_FINGERS]},
+     ValueError, r"robot.fingers: panda_finger_joint1 open=0.4 is outside its limits \[0.0, 0.04\]"),
+    ("neutral pose outside the limits", {"neutral_pose": [0.0, 0.41, 0.0, 1.85, 0.0, 2.26, 0.79]},
+     ValueError, r"robot.neutral_pose: panda_joint4=1.85 is outside its limits \[-3.1416, 0.0\]"),
+    ("neutral pose of another size", {"neutral_pose": [0.0, 0.41]}, ValueError,
+     "robot.neutral_pose has 2 angles: must have one per arm joint"),
+    ("unknown key", {"grasp_lnk": "x"}, ValueError,
+     "robot.grasp_lnk: unknown key; a robot has model, arm_joints"),
+    ("a finger entry that is not one", {"fingers": ["panda_finger_joint1"]}, ValueError,
+     r"robot.fingers\[0\]='panda_finger_joint1': must be \{joint: <name>, open: <position>"),
+    ("a mimic joint following no motor",
+     {"fingers": [{**PANDA_FINGERS[0], "mimic": "panda_finger_joint2"},
+                  {**PANDA_FINGERS[1], "mimic": "panda_finger_joint1"}]},
+     ValueError, "robot.fingers: panda_finger_joint1 mimics 'panda_finger_joint2', which must be a finger "
+     "joint with a motor of its own"),
+]
+
+
+@pytest.mark.parametrize("what, changes, error, match", BAD_ARMS, ids=[c[0] for c in BAD_ARMS])
+def test_a_bad_arm_fails_in_one_line_naming_the_key(what, changes, error, match):
+    mapping = {**PANDA.as_mapping(), **changes}
+    with pytest.raises(error, match=match) as info:
+        PandaGraspEnv(robot=mapping)
+    assert "\n" not in str(info.value)
+
+
+def test_a_missing_key_is_named():
+    mapping = PANDA.as_mapping()
+    del mapping["grasp_link"]
+    with pytest.raises(ValueError, match="robot.grasp_link: missing; a robot needs model, arm_joints"):
+        PandaGraspEnv(robot=mapping)
+
+
+def test_unknown_robot_names_the_valid_ones():
+    with pytest.raises(ValueError, match="unknown robot 'ur5'; valid robots: panda, kuka_iiwa, xarm6"):
+        PandaGraspEnv(robot="ur5")
+
+
+def test_torque_control_is_refused_where_the_model_says_it_is_not_meaningful():
+    mapping = {**dataclasses.asdict(PANDA), "torque_control": False, "fingers": PANDA_FINGERS}
+    with pytest.raises(ValueError, match="control_mode=joint_torque: this arm's model has no meaningful"):
+        PandaGraspEnv(robot=mapping, control_mode="joint_torque")
+
+
+# --- a policy never leaks across arms ---------------------------------------------------------
+def test_a_checkpoint_of_one_arm_is_refused_by_an_env_of_another():
+    with pytest.raises(EvaluationError, match="was trained on the robot 'kuka_iiwa' and the env has the "
+                                              "robot 'panda'"):
+        check_robot({"robot": "kuka_iiwa"}, {"robot": "panda"}, "checkpoint x.pt")
+    with pytest.raises(EvaluationError, match="trained on the robot 'panda' .* the robot 'mine'"):
+        check_robot({}, {"robot": {"name": "mine", "model": "arm.urdf"}}, "checkpoint x.pt")  # old: the Panda
+    check_robot({"robot": "xarm6"}, {"robot": "xarm6"}, "checkpoint x.pt")
