@@ -272,6 +272,20 @@ class TrainConfig:
     resume: str | None = None
 
 
+# --- demonstrations (rlgrasp-demos) -----------------------------------------------------------
+@dataclass
+class DemosConfig:
+    """``rlgrasp-demos``'s config (``configs/demos.yaml``): which episodes to record, and where."""
+
+    env: Any = MISSING  # the training env node (env, objects, randomization groups)
+    episodes: int = 100
+    out: str = MISSING  # the file goes to <out>/demos
+    policy: str = "scripted"  # scripted, or a checkpoint file / run directory whose policy acts
+    keep: str = "success"  # success: only successful episodes; all: every episode with its outcome
+    seed: int = 0  # episode i is reset with seed + i
+    workers: int = 2  # processes (1: in this one); the file does not depend on it
+
+
 # --- evaluation (rlgrasp-eval) ----------------------------------------------------------------
 @dataclass
 class EvalConfig:
@@ -394,6 +408,7 @@ def register_configs() -> None:
     cs.store(group="logger", name="mlflow_schema", node=MlflowLoggerConfig)
     cs.store(group="paths", name="paths_schema", node=PathsConfig)
     cs.store(name="eval_schema", node=EvalConfig)
+    cs.store(name="demos_schema", node=DemosConfig)
     cs.store(group="sweep", name="sweep_schema", node=SweepConfig)
     cs.store(name=SWEEP_PRIMARY, node={"defaults": [{"sweep": "smoke"}, "_self_"]})
 
