@@ -120,3 +120,13 @@ def summary(episodes: list[dict[str, Any]], kept: int) -> dict[str, Any]:
         "frames": sum(e["length"] for e in episodes if e["kept"]),
         "objects": {k: {"success": w, "episodes": c} for k, (w, c) in sorted(objects.items())},
     }
+
+
+def demos_for(path: str, make_env: Any, env_cfg: Any) -> Demos:
+    """The demonstrations at ``path`` checked against the env ``make_env`` builds."""
+    env = make_env()
+    try:
+        layout = layout_of(env, dict(env_cfg))
+    finally:
+        env.close()
+    return load_demos(path, layout)
