@@ -90,7 +90,7 @@ def load_demos(path: str | Path, layout: dict[str, Any]) -> Demos:
     recorded with another observation layout or control than ``layout`` (``layout_of``)."""
     path = Path(path).expanduser()
     meta = _meta(path)
-    for key in ("obs_dim", "action_dim", "obs_slices", *LAYOUT_KEYS):
+    for key in (*LAYOUT_KEYS, "obs_dim", "action_dim", "obs_slices"):
         if meta.get(key) != layout.get(key):
             raise DemoError(
                 f"algo.demos={path}: recorded with {key}={meta.get(key)!r}, this run has {layout.get(key)!r}"
