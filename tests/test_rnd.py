@@ -8,10 +8,14 @@ import torch
 from omegaconf import OmegaConf
 from tensordict import TensorDict
 
+from rlgrasp.compose import compose_train
 from rlgrasp.config import MLPConfig, PPOConfig
+from rlgrasp.train.loop import Trainer
 from rlgrasp.train.models import RunningNorm, build_models
 from rlgrasp.train.ppo import PPOLearner
+from rlgrasp.train.resume import prepare_run
 from rlgrasp.train.rnd import INTRINSIC_REWARD, RND
+from tests.test_demos import SMOKE, _logged
 
 OBS_DIM, ENVS, STEPS = 6, 4, 32
 
@@ -84,3 +88,22 @@ def test_the_learner_trains_rnd_and_checkpoints_round_trip() -> None:
     restored.load_state_dict(rnd.state_dict())
     assert torch.equal(restored.novelty(obs), rnd.novelty(obs))
     assert torch.equal(restored.obs_rms.mean, rnd.obs_rms.mean) and restored.reward_rms.count > 1
+
+
+def test_a_run_with_rnd_logs_it_checkpoints_its_networks_and_resumes(tmp_path) -> None:
+    run = tmp_path / "run"
+    args = [*SMOKE, "algo.rnd_coeff=0.5", f"paths.output_dir={run}"]
+    trainer = Trainer(prepare_run(compose_train(args))[0])
+    seen = _logged(trainer)
+    trainer.run()
+    assert len(seen["charts/intrinsic_reward"]) == 2 and len(seen["losses/rnd_loss"]) == 2
+    state = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
+    assert torch.equal(state["rnd"]["obs_rms.mean"], trainer.rnd.obs_rms.mean)
+    cfg, resumed = prepare_run(compose_train([*args, f"resume={run}", "total_frames=384"]),
+                               {"resume", "total_frames"})
+    again = Trainer(cfg, resumed=resumed)
+    predictor = {k: v for k, v in state["rnd"].items() if k.startswith("predictor.")}
+    assert all(torch.equal(again.rnd.state_dict()[k], v) for k, v in predictor.items())
+    assert float(again.rnd.reward_rms.count) == float(state["rnd"]["reward_rms.count"]) > 1
+    again.run()
+    assert again.updates == 3
