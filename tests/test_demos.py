@@ -103,6 +103,11 @@ def test_foreign_missing_and_empty_files_are_refused(tmp_path: Path) -> None:
         load_demos(tmp_path / "nowhere", _layout())
     with pytest.raises(DemoError, match="not a demonstration directory"):
         load_demos(tmp_path, _layout())
+    failed = {"observation": torch.zeros(2, 1), "success": torch.zeros(2, dtype=torch.bool)}
+    failures = TensorDict(failed, [2])
+    write_demos(tmp_path / "failed", failures, {**_layout(), "summary": {"kept": 1}})
+    with pytest.raises(DemoError, match="none of its 1 episodes succeeded"):
+        load_demos(tmp_path / "failed", _layout())
 
 
 def test_behaviour_cloning_lowers_its_loss_on_a_fixed_set(recorded: Path) -> None:

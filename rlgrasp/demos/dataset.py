@@ -97,8 +97,10 @@ def load_demos(path: str | Path, layout: dict[str, Any]) -> Demos:
             )
     if not meta.get("summary", {}).get("kept"):
         raise DemoError(f"algo.demos={path}: holds no demonstrations (0 episodes kept)")
-    frames = TensorDict.load_memmap(Path(meta["dir"]) / FRAMES)
-    return Demos(frames.to_tensordict(), meta)
+    frames = TensorDict.load_memmap(Path(meta["dir"]) / FRAMES).to_tensordict()
+    if not bool(frames["success"].any()):  # learning imitates successes only
+        raise DemoError(f"algo.demos={path}: none of its {meta['summary']['kept']} episodes succeeded")
+    return Demos(frames, meta)
 
 
 def summary(episodes: list[dict[str, Any]], kept: int) -> dict[str, Any]:
