@@ -99,6 +99,24 @@ class PPOConfig:
     # Recompute advantages with the current critic each epoch (TorchRL's sota PPO); false: once per
     # update (CleanRL), cheaper.
     gae_every_epoch: bool = True
+    # Sparse rewards (docs/sparse.md). A demonstration directory (rlgrasp-demos; referenced, not copied):
+    # each minibatch's loss gains demo_coeff * demo_decay**k x a behaviour-cloning loss on
+    # demo_minibatch_size demonstrated steps at update k (DAPG). null: none.
+    demos: str | None = None
+    demo_coeff: float = 0.1
+    demo_decay: float = 0.95
+    demo_minibatch_size: int = 256
+    # Behaviour-cloning pre-training of the actor (and the critic on the demonstrations' returns)
+    # before a fresh run's first update; 0: none. bc_only: pre-train, evaluate, stop (the BC baseline).
+    bc_epochs: int = 0
+    bc_lr: float = 1e-3
+    bc_minibatch_size: int = 64
+    bc_only: bool = False
+    # Random Network Distillation: rnd_coeff x the intrinsic advantage joins PPO's (0: off).
+    rnd_coeff: float = 0.0
+    rnd_gamma: float = 0.99  # intrinsic returns are non-episodic
+    rnd_features: int = 64
+    rnd_update_fraction: float = 0.25  # of each minibatch trains the predictor
 
 
 @dataclass
@@ -276,6 +294,20 @@ class TrainConfig:
     resume: str | None = None
 
 
+# --- demonstrations (rlgrasp-demos) -----------------------------------------------------------
+@dataclass
+class DemosConfig:
+    """``rlgrasp-demos``'s config (``configs/demos.yaml``): which episodes to record, and where."""
+
+    env: Any = MISSING  # the training env node (env, objects, randomization groups)
+    episodes: int = 100
+    out: str = MISSING  # the file goes to <out>/demos
+    policy: str = "scripted"  # scripted, or a checkpoint file / run directory whose policy acts
+    keep: str = "success"  # success: only successful episodes; all: every episode with its outcome
+    seed: int = 0  # episode i is reset with seed + i
+    workers: int = 2  # processes (1: in this one); the file does not depend on it
+
+
 # --- evaluation (rlgrasp-eval) ----------------------------------------------------------------
 @dataclass
 class EvalConfig:
@@ -398,6 +430,7 @@ def register_configs() -> None:
     cs.store(group="logger", name="mlflow_schema", node=MlflowLoggerConfig)
     cs.store(group="paths", name="paths_schema", node=PathsConfig)
     cs.store(name="eval_schema", node=EvalConfig)
+    cs.store(name="demos_schema", node=DemosConfig)
     cs.store(group="sweep", name="sweep_schema", node=SweepConfig)
     cs.store(name=SWEEP_PRIMARY, node={"defaults": [{"sweep": "smoke"}, "_self_"]})
 
@@ -421,7 +454,8 @@ def _train_problems(cfg: Any, batch: int) -> list[str]:
         ("collector.torch_threads", c.torch_threads, c.torch_threads >= 1, "must be >= 1"),
         ("algo.epochs", a.epochs, a.epochs >= 1, "must be >= 1"),
         ("algo.lr", a.lr, a.lr > 0, "must be > 0"),
-        *(_ppo_checks(a, batch) if a.name == "ppo" else _distill_checks(a)),
+        *(_ppo_checks(a, batch) + _sparse_checks(a, cfg.env.get("camera")) if a.name == "ppo"
+          else _distill_checks(a)),
         ("model.hidden_sizes", list(m.hidden_sizes), len(m.hidden_sizes) > 0 and all(
             _positive(h) for h in m.hidden_sizes), "must be a non-empty list of positive sizes"),
         ("model.activation", m.activation, m.activation in ("tanh", "relu", "elu"),
@@ -459,6 +493,28 @@ def _ppo_checks(a: Any, batch: int) -> list[tuple[str, Any, bool, str]]:
         ("algo.gae_lambda", a.gae_lambda, 0 <= a.gae_lambda <= 1, "must be in [0, 1]"),
         ("algo.clip_epsilon", a.clip_epsilon, a.clip_epsilon > 0, "must be > 0"),
         ("algo.max_grad_norm", a.max_grad_norm, a.max_grad_norm > 0, "must be > 0"),
+    ]
+
+
+def _sparse_checks(a: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
+    """Demonstrations and curiosity (``rlgrasp.demos``, ``rlgrasp.train.rnd``): state policies only."""
+    state = not camera
+    return [
+        ("algo.demo_coeff", a.demo_coeff, a.demo_coeff >= 0, "must be >= 0 (0: no imitation term)"),
+        ("algo.demo_decay", a.demo_decay, 0 < a.demo_decay <= 1, "must be in (0, 1]"),
+        ("algo.demo_minibatch_size", a.demo_minibatch_size, a.demo_minibatch_size >= 1, "must be >= 1"),
+        ("algo.bc_epochs", a.bc_epochs, a.bc_epochs >= 0, "must be >= 0 (0: no pre-training)"),
+        ("algo.bc_lr", a.bc_lr, a.bc_lr > 0, "must be > 0"),
+        ("algo.bc_minibatch_size", a.bc_minibatch_size, a.bc_minibatch_size >= 1, "must be >= 1"),
+        ("algo.bc_epochs", a.bc_epochs, not a.bc_epochs or a.demos, "needs algo.demos=<demonstrations>"),
+        ("algo.bc_only", a.bc_only, not a.bc_only or a.bc_epochs > 0, "needs algo.bc_epochs > 0"),
+        ("algo.demos", a.demos, not a.demos or state, "needs a state policy (cameras=none)"),
+        ("algo.rnd_coeff", a.rnd_coeff, a.rnd_coeff >= 0, "must be >= 0 (0: no curiosity)"),
+        ("algo.rnd_coeff", a.rnd_coeff, not a.rnd_coeff or state, "needs a state policy (cameras=none)"),
+        ("algo.rnd_gamma", a.rnd_gamma, 0 < a.rnd_gamma <= 1, "must be in (0, 1]"),
+        ("algo.rnd_features", a.rnd_features, a.rnd_features >= 1, "must be >= 1"),
+        ("algo.rnd_update_fraction", a.rnd_update_fraction, 0 < a.rnd_update_fraction <= 1,
+         "must be in (0, 1]"),
     ]
 
 

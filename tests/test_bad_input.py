@@ -2,7 +2,7 @@
 non-zero exit code, no traceback, and leaves nothing behind (no run, evaluation or export folder).
 The cases run the real entry points (Hydra and argparse included) in-process: scripts/train.py,
 scripts/evaluate.py (rlgrasp-eval), scripts/export.py, scripts/enjoy.py (without a display: the
-checks come before the display's), scripts/sweep.py and rlgrasp-demo.
+checks come before the display's), scripts/sweep.py, scripts/demos.py (rlgrasp-demos) and rlgrasp-demo.
 
 ``python tests/test_bad_input.py`` prints the bad-input table of the docs from these cases.
 """
@@ -28,6 +28,7 @@ from rlgrasp import demo
 from rlgrasp.compose import compose_train
 from rlgrasp.train.loop import Trainer
 from rlgrasp.utils import markdown_table
+from tests.test_demos import demo_files
 from tests.test_vision_eval import bad_input_files
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -35,7 +36,7 @@ SMOKE = ["experiment=smoke", "logger=none"]
 #: What PyBullet prints on stderr when it is imported, whatever the command: not one of our lines.
 PYBULLET_BANNER = "pybullet build time:"
 SCRIPTS = {"train": "train.py", "eval": "evaluate.py", "export": "export.py", "enjoy": "enjoy.py",
-           "sweep": "sweep.py"}
+           "sweep": "sweep.py", "demos": "demos.py"}
 #: Each entry point's command before a case's arguments (placeholders filled by _fill).
 BASE = {
     "train": [*SMOKE, "paths.root_dir={root}"],
@@ -44,6 +45,7 @@ BASE = {
     "enjoy": ["ckpt={run}", "ckpt_kind=last"],
     "sweep": ["experiment=smoke", "sweep.root_dir={root}/sweeps"],
     "demo": ["--out", "{root}/demo", "--episodes", "1"],
+    "demos": ["out={root}/demos_out", "episodes=1", "workers=1"],
 }
 COMMANDS = {
     "train": "scripts/train.py experiment=smoke logger=none",
@@ -52,6 +54,7 @@ COMMANDS = {
     "enjoy": "rlgrasp-enjoy ckpt=<run> ckpt_kind=last (no display)",
     "sweep": "rlgrasp-sweep experiment=smoke",
     "demo": "rlgrasp-demo --out <dir> --episodes 1",
+    "demos": "rlgrasp-demos out=<dir> episodes=1 workers=1",
 }
 
 
@@ -91,7 +94,8 @@ def _files(root: Path) -> dict[str, str]:
     notes.write_text("not a model")
     return {"run": str(run), "empty": str(empty), "truncated": str(truncated), "foreign": str(foreign),
             "unwritable": str(unwritable / "out"), "notamesh": str(notamesh), "notes": str(notes),
-            **bad_input_files(root)}  # camera checkpoints: student, orphan, mismatched; the teacher
+            **bad_input_files(root),  # camera checkpoints: student, orphan, mismatched; the teacher
+            **demo_files(root)}  # demonstrations of another control mode, and of no episode
 
 
 #: A user's arm (the Panda's model) naming a joint its model does not have.
@@ -151,6 +155,16 @@ TRAIN = [
      "cannot change on resume: algo.gamma"),
     ("a fresh run into a run dir with checkpoints", ["hydra.run.dir={run}"], "already holds checkpoints"),
     ("an unwritable output directory", ["hydra.run.dir={unwritable}"], "cannot create the run directory"),
+    ("demonstrations: a missing file", ["algo.demos={root}/no_demos"], "no_demos: no such file or directory"),
+    ("demonstrations of another control mode", ["algo.demos={foreign_demos}"],
+     "recorded with control_mode='joint_delta', this run has 'ee_delta'"),
+    ("demonstrations of no episode", ["algo.demos={empty_demos}"],
+     "holds no demonstrations (0 episodes kept)"),
+    ("a demonstration decay above 1", ["algo.demo_decay=1.5"], "algo.demo_decay=1.5: must be in (0, 1]"),
+    ("a demonstration decay of 0", ["algo.demo_decay=0"], "algo.demo_decay=0.0: must be in (0, 1]"),
+    ("a negative demonstration weight", ["algo.demo_coeff=-1"], "algo.demo_coeff=-1.0: must be >= 0"),
+    ("a negative curiosity coefficient", ["algo.rnd_coeff=-0.5"], "algo.rnd_coeff=-0.5: must be >= 0"),
+    ("pre-training without demonstrations", ["algo.bc_epochs=5"], "algo.bc_epochs=5: needs algo.demos="),
 ]
 EVAL = [
     ("unknown objects option (a typo of random_urdfs_test)", ["objects=random_urdfs_tset"],
@@ -256,8 +270,18 @@ DEMO = [
     ("negative seed", ["--seed", "-1"], "--seed -1: must be at least 0"),
     ("unknown flag", ["--bogus"], "unrecognized arguments: --bogus"),
 ]
+DEMOS = [
+    ("no episodes", ["episodes=0"], "episodes=0: must be at least 1"),
+    ("keep neither", ["keep=some"], "keep=some: must be success or all"),
+    ("the expert in another control mode", ["env.control_mode=joint_delta"],
+     "env.control_mode=joint_delta: the scripted expert acts in ee_delta"),
+    ("a missing policy checkpoint", ["policy={root}/nowhere.pt"], "nowhere.pt: missing checkpoint"),
+    ("unknown objects option", ["objects=random_urdfs_tset"], "objects=random_urdfs_tset: no such option"),
+    ("an unwritable output directory", ["out={unwritable}"], "cannot write there"),
+]
 CASES = [(entry, *case) for entry, cases in (("train", TRAIN), ("eval", EVAL), ("export", EXPORT),
-                                              ("enjoy", ENJOY), ("sweep", SWEEP), ("demo", DEMO))
+                                              ("enjoy", ENJOY), ("sweep", SWEEP), ("demo", DEMO),
+                                              ("demos", DEMOS))
          for case in cases]
 
 

@@ -178,7 +178,9 @@ SMOKE_CONFIG = """
 algo: {name: ppo, gamma: 0.9, gae_lambda: 0.9, epochs: 2, minibatch_size: 256, lr: 0.0003, anneal_lr: true,
        min_lr_frac: 0.0, clip_epsilon: 0.2, entropy_coeff: 0.0, critic_coeff: 0.5, loss_critic_type: l2,
        normalize_advantage: true, max_grad_norm: 0.5, target_kl: 0.05, adam_eps: 1.0e-05,
-       gae_every_epoch: true}
+       gae_every_epoch: true, demos: null, demo_coeff: 0.1, demo_decay: 0.95, demo_minibatch_size: 256,
+       bc_epochs: 0, bc_lr: 0.001, bc_minibatch_size: 64, bc_only: false, rnd_coeff: 0.0, rnd_gamma: 0.99,
+       rnd_features: 64, rnd_update_fraction: 0.25}
 model: {name: mlp, hidden_sizes: [64, 64], activation: tanh, init_log_std: -0.5, min_std: 0.05,
         obs_norm: true, obs_clip: 10.0}
 collector: {_target_: rlgrasp.train.collectors.ProcessCollector, num_workers: 2, envs_per_worker: 2,

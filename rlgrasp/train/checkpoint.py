@@ -16,6 +16,9 @@ writes it):
 - ``spec``: ``obs_key``, ``obs_dim``, ``action_dim``, ``action_low``, ``action_high``
 - ``versions``: python, torch, torchrl, tensordict, gymnasium, pybullet, rlgrasp
 - ``run_dir``: the run directory it was written in
+- ``rnd`` (runs with ``algo.rnd_coeff`` > 0): the RND networks, their running statistics and the
+  intrinsic value head (``rlgrasp.train.rnd``); a demonstration file is referenced by
+  ``config["algo"]["demos"]``, not stored
 
 Only tensors and plain containers are stored, and every reader loads with ``weights_only=True``: a
 checkpoint someone sends cannot run code when it is loaded, and one that would need to unpickle any

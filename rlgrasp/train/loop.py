@@ -23,6 +23,8 @@ from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDictBase
 
 from rlgrasp.config import ConfigError
+from rlgrasp.demos.bc import Imitation, pretrain
+from rlgrasp.demos.dataset import demos_for
 from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.batches import Batches
@@ -35,6 +37,7 @@ from rlgrasp.train.parts import build_parts
 from rlgrasp.train.ppo import NonFiniteError, PPOLearner
 from rlgrasp.train.preemption import StopSignals
 from rlgrasp.train.resume import prepare_run
+from rlgrasp.train.rnd import RND
 from rlgrasp.train.rundir import CHECKPOINTS, ENV_ERRORS
 from rlgrasp.utils import flatten
 
@@ -89,7 +92,7 @@ class Trainer:
         self.actor = self.parts.actor
         self.learner = PPOLearner(
             self.actor, self.parts.critic, self.parts.norms, cfg.algo, self.device,
-            stale_batches=self.parts.collector.collects_ahead,
+            stale_batches=self.parts.collector.collects_ahead, extras=self._extras(),
         )
 
         # --- counters, possibly resumed
@@ -107,6 +110,18 @@ class Trainer:
             self.logger.text("config", OmegaConf.to_yaml(self.config), 0)
         self.evaluator = periodic_evaluator(self.parts.make_env, cfg)
         self.final_episodes = cfg.eval.final_episodes or cfg.eval.episodes
+
+    def _extras(self) -> list[Any]:
+        """The PPO update's auxiliary terms: DAPG's imitation of ``algo.demos`` (the file is read,
+        and refused, here: before any worker) and RND's curiosity (``algo.rnd_coeff`` > 0)."""
+        a, extras = self.cfg.algo, []
+        self.demos = demos_for(a.demos, self.parts.make_env, self.cfg.env) if a.get("demos") else None
+        if self.demos is not None and a.demo_coeff > 0:
+            extras.append(Imitation(self.actor, self.demos, a, self.device))
+        self.rnd = None
+        if a.get("rnd_coeff"):
+            self.rnd = RND(self.parts.spec["obs_dim"], self.parts.norm, a).to(self.device)
+        return extras + ([self.rnd] if self.rnd is not None else [])
 
     # --- checkpoint state ---------------------------------------------------------------------
     def state_dict(self) -> dict[str, Any]:
@@ -129,6 +144,8 @@ class Trainer:
         }
         if self.parts.kind == "vision":  # how evaluation and export rebuild the policy
             state["kind"] = "vision"
+        if self.rnd is not None:
+            state["rnd"] = self.rnd.state_dict()
         return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -140,6 +157,8 @@ class Trainer:
             raise ConfigError(
                 f"checkpoint does not fit the model: {str(exc).splitlines()[-1].strip()[:200]}"
             ) from exc
+        if self.rnd is not None:
+            self.rnd.load_state_dict(state["rnd"])
         self.learner.optimizer.load_state_dict(state["optimizer"])
         ckpt_lib.set_rng_state(state["rng"])
         self.frames, self.updates = state["frames"], state["updates"]
@@ -169,8 +188,12 @@ class Trainer:
             )
             self.start = time.monotonic()  # the time budget includes the workers' start-up
             cleanup.enter_context(self.signals)
+            if self.demos is not None and self.cfg.algo.bc_epochs and self.updates == 0 and self.frames == 0:
+                self.logger.scalars(pretrain(self.actor, self.parts.critic, self.parts.norm, self.demos,
+                                             self.cfg.algo), 0)
             try:
-                if self.frames < self.cfg.total_frames:  # a finished run starts no workers
+                # a finished run, or behaviour cloning alone (algo.bc_only), starts no workers
+                if self.frames < self.cfg.total_frames and not self.cfg.algo.get("bc_only"):
                     with self._collector() as batches:
                         self._loop(batches)
             except (KeyboardInterrupt, _Stopped):
@@ -252,9 +275,9 @@ class Trainer:
         t1 = time.perf_counter()
         lr = self.learner.lr_at(self.frames, self.cfg.total_frames)
         self.learner.set_lr(lr)
-        losses = self.learner.update(batch)
+        losses = self.learner.update(batch, self.updates)
         self.updates += 1
-        metrics = {f"losses/{k}": v for k, v in losses.items()}
+        metrics = {k if "/" in k else f"losses/{k}": v for k, v in losses.items()}
         metrics["charts/learning_rate"] = lr
         metrics["time/train_s"] = time.perf_counter() - t1
         return metrics

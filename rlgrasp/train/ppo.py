@@ -2,7 +2,8 @@
 
 TorchRL provides the pieces (``GAE``, ``ClipPPOLoss``, ``SamplerWithoutReplacement``); this module
 only adds what it lacks: the learning-rate schedule, the target-KL stop, finiteness checks, the
-per-update metrics and the refreshed log-probs of stale batches.
+per-update metrics, the refreshed log-probs of stale batches, and auxiliary terms (``extras``: the
+imitation term of ``rlgrasp.demos.bc``, the curiosity of ``rlgrasp.train.rnd``).
 
 Stale batches (collected with the weights of one update before, ``collector.overlap``): their
 log-probs are recomputed with the learner's weights before the epochs, so the clip and the
@@ -17,8 +18,8 @@ docs/benchmarks/throughput.md.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
-from typing import Any
+from collections.abc import Mapping, Sequence
+from typing import Any, Protocol
 
 import torch
 from tensordict import TensorDictBase
@@ -33,6 +34,16 @@ class NonFiniteError(RuntimeError):
     """A NaN or inf appeared in the loss, the gradients or the parameters."""
 
 
+class Extra(Protocol):
+    """An auxiliary term of the PPO update: ``start`` once per update (its metrics are logged as
+    named), ``after_gae`` after each advantage pass, ``loss`` added to each minibatch's loss."""
+
+    def trainable(self) -> list[torch.nn.Parameter]: ...
+    def start(self, batch: TensorDictBase, updates: int) -> dict[str, float]: ...
+    def after_gae(self, batch: TensorDictBase) -> None: ...
+    def loss(self, minibatch: TensorDictBase) -> tuple[torch.Tensor, dict[str, float]]: ...
+
+
 class PPOLearner:
     """Owns the loss, the advantage estimator and the optimizer; ``update`` does one PPO round."""
 
@@ -44,6 +55,7 @@ class PPOLearner:
         algo_cfg: Any,
         device: torch.device,
         stale_batches: bool = False,
+        extras: Sequence[Extra] = (),
     ):
         """``norm``: the normalizer of ``observation``, or each normalizer by the batch entry it learns
         from (a camera run's actor and critic read different entries, each through its own)."""
@@ -65,8 +77,9 @@ class PPOLearner:
         self.gae = GAE(
             gamma=algo_cfg.gamma, lmbda=algo_cfg.gae_lambda, value_network=critic, average_gae=False
         )
-        self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=algo_cfg.lr, eps=algo_cfg.adam_eps)
-        self.params = [p for p in self.loss.parameters()]
+        self.extras = list(extras)
+        self.params = [*self.loss.parameters(), *(p for x in self.extras for p in x.trainable())]
+        self.optimizer = torch.optim.Adam(self.params, lr=algo_cfg.lr, eps=algo_cfg.adam_eps)
 
     def lr_at(self, frames: int, total_frames: int) -> float:
         """Linear annealing by frames (so a resumed run continues the same schedule)."""
@@ -79,8 +92,9 @@ class PPOLearner:
         for group in self.optimizer.param_groups:
             group["lr"] = lr
 
-    def update(self, batch: TensorDictBase) -> dict[str, float]:
-        """One PPO round on a ``[envs, time]`` batch; returns averaged metrics."""
+    def update(self, batch: TensorDictBase, updates: int = 0) -> dict[str, float]:
+        """One PPO round on a ``[envs, time]`` batch (``updates``: how many came before); returns
+        averaged metrics."""
         cfg = self.cfg
         batch = batch.to(self.device)
         n = batch.numel()
@@ -88,6 +102,7 @@ class PPOLearner:
         buffer = self._buffer(n, mb)
         if self.stale_batches:
             self.refresh_log_probs(batch)
+        started = {k: v for x in self.extras for k, v in x.start(batch, updates).items()}
         sums: dict[str, float] = {}
         count = 0
         stopped_early = False
@@ -95,12 +110,19 @@ class PPOLearner:
             if epoch == 0 or cfg.gae_every_epoch:
                 with torch.no_grad():
                     self.gae(batch)
+                    for extra in self.extras:
+                        extra.after_gae(batch)
                 buffer.empty()
                 buffer.extend(batch.reshape(-1))
             for _ in range(n // mb):
                 minibatch = buffer.sample()
                 losses = self.loss(minibatch)
                 total = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
+                for extra in self.extras:
+                    term, values = extra.loss(minibatch)
+                    total = total + term
+                    for key, value in values.items():
+                        sums[key] = sums.get(key, 0.0) + value
                 if not torch.isfinite(total):
                     raise NonFiniteError(
                         "non-finite PPO loss "
@@ -133,7 +155,7 @@ class PPOLearner:
         # old ones, and updating first would make the ratio differ from 1 before any step is taken.
         for key, norm in self.norms.items():
             norm.update(batch[key])
-        metrics = {k: v / max(count, 1) for k, v in sums.items()}
+        metrics = {**started, **{k: v / max(count, 1) for k, v in sums.items()}}
         metrics["explained_variance"] = explained_variance(batch)
         metrics["epochs"] = float(epoch + 1)
         metrics["minibatches"] = float(count)

@@ -1,0 +1,114 @@
+"""Learning from demonstrations: behaviour-cloning pre-training, and DAPG's imitation term in PPO.
+
+Both regress the actor's deterministic action onto the demonstrated one with TorchRL's ``BCLoss``
+(mean squared error, as the camera student of ``rlgrasp.vision.distill``): the expert's gripper
+command is exactly +-1, where the squashed Gaussian's log-likelihood is unbounded. Pre-training
+also fits the critic to the demonstrations' discounted returns, so the first advantages are not
+computed against a random value. The imitation term is weighted ``demo_coeff * demo_decay ** k`` at
+update ``k`` (Rajeswaran et al. 2018, "Learning Complex Dexterous Manipulation with Deep
+Reinforcement Learning and Demonstrations"): it holds the policy near the expert while PPO's own
+advantages are still noise, then fades.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+from torch import nn
+from torchrl.data import LazyTensorStorage, RandomSampler, ReplayBuffer, SamplerWithoutReplacement
+from torchrl.envs import ExplorationType, set_exploration_type
+from torchrl.objectives import BCLoss
+
+from rlgrasp.demos.dataset import Demos
+from rlgrasp.train.models import OBS_KEY, RunningNorm
+
+VALUE_TARGET = "value_target"
+
+
+def successful(demos: Demos, gamma: float) -> TensorDict:
+    """The transitions of successful episodes, with their discounted returns as value targets."""
+    frames = demos.frames.clone()
+    frames[VALUE_TARGET] = demos.returns(gamma).unsqueeze(-1)
+    return frames[frames["success"]].select(OBS_KEY, "action", VALUE_TARGET)
+
+
+def demo_weight(algo: Any, updates: int) -> float:
+    """DAPG's ``lambda0 * lambda1 ** k``."""
+    return float(algo.demo_coeff * algo.demo_decay**updates)
+
+
+def pretrain(
+    actor: nn.Module, critic: nn.Module, norm: RunningNorm, demos: Demos, algo: Any
+) -> dict[str, float]:
+    """``algo.bc_epochs`` epochs of behaviour cloning (actor) and return regression (critic) on the
+    successful demonstrations; returns the first and last epochs' mean losses."""
+    data = successful(demos, algo.gamma)
+    norm.update(data[OBS_KEY])  # PPO's updates continue these statistics
+    mb = min(algo.bc_minibatch_size, data.numel())
+    buffer = ReplayBuffer(
+        storage=LazyTensorStorage(data.numel()), sampler=SamplerWithoutReplacement(), batch_size=mb
+    )
+    buffer.extend(data)
+    bc = BCLoss(actor, loss_function="mse")
+    params = list({id(p): p for p in [*actor.parameters(), *critic.parameters()]}.values())
+    optimizer = torch.optim.Adam(params, lr=algo.bc_lr)
+    epochs: list[tuple[float, float]] = []
+    for _ in range(algo.bc_epochs):
+        sums = [0.0, 0.0]
+        steps = math.ceil(data.numel() / mb)
+        for _ in range(steps):
+            batch = buffer.sample()
+            with set_exploration_type(ExplorationType.DETERMINISTIC):
+                loss_bc = bc(batch)["loss_bc"]
+            value = critic(batch.select(OBS_KEY))["state_value"]
+            loss_v = nn.functional.mse_loss(value, batch[VALUE_TARGET])
+            optimizer.zero_grad(set_to_none=True)
+            (loss_bc + loss_v).backward()
+            optimizer.step()
+            sums[0] += float(loss_bc.detach())
+            sums[1] += float(loss_v.detach())
+        epochs.append((sums[0] / steps, sums[1] / steps))
+    if not epochs:
+        return {}
+    return {
+        "pretrain/bc_loss_first": epochs[0][0],
+        "pretrain/bc_loss_last": epochs[-1][0],
+        "pretrain/value_loss_first": epochs[0][1],
+        "pretrain/value_loss_last": epochs[-1][1],
+        "pretrain/frames": float(data.numel()),
+    }
+
+
+class Imitation:
+    """DAPG's auxiliary term for ``PPOLearner``: a weighted BC loss on a demonstration minibatch
+    beside each PPO minibatch."""
+
+    def __init__(self, actor: nn.Module, demos: Demos, algo: Any, device: torch.device):
+        data = successful(demos, algo.gamma).select(OBS_KEY, "action")
+        self.buffer = ReplayBuffer(
+            storage=LazyTensorStorage(data.numel(), device=device),
+            sampler=RandomSampler(),
+            batch_size=min(algo.demo_minibatch_size, data.numel()),
+        )
+        self.buffer.extend(data)
+        self.loss_fn = BCLoss(actor, loss_function="mse")
+        self.algo = algo
+        self.weight = demo_weight(algo, 0)
+
+    def trainable(self) -> list[nn.Parameter]:
+        return []  # the actor's, which the PPO optimizer already holds
+
+    def start(self, batch: TensorDictBase, updates: int) -> dict[str, float]:
+        self.weight = demo_weight(self.algo, updates)
+        return {"charts/demo_weight": self.weight}
+
+    def after_gae(self, batch: TensorDictBase) -> None:
+        pass
+
+    def loss(self, minibatch: TensorDictBase) -> tuple[torch.Tensor, dict[str, float]]:
+        with set_exploration_type(ExplorationType.DETERMINISTIC):
+            bc = self.loss_fn(self.buffer.sample())["loss_bc"]
+        return self.weight * bc, {"bc_loss": float(bc.detach())}

@@ -1,0 +1,134 @@
+"""The demonstration file: a TensorDict memory map of transitions plus ``demos.json`` (what made it).
+
+A directory ``<out>/demos`` holds ``frames/`` (``TensorDict.memmap``: one tensor file per entry,
+read back without unpickling anything) and ``demos.json``: the observation layout, control mode and
+action size the transitions were recorded with, the env config, and the summary. A run whose env
+observes or acts otherwise is refused in one line: the numbers would load and mean something else.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+from tensordict import TensorDict
+
+from rlgrasp.config import ConfigError
+
+FORMAT = 1
+META = "demos.json"
+FRAMES = "frames"
+#: The env keys that change what an observation or an action means.
+LAYOUT_KEYS = ("control_mode", "ee_yaw", "robot")
+
+
+class DemoError(ConfigError):
+    """A demonstration file that cannot be used; the message names the file and why."""
+
+
+@dataclass
+class Demos:
+    """Transitions (``observation``, ``action``, ``reward``, ``done``, ``episode``) and their meta."""
+
+    frames: TensorDict
+    meta: dict[str, Any]
+
+    @property
+    def episodes(self) -> int:
+        return int(self.meta["summary"]["kept"])
+
+    def returns(self, gamma: float) -> torch.Tensor:
+        """Discounted return-to-go of each transition within its episode (the value targets of
+        pre-training)."""
+        reward, done = self.frames["reward"].flatten(), self.frames["done"].flatten()
+        out = torch.zeros_like(reward)
+        running = 0.0
+        for i in range(reward.numel() - 1, -1, -1):
+            running = float(reward[i]) + (0.0 if bool(done[i]) else gamma * running)
+            out[i] = running
+        return out
+
+
+def layout_of(env: Any, env_cfg: dict[str, Any]) -> dict[str, Any]:
+    """What an observation and an action mean in ``env``: part slices, sizes, control keys."""
+    return {
+        "obs_dim": int(env.observation_space.shape[-1]),
+        "action_dim": int(env.action_space.shape[0]),
+        "obs_slices": {k: [s.start, s.stop] for k, s in env.obs_slices.items()},
+        **{k: env_cfg.get(k) for k in LAYOUT_KEYS},
+    }
+
+
+def write_demos(out: Path, frames: TensorDict, meta: dict[str, Any]) -> Path:
+    """Write ``<out>/demos`` (frames memory-mapped, ``demos.json``); returns that directory."""
+    target = Path(out) / "demos"
+    frames.memmap(target / FRAMES)
+    (target / META).write_text(json.dumps({"format": FORMAT, **meta}, indent=1))
+    return target
+
+
+def _meta(path: Path) -> dict[str, Any]:
+    """``demos.json`` of ``path`` (the ``demos`` directory or the ``out`` directory above it)."""
+    for folder in (path, path / "demos"):
+        if (folder / META).is_file():
+            try:
+                return {**json.loads((folder / META).read_text()), "dir": str(folder)}
+            except json.JSONDecodeError as exc:
+                raise DemoError(f"algo.demos={path}: unreadable {META} ({exc})") from None
+    if not path.exists():
+        raise DemoError(f"algo.demos={path}: no such file or directory")
+    raise DemoError(
+        f"algo.demos={path}: not a demonstration directory (no {META}; record one with rlgrasp-demos)"
+    )
+
+
+def load_demos(path: str | Path, layout: dict[str, Any]) -> Demos:
+    """The demonstrations at ``path``, refused (``DemoError``, one line) when missing, empty or
+    recorded with another observation layout or control than ``layout`` (``layout_of``)."""
+    path = Path(path).expanduser()
+    meta = _meta(path)
+    for key in (*LAYOUT_KEYS, "obs_dim", "action_dim", "obs_slices"):
+        if meta.get(key) != layout.get(key):
+            raise DemoError(
+                f"algo.demos={path}: recorded with {key}={meta.get(key)!r}, this run has {layout.get(key)!r}"
+            )
+    if not meta.get("summary", {}).get("kept"):
+        raise DemoError(f"algo.demos={path}: holds no demonstrations (0 episodes kept)")
+    frames = TensorDict.load_memmap(Path(meta["dir"]) / FRAMES).to_tensordict()
+    if not bool(frames["success"].any()):  # learning imitates successes only
+        raise DemoError(f"algo.demos={path}: none of its {meta['summary']['kept']} episodes succeeded")
+    return Demos(frames, meta)
+
+
+def summary(episodes: list[dict[str, Any]], kept: int) -> dict[str, Any]:
+    """Success, lengths and objects of the recorded episodes (printed and saved with the file)."""
+    n = len(episodes)
+    lengths = [e["length"] for e in episodes]
+    objects: dict[str, list[int]] = {}
+    for e in episodes:
+        wins = objects.setdefault(e["object"] or "-", [0, 0])
+        wins[0] += int(e["success"])
+        wins[1] += 1
+    return {
+        "episodes": n,
+        "kept": kept,
+        "success_rate": sum(e["success"] for e in episodes) / max(n, 1),
+        "mean_length": sum(lengths) / max(n, 1),
+        "min_length": min(lengths, default=0),
+        "max_length": max(lengths, default=0),
+        "frames": sum(e["length"] for e in episodes if e["kept"]),
+        "objects": {k: {"success": w, "episodes": c} for k, (w, c) in sorted(objects.items())},
+    }
+
+
+def demos_for(path: str, make_env: Any, env_cfg: Any) -> Demos:
+    """The demonstrations at ``path`` checked against the env ``make_env`` builds."""
+    env = make_env()
+    try:
+        layout = layout_of(env, dict(env_cfg))
+    finally:
+        env.close()
+    return load_demos(path, layout)
