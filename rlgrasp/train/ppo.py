@@ -115,35 +115,7 @@ class PPOLearner:
                 buffer.empty()
                 buffer.extend(batch.reshape(-1))
             for _ in range(n // mb):
-                minibatch = buffer.sample()
-                losses = self.loss(minibatch)
-                total = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
-                for extra in self.extras:
-                    term, values = extra.loss(minibatch)
-                    total = total + term
-                    for key, value in values.items():
-                        sums[key] = sums.get(key, 0.0) + value
-                if not torch.isfinite(total):
-                    raise NonFiniteError(
-                        "non-finite PPO loss "
-                        + ", ".join(f"{k}={float(v):.4g}" for k, v in losses.items() if v.numel() == 1)
-                    )
-                self.optimizer.zero_grad(set_to_none=True)
-                total.backward()
-                grad_norm = torch.nn.utils.clip_grad_norm_(self.params, cfg.max_grad_norm)
-                if not torch.isfinite(grad_norm):
-                    raise NonFiniteError(f"non-finite gradient norm {float(grad_norm)}")
-                self.optimizer.step()
-                kl = float(losses["kl_approx"])
-                for key, value in (
-                    ("policy_loss", losses["loss_objective"]),
-                    ("value_loss", losses["loss_critic"]),
-                    ("entropy", losses["entropy"]),
-                    ("approx_kl", losses["kl_approx"]),
-                    ("clipfrac", losses["clip_fraction"]),
-                    ("grad_norm", grad_norm),
-                ):
-                    sums[key] = sums.get(key, 0.0) + float(value.detach())
+                kl = self._minibatch_step(buffer.sample(), sums)
                 count += 1
                 if cfg.target_kl is not None and kl > cfg.target_kl:
                     stopped_early = True
@@ -160,6 +132,38 @@ class PPOLearner:
         metrics["epochs"] = float(epoch + 1)
         metrics["minibatches"] = float(count)
         return metrics
+
+    def _minibatch_step(self, minibatch: TensorDictBase, sums: dict[str, float]) -> float:
+        """One gradient step (PPO's losses and the extras' terms); adds its metrics to ``sums`` and
+        returns the minibatch's KL estimate (for the early stop)."""
+        losses = self.loss(minibatch)
+        total = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
+        for extra in self.extras:
+            term, values = extra.loss(minibatch)
+            total = total + term
+            for key, value in values.items():
+                sums[key] = sums.get(key, 0.0) + value
+        if not torch.isfinite(total):
+            raise NonFiniteError(
+                "non-finite PPO loss "
+                + ", ".join(f"{k}={float(v):.4g}" for k, v in losses.items() if v.numel() == 1)
+            )
+        self.optimizer.zero_grad(set_to_none=True)
+        total.backward()
+        grad_norm = torch.nn.utils.clip_grad_norm_(self.params, self.cfg.max_grad_norm)
+        if not torch.isfinite(grad_norm):
+            raise NonFiniteError(f"non-finite gradient norm {float(grad_norm)}")
+        self.optimizer.step()
+        for key, value in (
+            ("policy_loss", losses["loss_objective"]),
+            ("value_loss", losses["loss_critic"]),
+            ("entropy", losses["entropy"]),
+            ("approx_kl", losses["kl_approx"]),
+            ("clipfrac", losses["clip_fraction"]),
+            ("grad_norm", grad_norm),
+        ):
+            sums[key] = sums.get(key, 0.0) + float(value.detach())
+        return float(losses["kl_approx"])
 
     @torch.no_grad()
     def refresh_log_probs(self, batch: TensorDictBase) -> None:
