@@ -25,6 +25,7 @@ from tensordict import TensorDictBase
 from rlgrasp.config import ConfigError
 from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
+from rlgrasp.train.adr_sync import AdrSync
 from rlgrasp.train.batches import Batches
 from rlgrasp.train.collect import read_env_errors
 from rlgrasp.train.collectors import shut_down
@@ -87,6 +88,8 @@ class Trainer:
         except (ValueError, TypeError, OSError) as exc:  # the env refuses its keywords or object files
             raise ConfigError(f"env: {exc}".splitlines()[0]) from exc
         self.actor = self.parts.actor
+        full_length = cfg.env.get("max_episode_steps") if self.parts.collector.stagger_starts else None
+        self.adr = AdrSync.from_env_cfg(self.config["env"], full_length)
         self.learner = PPOLearner(
             self.actor, self.parts.critic, self.parts.norms, cfg.algo, self.device,
             stale_batches=self.parts.collector.collects_ahead,
@@ -129,6 +132,8 @@ class Trainer:
         }
         if self.parts.kind == "vision":  # how evaluation and export rebuild the policy
             state["kind"] = "vision"
+        if self.adr is not None:
+            state["adr"] = self.adr.state.state_dict()
         return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -146,12 +151,16 @@ class Trainer:
         self.generation = state.get("generation", 0) + 1
         self.best_success = state.get("best_eval_success", -math.inf)
         self.last_eval = state.get("last_eval")
+        if self.adr is not None and "adr" in state:
+            self.adr.state.load_state_dict(state["adr"])
 
     def save(self, is_best: bool = False) -> None:
         path = ckpt_lib.write_checkpoints(
             self.ckpt_dir, self.state_dict(), self.cfg.checkpoint.keep_last, is_best
         )
         log.info("checkpoint %s", path)
+        if self.adr is not None:  # the ranges reached so far, for rlgrasp-eval randomization=<file>
+            self.adr.write_ranges(self.run_dir)
 
     # --- the run --------------------------------------------------------------------------------
     def run(self) -> float:
@@ -196,7 +205,7 @@ class Trainer:
         loop ends."""
         behaviour = copy.deepcopy(self.actor)
         collector = self.parts.make_collector(self.generation, str(self.error_dir), behaviour)
-        batches = Batches(collector, self.actor, behaviour, self.parts.collector.collects_ahead)
+        batches = Batches(collector, self.actor, behaviour, self.parts.collector.collects_ahead, self.adr)
         try:
             yield batches
         finally:
@@ -219,6 +228,8 @@ class Trainer:
             self.frames += batch.numel()
             metrics = {"time/collect_s": time.perf_counter() - t0, **self.episode_metrics(batch)}
             metrics.update(self.update(batch))
+            if self.adr is not None:
+                metrics.update(self.adr.scalars())
             metrics["charts/SPS"] = sps = throughput(batch.numel(), t0)
             self.logger.scalars(metrics, self.frames)
 
