@@ -13,7 +13,7 @@ boundary episode), so that it travels through ``info`` and a tensordict as a pla
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -75,7 +75,7 @@ def _param(name: str, node: Any) -> AdrParam:
         what = f"needs {sorted(missing)}" if missing else f"unknown keys {sorted(unknown)}"
         raise ValueError(f"{where}: {what}; keys are nominal, limits: [low, high], step (and integer)")
     nominal, limits = _number(f"{where}: nominal", node["nominal"]), node["limits"]
-    if not isinstance(limits, (list, tuple)) or len(limits) != 2:
+    if isinstance(limits, str) or not isinstance(limits, Sequence) or len(limits) != 2:
         raise ValueError(f"{where}: limits must be [low, high], got {limits!r}")
     low, high = (_number(f"{where}: limits", v) for v in limits)
     if not low <= nominal <= high:

@@ -195,9 +195,11 @@ def test_the_ranges_reach_the_workers_envs_between_batches(collector: str, train
         first = next(batches)  # built from the config: no boundary episode yet
         assert (first["next", "adr_boundary"] == NOT_BOUNDARY).all()
         sync.push(collector_)  # between batches, as rlgrasp.train.batches does
-        second = next(batches)
-        done = second["next", "done"].squeeze(-1)
-        assert done.any() and (second["next", "adr_boundary"][done] != NOT_BOUNDARY).all()
+        # episodes already running keep their draw; those that start after the push are boundary ones
+        second, third = next(batches), next(batches)
+        done = third["next", "done"].squeeze(-1)
+        assert done.any() and (third["next", "adr_boundary"][done] != NOT_BOUNDARY).all()
+        assert (second["next", "adr_boundary"] != NOT_BOUNDARY).any()
         # each worker's envs, read back through the same channel
         workers = collector_.map_fn("env.base_env._env.get_attr", list_of_args=[("randomizer",)])
         randomizers = [r for worker in workers for r in worker]

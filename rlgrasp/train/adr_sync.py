@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+from omegaconf import OmegaConf
 from tensordict import TensorDictBase
 from torchrl.collectors import BaseCollector
 
@@ -45,6 +46,8 @@ class AdrSync:
     def from_env_cfg(cls, env_cfg: Mapping[str, Any], full_length: int | None = None) -> AdrSync | None:
         """An ``AdrSync`` when the env's randomization has an ``adr`` node, else None."""
         spec = env_cfg.get("randomization", "default")
+        if OmegaConf.is_config(spec):
+            spec = OmegaConf.to_container(spec, resolve=True)
         randomizer = Randomizer(spec)
         return cls(randomizer, full_length) if randomizer.adr is not None else None
 
