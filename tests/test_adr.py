@@ -20,6 +20,7 @@ from rlgrasp.train.checkpoint import load_checkpoint
 from rlgrasp.train.collectors import shut_down
 from rlgrasp.train.loop import train
 from rlgrasp.train.parts import build_parts
+from tests.test_scale import ray_cluster  # noqa: F401 - the fixture: two Ray nodes on loopback
 from tests.test_train_run import _differences, _twice
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -185,8 +186,21 @@ def test_bad_settings_are_refused_naming_the_key(change, message) -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("collector", ["single", "process"])
 def test_the_ranges_reach_the_workers_envs_between_batches(collector: str, train_cfg) -> None:
-    cfg = train_cfg("experiment=smoke", "randomization=adr", f"collector={collector}",
-                    "collector.steps_per_env=120", "collector.num_workers=1")
+    _check_the_ranges_reach_the_envs(train_cfg, f"collector={collector}")
+
+
+@pytest.mark.slow
+def test_the_ranges_reach_ray_workers_envs(request, train_cfg) -> None:
+    cluster = request.getfixturevalue("ray_cluster")
+    _check_the_ranges_reach_the_envs(
+        train_cfg, "collector=ray", f"collector.ray.address={cluster.address}",
+        "collector.ray.memory_per_worker_gb=0.25",
+    )
+
+
+def _check_the_ranges_reach_the_envs(train_cfg, *collector: str) -> None:
+    cfg = train_cfg("experiment=smoke", "randomization=adr", *collector, "collector.steps_per_env=120",
+                    "collector.num_workers=1")
     parts = build_parts(cfg)
     sync = AdrSync.from_env_cfg(cfg.env)
     sync.settings = dataclasses.replace(sync.settings, boundary_prob=1.0)
