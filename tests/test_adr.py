@@ -5,6 +5,7 @@ real run through a checkpoint and a resume."""
 from __future__ import annotations
 
 import dataclasses
+import runpy
 from pathlib import Path
 
 import numpy as np
@@ -268,3 +269,29 @@ def test_a_seed_gives_one_adr_run_on_this_machine(tmp_path: Path, train_cfg) -> 
     first, second = _twice(train_cfg, tmp_path, *adr)
     assert "adr/entropy" in first["curves"]
     assert _differences(first, second) == []
+
+
+def _report_main():
+    """The script's ``main`` (a script, not a module of the package: loaded by path)."""
+    return runpy.run_path(str(ROOT / "scripts" / "adr_report.py"))["main"]
+
+
+def test_the_report_sets_default_wide_and_the_adr_ranges_side_by_side(tmp_path: Path, capsys) -> None:
+    sync = AdrSync(Randomizer(ADR_SPEC))
+    sync.state.ranges["finger_force"] = [5.0, 60.0]
+    ranges = sync.write_ranges(tmp_path)
+    out = tmp_path / "report"
+    assert _report_main()(["scripted", "--ranges", str(ranges), "--episodes", "2", "--out", str(out)]) == 0
+    report = yaml.safe_load((out / "adr_report.json").read_text())
+    assert list(report["conditions"]) == ["default", "wide", "adr ranges"]
+    assert set(report["success"]["scripted"]) == {"default", "wide", "adr ranges"}
+    assert report["success"]["scripted"]["wide"]["episodes"] == 2
+    # finger_force [5, 60] contains default's [10, 40]; the nominal-only others mostly do not
+    assert "finger_force" in report["contain_default"] and "object_mass" not in report["contain_default"]
+    assert "| scripted" in capsys.readouterr().out
+
+
+def test_the_report_refuses_a_missing_ranges_file_in_one_line(tmp_path: Path, capsys) -> None:
+    assert _report_main()(["scripted", "--ranges", str(tmp_path / "nowhere.yaml")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --ranges") and "no such file" in err[0]
