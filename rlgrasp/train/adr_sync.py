@@ -24,7 +24,7 @@ from rlgrasp.envs.randomization import Randomizer
 from rlgrasp.train.logger import log
 from rlgrasp.train.metrics import finished_mask
 
-#: The run's final ranges, loadable by ``randomization=<run dir>/adr_ranges.yaml``.
+#: The run's final ranges, loadable as ``env.randomization=<run dir>/adr_ranges.yaml`` (docs/adr.md).
 RANGES_FILE = "adr_ranges.yaml"
 #: The worker-side method ``map_fn`` calls: the inner collector's env is
 #: ``TransformedEnv(GymWrapper(SyncVectorEnv))`` (``rlgrasp.train.collect.make_batched_env``).
@@ -88,6 +88,6 @@ class AdrSync:
             name: {"low": float(low), "high": float(high)} for name, (low, high) in self.state.ranges.items()
         }}
         path = Path(run_dir) / RANGES_FILE
-        header = "# The ADR ranges this run reached; evaluate on them with randomization=<this file>.\n"
+        header = "# The ADR ranges this run reached: rlgrasp-eval ... +env.randomization=<this file>\n"
         path.write_text(header + yaml.safe_dump(spec, sort_keys=False))
         return path

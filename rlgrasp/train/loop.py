@@ -159,7 +159,7 @@ class Trainer:
             self.ckpt_dir, self.state_dict(), self.cfg.checkpoint.keep_last, is_best
         )
         log.info("checkpoint %s", path)
-        if self.adr is not None:  # the ranges reached so far, for rlgrasp-eval randomization=<file>
+        if self.adr is not None:  # the ranges reached so far, for rlgrasp-eval
             self.adr.write_ranges(self.run_dir)
 
     # --- the run --------------------------------------------------------------------------------
