@@ -181,6 +181,7 @@ class AdrState:
         limit = param.high_limit if bound else param.low_limit
         new = min(new, limit) if bound else max(new, limit)  # never past the hard limit
         new = max(new, param.nominal) if bound else min(new, param.nominal)  # nor inside the nominal
+        new = round(new, 10)  # steps of 0.1 in binary floats would drift (0.30000000000000004)
         if new == old:
             return None
         self.ranges[param.name][bound] = new
