@@ -262,7 +262,14 @@ class GraspEnv(gym.Env):
         return obs, readings
 
     def _info(self, readings: dict[str, Any], success: bool) -> dict[str, Any]:
-        return {**self.task.info(readings, success), "randomization": {**self.episode, **self._visual}}
+        return {
+            **self.task.info(readings, success), **self.randomizer.info(),
+            "randomization": {**self.episode, **self._visual},
+        }
+
+    def set_randomization_ranges(self, ranges: Mapping[str, Any], boundary_prob: float) -> None:
+        """ADR's current ranges, from the learner between batches (``rlgrasp.train.adr_sync``)."""
+        self.randomizer.set_ranges(ranges, boundary_prob)
 
     # --- what tools read -------------------------------------------------------------------------
     @property

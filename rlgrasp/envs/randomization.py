@@ -10,9 +10,13 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
+
+from rlgrasp.adr import NOT_BOUNDARY, AdrSettings, draw_boundary, parse_settings, start_ranges
 
 
 @dataclass(frozen=True)
@@ -166,45 +170,73 @@ def _validate(name: str, rng: Range) -> None:
 class Randomizer:
     """Draws one episode's physical and sensing parameters.
 
-    ``spec`` is a preset name, or a mapping of parameter -> range that overrides a base preset
-    (``{"preset": "none", "object_mass": [0.05, 1.0]}``; the base defaults to ``none``).
+    ``spec`` is a preset name, a YAML file holding a mapping (what an ADR run writes), or a mapping of
+    parameter -> range that overrides a base preset (``{"preset": "none", "object_mass": [0.05, 1.0]}``;
+    the base defaults to ``none``). A mapping's ``adr`` node (``rlgrasp.adr.parse_settings``) makes its
+    parameters ADR's: they start at their nominal values (or ``adr.start``'s preset) and move when the
+    learner calls ``set_ranges``, which also turns on boundary episodes: an env built from the config
+    alone (an evaluation) samples the start ranges and pins nothing.
     """
 
     def __init__(self, spec: str | Mapping[str, Any] | None = "default"):
-        self.ranges = self._resolve(spec)
+        self.ranges, self.adr = self._resolve(spec)
+        self.boundary = NOT_BOUNDARY
+        self._boundary_prob = 0.0
 
     @staticmethod
-    def _resolve(spec: str | Mapping[str, Any] | None) -> dict[str, Range]:
+    def _resolve(spec: str | Mapping[str, Any] | None) -> tuple[dict[str, Range], AdrSettings | None]:
         if spec is None:
             spec = "none"
+        if isinstance(spec, str) and spec.endswith((".yaml", ".yml")):
+            return Randomizer._resolve(_load_file(spec))
+        adr = None
         if isinstance(spec, str):
             if spec not in PRESETS:
                 raise ValueError(
-                    f"unknown randomization preset {spec!r}; valid presets: {', '.join(PRESETS)}"
+                    f"unknown randomization preset {spec!r}; valid presets: {', '.join(PRESETS)} "
+                    "(or a .yaml file of ranges)"
                 )
             ranges = dict(PRESETS[spec])
         elif isinstance(spec, Mapping):
             spec = dict(spec)
-            base = spec.pop("preset", "none")
-            ranges = dict(Randomizer._resolve(base))
+            base, adr_node = spec.pop("preset", "none"), spec.pop("adr", None)
+            ranges = dict(Randomizer._resolve(base)[0])
             for name, value in spec.items():
                 if name not in PARAMS:
                     raise ValueError(
                         f"unknown randomization parameter {name!r}; valid parameters: "
-                        f"{', '.join(PARAMS)} (and 'preset')"
+                        f"{', '.join(PARAMS)} (and 'preset', 'adr')"
                     )
                 ranges[name] = _as_range(name, value)
+            if adr_node is not None:
+                adr = _adr_settings(adr_node)
+                ranges.update({k: Range(*v) for k, v in _adr_start(adr).items()})
         else:
             raise ValueError(
-                f"randomization must be a preset name ({', '.join(PRESETS)}) or a mapping of "
-                f"parameter ranges, got {spec!r}"
+                f"randomization must be a preset name ({', '.join(PRESETS)}), a .yaml file or a mapping "
+                f"of parameter ranges, got {spec!r}"
             )
         for name, rng in ranges.items():
             _validate(name, rng)
-        return ranges
+        return ranges, adr
+
+    def set_ranges(self, ranges: Mapping[str, Any], boundary_prob: float) -> None:
+        """The learner's current ADR ranges (``name -> (low, high)``) and boundary probability."""
+        if self.adr is None:
+            raise ValueError("set_ranges needs an ADR randomization (a spec with an 'adr' node)")
+        for name, (low, high) in ranges.items():
+            if name not in self.adr.names:
+                raise ValueError(f"randomization parameter {name!r} is not one of ADR's: {self.adr.names}")
+            self.ranges[name] = Range(float(low), float(high))
+        self._boundary_prob = float(boundary_prob)
 
     def sample(self, rng: np.random.Generator) -> dict[str, float]:
-        """One episode's values; parameters without a range take their nominal value."""
+        """One episode's values; parameters without a range take their nominal value. Under ADR the
+        boundary draw comes first, from the same seeded generator: same seed, same episodes."""
+        self.boundary = NOT_BOUNDARY
+        if self.adr is not None:
+            current = {name: (self.ranges[name].low, self.ranges[name].high) for name in self.adr.names}
+            self.boundary = draw_boundary(rng, self.adr, current, self._boundary_prob)
         values = {}
         for name, spec in PARAMS.items():  # fixed order: same seed, same draws
             r = self.ranges.get(name)
@@ -214,4 +246,53 @@ class Randomizer:
                 values[name] = int(rng.integers(int(r.low), int(r.high) + 1))
             else:
                 values[name] = r.sample(rng)
+        if self.boundary != NOT_BOUNDARY:
+            param, bound = self.adr.decode(self.boundary)
+            pinned = (self.ranges[param.name].low, self.ranges[param.name].high)[bound]
+            values[param.name] = int(pinned) if PARAMS[param.name].integer else float(pinned)
         return values
+
+    def info(self) -> dict[str, int]:
+        """What the learner reads from each step's ``info``: the episode's ADR boundary code."""
+        return {} if self.adr is None else {"adr_boundary": self.boundary}
+
+
+def _load_file(path: str) -> Mapping[str, Any]:
+    """A YAML file of ranges (``{preset: ..., name: {low, high}}``), as an ADR run writes its final ones."""
+    try:
+        spec = yaml.safe_load(Path(path).read_text())
+    except OSError as exc:
+        raise ValueError(f"randomization file {path!r}: {exc.strerror or exc}") from None
+    except yaml.YAMLError as exc:
+        reason = str(exc).splitlines()[0]
+        raise ValueError(f"randomization file {path!r}: not valid YAML ({reason})") from None
+    if not isinstance(spec, Mapping) or "adr" in spec:
+        raise ValueError(f"randomization file {path!r}: expected a mapping of parameter ranges")
+    return spec
+
+
+def _adr_settings(node: Any) -> AdrSettings:
+    """ADR's settings, each parameter checked against what the env knows of it."""
+    adr = parse_settings(node)
+    for p in adr.params:
+        if p.name not in PARAMS or p.name in _TASK:
+            valid = [n for n in PARAMS if n not in _TASK]
+            raise ValueError(f"randomization adr parameter {p.name!r}: not one of {', '.join(valid)}")
+        spec = PARAMS[p.name]
+        if p.low_limit < spec.minimum or p.high_limit > spec.maximum:
+            raise ValueError(
+                f"randomization adr parameter {p.name!r}: limits [{p.low_limit}, {p.high_limit}] are "
+                f"outside the physically allowed [{spec.minimum}, {spec.maximum}]"
+            )
+        if spec.integer and (p.step != int(p.step) or p.nominal != int(p.nominal)):
+            raise ValueError(f"randomization adr parameter {p.name!r}: an integer parameter needs integers")
+    if adr.start != "nominal" and adr.start not in PRESETS:
+        raise ValueError(
+            f"randomization adr.start={adr.start!r}: must be nominal or a preset ({', '.join(PRESETS)})"
+        )
+    return adr
+
+
+def _adr_start(adr: AdrSettings) -> dict[str, tuple[float, float]]:
+    preset = None if adr.start == "nominal" else PRESETS[adr.start]
+    return start_ranges(adr, {k: (r.low, r.high) for k, r in (preset or {}).items()})

@@ -11,13 +11,16 @@ idle for the whole update). That batch is collected with the weights of one upda
 learner recomputes its log-probs with its own weights before the epochs (``PPOLearner``,
 ``stale_batches``). TorchRL's asynchronous collector overlaps too, but each worker's batch then
 carries whatever weights it had when it started, which depends on timing.
+
+An ``env_sync`` (ADR's ``rlgrasp.train.adr_sync.AdrSync``) reads each batch as it arrives and pushes
+what the envs need at the same idle moment as the weights, so the next batch already uses it.
 """
 
 from __future__ import annotations
 
 import threading
 from collections.abc import Iterator
-from typing import Any
+from typing import Any, Protocol
 
 import torch
 from tensordict import TensorDictBase
@@ -28,13 +31,21 @@ from torchrl.collectors import BaseCollector
 DRAIN_TIMEOUT_S = 120.0
 
 
+class EnvSync(Protocol):
+    def observe(self, batch: TensorDictBase) -> Any: ...
+
+    def push(self, collector: BaseCollector) -> None: ...
+
+
 class Batches(Iterator[TensorDictBase]):
     """``next()`` gives the next batch; with ``overlap`` the one after is already being collected."""
 
     def __init__(
-        self, collector: BaseCollector, actor: torch.nn.Module, behaviour: torch.nn.Module, overlap: bool
+        self, collector: BaseCollector, actor: torch.nn.Module, behaviour: torch.nn.Module, overlap: bool,
+        env_sync: EnvSync | None = None,
     ) -> None:
         self.collector, self.actor, self.behaviour, self.overlap = collector, actor, behaviour, overlap
+        self.env_sync = env_sync
         self._iterator = iter(collector)
         self._thread: threading.Thread | None = None
         self._result: tuple[Any, BaseException | None] = (None, None)
@@ -42,12 +53,19 @@ class Batches(Iterator[TensorDictBase]):
     def __next__(self) -> TensorDictBase:
         if not self.overlap:
             self._push_weights()
-            return next(self._iterator)
+            return self._arrived(next(self._iterator))
         if self._thread is None:
+            if self.env_sync is not None:  # the first batch too (a resume's ranges are not the start's)
+                self.env_sync.push(self.collector)
             self._start()
-        batch = self._wait()
+        batch = self._arrived(self._wait())
         self._push_weights()
         self._start()
+        return batch
+
+    def _arrived(self, batch: TensorDictBase) -> TensorDictBase:
+        if self.env_sync is not None:
+            self.env_sync.observe(batch)
         return batch
 
     def close(self) -> None:
@@ -59,6 +77,8 @@ class Batches(Iterator[TensorDictBase]):
     def _push_weights(self) -> None:
         self.behaviour.load_state_dict(self.actor.state_dict())  # in place, into the shared memory
         self.collector.update_policy_weights_()
+        if self.env_sync is not None:
+            self.env_sync.push(self.collector)
 
     def _start(self) -> None:
         def fetch() -> None:

@@ -25,7 +25,8 @@ from torchrl.envs.transforms import Compose, RewardSum, StepCounter, Transformed
 
 ERROR_FILE_PREFIX = "env_error_"
 # Info entries copied into the tensordict (those the env provides).
-INFO_DTYPES = {"is_success": torch.bool, "grasped": torch.bool, "lift_height": torch.float32}
+INFO_DTYPES = {"is_success": torch.bool, "grasped": torch.bool, "lift_height": torch.float32,
+               "adr_boundary": torch.int64}  # rlgrasp.adr: the episode's boundary code (ADR runs only)
 
 #: Builds one gymnasium env: what ``rlgrasp.envs.factory.env_factory`` returns (a picklable partial).
 EnvFactory = Callable[[], Any]

@@ -27,6 +27,7 @@ from rlgrasp.demos.bc import Imitation, pretrain
 from rlgrasp.demos.dataset import demos_for
 from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
+from rlgrasp.train.adr_sync import AdrSync
 from rlgrasp.train.batches import Batches
 from rlgrasp.train.collect import read_env_errors
 from rlgrasp.train.collectors import shut_down
@@ -90,6 +91,8 @@ class Trainer:
         except (ValueError, TypeError, OSError) as exc:  # the env refuses its keywords or object files
             raise ConfigError(f"env: {exc}".splitlines()[0]) from exc
         self.actor = self.parts.actor
+        full_length = cfg.env.get("max_episode_steps") if self.parts.collector.stagger_starts else None
+        self.adr = AdrSync.from_env_cfg(self.config["env"], full_length)
         self.learner = PPOLearner(
             self.actor, self.parts.critic, self.parts.norms, cfg.algo, self.device,
             stale_batches=self.parts.collector.collects_ahead, extras=self._extras(),
@@ -146,6 +149,8 @@ class Trainer:
             state["kind"] = "vision"
         if self.rnd is not None:
             state["rnd"] = self.rnd.state_dict()
+        if self.adr is not None:
+            state["adr"] = self.adr.state.state_dict()
         return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -165,12 +170,16 @@ class Trainer:
         self.generation = state.get("generation", 0) + 1
         self.best_success = state.get("best_eval_success", -math.inf)
         self.last_eval = state.get("last_eval")
+        if self.adr is not None and "adr" in state:
+            self.adr.state.load_state_dict(state["adr"])
 
     def save(self, is_best: bool = False) -> None:
         path = ckpt_lib.write_checkpoints(
             self.ckpt_dir, self.state_dict(), self.cfg.checkpoint.keep_last, is_best
         )
         log.info("checkpoint %s", path)
+        if self.adr is not None:  # the ranges reached so far, for rlgrasp-eval
+            self.adr.write_ranges(self.run_dir)
 
     # --- the run --------------------------------------------------------------------------------
     def run(self) -> float:
@@ -219,7 +228,7 @@ class Trainer:
         loop ends."""
         behaviour = copy.deepcopy(self.actor)
         collector = self.parts.make_collector(self.generation, str(self.error_dir), behaviour)
-        batches = Batches(collector, self.actor, behaviour, self.parts.collector.collects_ahead)
+        batches = Batches(collector, self.actor, behaviour, self.parts.collector.collects_ahead, self.adr)
         try:
             yield batches
         finally:
@@ -242,6 +251,8 @@ class Trainer:
             self.frames += batch.numel()
             metrics = {"time/collect_s": time.perf_counter() - t0, **self.episode_metrics(batch)}
             metrics.update(self.update(batch))
+            if self.adr is not None:
+                metrics.update(self.adr.scalars())
             metrics["charts/SPS"] = sps = throughput(batch.numel(), t0)
             self.logger.scalars(metrics, self.frames)
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import time
 
+import torch
 from tensordict import TensorDictBase
 
 
@@ -40,17 +41,22 @@ class Throughput:
         return (self.frames - self.frames0) / max(now - self.t0, 1e-9)
 
 
-def finished_episodes(batch: TensorDictBase, full_length: int | None = None) -> dict[str, float]:
-    """Return, length and success-at-episode-end of the episodes that ended in this batch.
-
-    Episodes truncated before ``full_length`` steps are the first episodes ``StaggeredStart`` cut
-    short (``collector.stagger_starts``): they are left out so that the curves compare like with like.
-    """
+def finished_mask(batch: TensorDictBase, full_length: int | None = None) -> torch.Tensor:
+    """Where episodes ended in this batch, without the first episodes ``StaggeredStart`` cut short
+    (``collector.stagger_starts``) before ``full_length`` steps: they would not compare like with like."""
     done = batch["next", "done"].reshape(batch.shape)
     keys = batch.keys(True)
     if full_length and ("next", "step_count") in keys and ("next", "truncated") in keys:
         steps = batch["next", "step_count"].reshape(batch.shape)
         done = done & ~(batch["next", "truncated"].reshape(batch.shape) & (steps < full_length))
+    return done
+
+
+def finished_episodes(batch: TensorDictBase, full_length: int | None = None) -> dict[str, float]:
+    """Return, length and success-at-episode-end of the episodes that ended in this batch
+    (``finished_mask``)."""
+    done = finished_mask(batch, full_length)
+    keys = batch.keys(True)
     if not done.any():
         return {}
     out = {}
