@@ -40,19 +40,11 @@ def check_model(spec: RobotSpec, client: BulletClient, body: int, joints: dict[s
     movable = [n for n, j in joints.items() if client.getJointInfo(body, j)[2] != pybullet.JOINT_FIXED]
     names = {"arm_joints": list(spec.arm_joints), "fingers": [f.joint for f in spec.fingers],
              "hold_joints": list(spec.hold_joints)}
-    for key, wanted in names.items():
-        for name in wanted:
-            if name not in movable:
-                raise ValueError(f"robot.{key}: {name!r} is not a movable joint of {path}; its movable "
-                                 f"joints: {', '.join(movable)}")
+    _require(names, movable, "a movable joint", path)
     link_keys = {"grasp_link": [spec.grasp_link], "finger_links": list(spec.finger_links),
                  "camera_link": [spec.camera_link] if spec.camera_link else [],
                  "wrist_links": list(spec.wrist_links)}
-    for key, wanted in link_keys.items():
-        for name in wanted:
-            if name not in links:
-                raise ValueError(f"robot.{key}: {name!r} is not a link of {path}; its links: "
-                                 f"{', '.join(links)}")
+    _require(link_keys, list(links), "a link", path)
     driven = [f.joint for f in spec.fingers if not f.mimic]
     for f in spec.fingers:
         if f.mimic and f.mimic not in driven:
@@ -94,3 +86,14 @@ def _check_fingers(spec: RobotSpec, client: BulletClient, body: int, joints: dic
             f"apart closed and {gap['open']:.3f} m open: open must part them by at least {MIN_OPENING} m "
             "(check the signs of open and closed)"
         )
+
+
+def _require(wanted_by_key: dict[str, list[str]], available: list[str], what: str, path: str) -> None:
+    """The first name the spec uses that the model lacks, named with its key and what the model has."""
+    plural = {"a movable joint": "movable joints", "a link": "links"}[what]
+    for key, wanted in wanted_by_key.items():
+        for name in wanted:
+            if name not in available:
+                raise ValueError(f"robot.{key}: {name!r} is not {what} of {path}; its {plural}: "
+                                 f"{', '.join(available)}")
+
