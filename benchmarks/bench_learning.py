@@ -106,13 +106,13 @@ def main() -> None:
         curve = eval_curve(run["run_dir"], run["start"])
         rows += [(args.tag, seed, round(m, 3), f, v) for m, f, v in curve]
         minutes, frames, success = curve[-1]
-        first_90 = next((m for m, _, v in curve if v >= 0.9 - 1e-6), None)
+        first_90 = next(((m, f) for m, f, v in curve if v >= 0.9 - 1e-6), None)
         episodes = final_episodes(run["run_dir"])
         low, high = wilson_interval(round(success * episodes), episodes)
         finals.append((seed, minutes, frames, success, first_90, episodes, low, high))
         print(f"seed {seed}: final eval success {success:.3f} over {episodes} episodes "
               f"[{low:.3f}, {high:.3f}] at {frames:,} frames, {minutes:.1f} min; "
-              f"first >= 0.9 at {'-' if first_90 is None else f'{first_90:.1f} min'}", flush=True)
+              f"first >= 0.9 at {first_reach(first_90)}", flush=True)
         for objects in args.eval_objects:
             r = evaluate_on(run["run_dir"], objects, args.eval_episodes)
             held_out.append((seed, objects, r))
@@ -128,16 +128,36 @@ def main() -> None:
 
     print(f"\n{args.tag}: budget {args.minutes} min per seed")
     print(f"{'seed':>4}{'final success':>15}{'episodes':>9}{'95% Wilson':>16}{'frames':>10}{'minutes':>9}"
-          f"{'first >= 0.9':>14}")
+          f"{'first >= 0.9':>26}")
     for seed, minutes, frames, success, first_90, episodes, low, high in finals:
         print(f"{seed:>4}{success:>15.3f}{episodes:>9}{f'[{low:.2f}, {high:.2f}]':>16}{frames:>10,}"
-              f"{minutes:>9.1f}{'-' if first_90 is None else f'{first_90:.1f} min':>14}")
+              f"{minutes:>9.1f}{first_reach(first_90):>26}")
+    print(at_frames(rows))
     hits = sum(round(f[3] * f[5]) >= 0.9 * f[5] for f in finals)  # counts: 0.9 is 0.8999... in float32
     print(f"seeds with final eval success >= 0.9: {hits}/{len(finals)}")
     for seed, objects, r in held_out:
         print(f"seed {seed} on {objects:>20}: {r['rate']:.3f} over {r['episodes']} episodes "
               f"[{r['ci95'][0]:.2f}, {r['ci95'][1]:.2f}]")
     print(f"wrote {csv_path} and {csv_path.with_suffix('.png')}")
+
+
+def first_reach(point: tuple[float, int] | None) -> str:
+    return "-" if point is None else f"{point[0]:.1f} min, {point[1]:,} frames"
+
+
+def at_frames(rows: list[tuple], marks: tuple[int, ...] = (40960, 81920, 122880, 163840, 204800)) -> str:
+    """Mean periodic eval success over the seeds at fixed frame counts: the per-frame comparison
+    that does not depend on the machine's speed (the eval at the first point at or after each mark)."""
+    parts = []
+    for mark in marks:
+        values = []
+        for seed in sorted({r[1] for r in rows}):
+            later = [r[4] for r in rows if r[1] == seed and r[3] >= mark]
+            if later:
+                values.append(later[0])
+        if values:
+            parts.append(f"{mark // 1024}k: {sum(values) / len(values):.2f} ({len(values)} seeds)")
+    return "mean eval success at " + "; ".join(parts)
 
 
 def plot(rows: list[tuple], path: Path, title: str) -> None:
