@@ -115,6 +115,22 @@ def test_depth_is_in_metres_and_sees_the_ground(cam_env):
     assert float(np.median(depth)) > grasp_height
 
 
+@pytest.mark.parametrize("mount", ["wrist", "fixed"])
+def test_a_depth_cameras_computed_ground_matches_the_rendered_one(mount, cam_env):
+    """A depth-only camera adds the ground plane itself instead of rendering it; an RGB-D camera
+    (whose colour needs the ground drawn) sees the same depth on the same episode, wherever the arm
+    moves. A ray through the wrong pixel point, a flipped row or a wrong axis would be centimetres off."""
+    computed = cam_env(control_mode="joint_delta", camera={"mount": mount, "modality": "depth"})
+    rendered = cam_env(control_mode="joint_delta", camera={"mount": mount, "modality": "rgbd"})
+    assert computed.scene.ground is None and rendered.scene.ground is not None
+    rng = np.random.default_rng(0)
+    a, b = computed.reset(seed=3)[0], rendered.reset(seed=3)[0]
+    for _ in range(15):
+        assert np.abs(a["depth"] - b["depth"]).max() < 1e-4  # metres
+        action = rng.uniform(-1, 1, computed.action_dim)
+        a, b = computed.step(action)[0], rendered.step(action)[0]
+
+
 @pytest.mark.parametrize(
     "camera, match",
     [

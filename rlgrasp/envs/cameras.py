@@ -1,15 +1,17 @@
 """Cameras a robot could carry: depth in metres and RGB, from the wrist or from a fixed mount.
 
 Rendered with PyBullet's TinyRenderer (CPU, no display), once per control step. The cost is the
-robot's visual meshes, not the pixels, so a camera renders the robot's low-poly model
-(``Robot.render_model``); docs/cameras.md has the figures.
+robot's visual meshes and the pixels each triangle covers, so a camera renders the robot's low-poly
+model (``Robot.render_model``), and a depth-only camera adds the ground itself (``ground_depth``):
+the flat ground covers most pixels and cost TinyRenderer two thirds of each image. docs/cameras.md
+has the figures.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 import gymnasium as gym
@@ -115,22 +117,56 @@ class Lighting:
         }
 
 
+def ray_grid(spec: CameraSpec) -> np.ndarray:
+    """Each pixel's ray in the camera's frame (right, up, forward), scaled to unit forward length,
+    so that a hit at parameter t lies t metres deep; rows from the top, as images arrive. Each ray
+    passes through its pixel's lower-left corner, where TinyRenderer samples (tests/test_cameras.py:
+    the computed ground matches the rendered one to micrometres)."""
+    tan_v = math.tan(math.radians(spec.fov) / 2)
+    tan_h = tan_v * spec.width / spec.height
+    x = (np.arange(spec.width) / spec.width * 2 - 1) * tan_h
+    y = (1 - (np.arange(spec.height) + 1) / spec.height * 2) * tan_v
+    grid = np.ones((spec.height, spec.width, 3), np.float32)
+    grid[..., 0], grid[..., 1] = x[None, :], y[:, None]
+    return grid
+
+
+def ground_depth(rays: np.ndarray, eye: np.ndarray, target: np.ndarray, up: np.ndarray,
+                 height: float = 0.0) -> np.ndarray:
+    """Depth (m, along the view axis) of the plane z = ``height`` at each pixel; inf where a ray
+    never meets it. Hand-written: TinyRenderer shades every ground pixel, which a depth image
+    does not need."""
+    forward = (target - eye) / np.linalg.norm(target - eye)
+    right = np.cross(forward, up)
+    right /= np.linalg.norm(right)
+    true_up = np.cross(right, forward)
+    dz = rays @ np.array([right[2], true_up[2], forward[2]], np.float32)
+    with np.errstate(divide="ignore"):
+        t = (height - eye[2]) / dz
+    return np.where(t > 0, t, np.inf).astype(np.float32)
+
+
 class Camera:
-    """Renders one ``CameraSpec`` in one client; ``render`` returns channel-first arrays by key."""
+    """Renders one ``CameraSpec`` in one client; ``render`` returns channel-first arrays by key.
+    ``ground_height``: a depth-only camera whose scene shows no ground body computes the ground
+    plane at this height itself (``ground_depth``); None: the ground is a body TinyRenderer draws."""
 
     def __init__(self, spec: CameraSpec, client: BulletClient):
         self.spec, self.client = spec, client
+        self.ground_height: float | None = None
         self.base_pose = spec.pose()
         self.fov = spec.fov
         self.offset = np.zeros(3)  # per-episode pose jitter (m), in the mount's frame
         self.tilt = np.zeros(3)  # per-episode aim jitter (m at the target), in the mount's frame
         self.lighting = Lighting()
+        self._rays: np.ndarray | None = None
 
     def jitter(self, offset: np.ndarray, tilt: np.ndarray, fov_delta: float, lighting: Lighting) -> None:
         """This episode's deviations from the nominal camera (visual randomization)."""
         self.offset, self.tilt = np.asarray(offset, float), np.asarray(tilt, float)
         self.fov = float(np.clip(self.spec.fov + fov_delta, 1.0, 179.0))
         self.lighting = lighting
+        self._rays = None
 
     def world_pose(self, mount_pose: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, ...]:
         """Eye, target and up in the world; ``mount_pose`` is the wrist's (position, quaternion),
@@ -147,6 +183,12 @@ class Camera:
     def view_matrix(self, mount_pose: tuple[np.ndarray, np.ndarray] | None) -> list[float]:
         eye, target, up = self.world_pose(mount_pose)
         return self.client.computeViewMatrix(eye.tolist(), target.tolist(), up.tolist())
+
+    def rays(self) -> np.ndarray:
+        """The pixel rays at this episode's field of view (made once per episode)."""
+        if self._rays is None:
+            self._rays = ray_grid(replace(self.spec, fov=self.fov))
+        return self._rays
 
     def check_outside(self, body: int, mount_pose: tuple[np.ndarray, np.ndarray] | None) -> None:
         """A camera inside a link sees the inside of one mesh for ever: refuse it when the env is
@@ -168,9 +210,11 @@ class Camera:
 
     def render(self, mount_pose: tuple[np.ndarray, np.ndarray] | None) -> dict[str, np.ndarray]:
         s = self.spec
+        eye, target, up = self.world_pose(mount_pose)
+        view = self.client.computeViewMatrix(eye.tolist(), target.tolist(), up.tolist())
         projection = self.client.computeProjectionMatrixFOV(self.fov, s.width / s.height, s.near, s.far)
         _, _, rgba, depth_buffer, _ = self.client.getCameraImage(
-            s.width, s.height, self.view_matrix(mount_pose), projection,
+            s.width, s.height, view, projection,
             renderer=pybullet.ER_TINY_RENDERER, flags=pybullet.ER_NO_SEGMENTATION_MASK,
             **self.lighting.keywords(),
         )
@@ -178,6 +222,9 @@ class Camera:
         if "depth" in s.keys:
             z = np.asarray(depth_buffer, np.float32).reshape(1, s.height, s.width)
             metres = s.far * s.near / (s.far - (s.far - s.near) * z)  # OpenGL depth buffer -> distance
+            if self.ground_height is not None:
+                ground = ground_depth(self.rays(), eye, target, up, self.ground_height)
+                metres = np.minimum(metres, ground[None])
             out["depth"] = np.clip(metres, s.near, s.far).astype(np.float32)
         if "rgb" in s.keys:
             image = np.asarray(rgba, np.uint8).reshape(s.height, s.width, 4)[:, :, :3]

@@ -184,9 +184,14 @@ class GraspEnv(gym.Env):
             raise
 
     def _prepare_rendering(self) -> None:
-        """What cameras render, made cheap: a small ground, and for a wrist camera only the links
-        it can see (the robot is already its low-poly model)."""
-        self.scene.use_compact_ground()
+        """What cameras render, made cheap: no ground body for a depth-only camera (it adds the
+        ground plane itself), a small one for colour, and for a wrist camera only the links it can
+        see (the robot is already its low-poly model)."""
+        if "rgb" in self.camera.spec.keys:
+            self.scene.use_compact_ground()
+        else:
+            self.scene.hide_ground()
+            self.camera.ground_height = 0.0
         if self.camera.spec.mount == "wrist":
             self.robot.show_only(self.robot.wrist_links())
 

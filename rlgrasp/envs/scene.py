@@ -47,7 +47,7 @@ class Scene:
         )
         self.time_step = time_step
         self.plane = c.loadURDF(data_path("plane.urdf"))
-        self.ground = self.plane  # the body cameras see as the ground
+        self.ground: int | None = self.plane  # the body cameras see as the ground (None: none)
         self.object: int | None = None
         self._shapes: dict[tuple, tuple[int, int]] = {}
         self._saved: int | None = None
@@ -60,6 +60,12 @@ class Scene:
             pybullet.GEOM_BOX, halfExtents=[half_size, half_size, 0.0005], rgbaColor=GROUND_COLOUR
         )
         self.ground = self.client.createMultiBody(0.0, -1, visual, [VIEWER_TARGET[0], 0.0, -0.0005])
+
+    def hide_ground(self) -> None:
+        """Show no ground body to cameras: a depth-only camera computes the ground plane itself
+        (``rlgrasp.envs.cameras.ground_depth``). The collision plane, and so the physics, stay."""
+        self.client.changeVisualShape(self.plane, -1, rgbaColor=[1.0, 1.0, 1.0, 0.0])
+        self.ground = None
 
     def save(self) -> None:
         """Remember the world as it is now (robot loaded, no object): each reset restores it."""
