@@ -35,6 +35,11 @@ class ImageEncoder(nn.Module):
             strides=[4, 2, 1],
             activation_class=nn.ELU,
         )
+        # A one-channel (depth) image goes through channels-last convolutions: on a CPU, PyTorch's
+        # default layout took 7x longer for the first layer's weight gradient, and a student's
+        # update 2x longer in all. With three channels (RGB) the default layout is the faster one.
+        self.layout = torch.channels_last if shape[0] == 1 else torch.contiguous_format
+        self.conv.to(memory_format=self.layout)
         with torch.no_grad():
             flat = self.conv(torch.zeros(1, *shape)).shape[-1]
         self.project = nn.Sequential(nn.Linear(flat, features), nn.ELU())
@@ -42,8 +47,8 @@ class ImageEncoder(nn.Module):
     def forward(self, image: torch.Tensor) -> torch.Tensor:
         x = image.float() / (255.0 if self.key == "rgb" else self.far)
         batch = x.shape[:-3]
-        features = self.project(self.conv(x.reshape(-1, *x.shape[-3:])))
-        return features.reshape(*batch, -1)
+        x = x.reshape(-1, *x.shape[-3:]).contiguous(memory_format=self.layout)
+        return self.project(self.conv(x)).reshape(*batch, -1)
 
 
 class VisionActorNet(nn.Module):
