@@ -169,6 +169,12 @@ class DistillConfig:
     lr: float = 1e-3
     min_lr_frac: float = 0.1  # the learning rate anneals linearly to this fraction at total_frames
     buffer_frames: int = 60_000  # labelled frames kept (the oldest go first); 64x64 depth: 16 kB each
+    # Auxiliary task (rlgrasp/vision/auxiliary.py): the student's image features also predict these
+    # parts of the privileged state, weighted aux_coeff (0: off). Training only; nothing is deployed.
+    aux_coeff: float = 0.0
+    aux_parts: list[str] = field(default_factory=lambda: ["object_minus_grasp", "grasped"])
+    # Training images recoloured per sample (rlgrasp/vision/augment.py): none | colour (RGB only).
+    augment: str = "none"
     learner_threads: int | None = None  # null: every core (the learner, not the workers, is the bound)
 
 
@@ -528,6 +534,8 @@ def _distill_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
          f"must be >= algo.minibatch_size ({a.minibatch_size})"),
         ("algo.learner_threads", a.learner_threads, a.learner_threads is None or a.learner_threads >= 1,
          "must be >= 1 or null"),
+        ("algo.aux_coeff", a.aux_coeff, a.aux_coeff >= 0, "must be >= 0 (0: no auxiliary task)"),
+        ("algo.augment", a.augment, a.augment in ("none", "colour"), "must be none or colour"),
     ]
 
 

@@ -9,7 +9,10 @@ from tensordict import TensorDict
 from torchrl.envs import ExplorationType, set_exploration_type
 from torchrl.objectives import BCLoss
 
+from rlgrasp.config import ConfigError
 from rlgrasp.train.checkpoint import CheckpointError
+from rlgrasp.vision.augment import recolour
+from rlgrasp.vision.auxiliary import ObjectFromImages
 from rlgrasp.vision.dagger import LABEL_KEY, DAggerPolicy, LabelledFrames, PrivilegedTeacher, load_teacher
 from rlgrasp.vision.models import build_vision_actor
 
@@ -79,6 +82,48 @@ def test_bc_loss_lowers_on_a_fixed_batch():
     assert values[-1] < 0.5 * values[0]
 
 
+def test_the_auxiliary_head_learns_the_object_from_the_images_alone():
+    """The object's offset is written into the depth image (a bright column at its x); the head on
+    the encoder's features learns to read it back, trained with the encoder as distillation does."""
+    torch.manual_seed(0)
+    actor = build_vision_actor(SPEC, MODEL)
+    aux = ObjectFromImages(actor.module[0].module.encoders, {"object_minus_grasp": [2, 5]},
+                           ["object_minus_grasp"])
+    batch = frames(128)
+    column = torch.randint(0, 64, (128,))
+    batch["depth"] = torch.zeros(128, 1, 64, 64)
+    batch["depth"][torch.arange(128), 0, :, column] = 1.0
+    batch["privileged"][:, 2] = column.float() / 64  # the part the head must predict
+    aux.update(batch)
+    optimizer = torch.optim.Adam([*actor.parameters(), *aux.parameters()], 3e-3)
+    losses = []
+    for _ in range(80):
+        actor(batch.clone())  # the student's forward: the head reads the features it tapped
+        loss = aux.loss(batch)
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+        losses.append(float(loss))
+    assert losses[-1] < 0.3 * losses[0]
+
+
+def test_an_unknown_auxiliary_part_is_refused_in_one_line():
+    actor = build_vision_actor(SPEC, MODEL)
+    with pytest.raises(ConfigError, match="algo.aux_parts: unknown part 'object_pose'; parts of the "
+                                          "privileged state: object_minus_grasp"):
+        ObjectFromImages(actor.module[0].module.encoders, {"object_minus_grasp": [2, 5]}, ["object_pose"])
+
+
+def test_recolouring_permutes_channels_and_scales_brightness():
+    rgb = torch.zeros(50, 3, 4, 4, dtype=torch.uint8)
+    rgb[:, 0], rgb[:, 1], rgb[:, 2] = 200, 100, 10
+    same_light = recolour(rgb, brightness=(1.0, 1.0), contrast=(1.0, 1.0))
+    orders = {tuple(int(v) for v in img[:, 0, 0].round()) for img in same_light}
+    assert all(sorted(o) == [10, 100, 200] for o in orders) and len(orders) > 1  # permuted, not changed
+    dimmer = recolour(rgb, brightness=(0.5, 0.5), contrast=(1.0, 1.0))
+    assert torch.allclose(dimmer.sum(1), torch.full((50, 4, 4), 155.0))  # half of 310, every image
+
+
 @pytest.mark.parametrize("beta, teacher_share", [(1.0, 1.0), (0.0, 0.0)])
 def test_dagger_policy_labels_every_frame_and_mixes_by_beta(beta, teacher_share):
     student = build_vision_actor(SPEC, MODEL)
@@ -139,7 +184,8 @@ def test_distillation_trains_checkpoints_resumes_and_evaluates(tmp_path, train_c
     from rlgrasp.vision.distill import distill
 
     run = tmp_path / "run"
-    success = distill(train_cfg(*SMALL_DISTILL, run_dir=run))
+    with_aux = (*SMALL_DISTILL, "algo.aux_coeff=0.1")  # the auxiliary head is checkpointed and resumed too
+    success = distill(train_cfg(*with_aux, run_dir=run))
     assert 0.0 <= success <= 1.0
     ckpt = load_checkpoint(run)
     assert (
@@ -147,10 +193,10 @@ def test_distillation_trains_checkpoints_resumes_and_evaluates(tmp_path, train_c
         and ckpt["frames"] == 2048
         and ckpt["spec"]["images"] == {"depth": [1, 64, 64]}
     )
-    assert ckpt["last_eval"]["teacher_success_rate"] >= 0.0
+    assert ckpt["last_eval"]["teacher_success_rate"] >= 0.0 and "head.weight" in ckpt["aux"]
     policy = policy_from_checkpoint(ckpt)
     assert set(policy.in_keys) == {"observation", "depth"}
-    distill(train_cfg(*SMALL_DISTILL, f"resume={run}", "total_frames=3072", run_dir=run))
+    distill(train_cfg(*with_aux, f"resume={run}", "total_frames=3072", run_dir=run))
     resumed = load_checkpoint(run)
     assert resumed["frames"] == 3072 and resumed["generation"] == 1 and resumed["updates"] > ckpt["updates"]
 

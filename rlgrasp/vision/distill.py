@@ -37,9 +37,11 @@ from rlgrasp.train.loop import seed_everything
 from rlgrasp.train.metrics import Due, finished_episodes
 from rlgrasp.train.preemption import StopSignals
 from rlgrasp.train.resume import prepare_run
+from rlgrasp.vision.augment import augment
+from rlgrasp.vision.auxiliary import ObjectFromImages
 from rlgrasp.vision.dagger import LABEL_KEY, DAggerPolicy, LabelledFrames, load_teacher, resolve_teacher
 from rlgrasp.vision.models import actor_norm, build_vision_actor
-from rlgrasp.vision.spec import vision_spec
+from rlgrasp.vision.spec import PRIVILEGED_KEY, vision_spec
 
 
 class Distiller:
@@ -62,8 +64,14 @@ class Distiller:
         self.student = build_vision_actor(self.spec, cfg.model)
         self.policy = DAggerPolicy(self.student, self.teacher, a.beta0)
         self.loss = BCLoss(self.student, loss_function="mse")
-        self.optimizer = torch.optim.Adam(self.student.parameters(), lr=a.lr)
-        self.data = LabelledFrames(self.student.in_keys, a.buffer_frames, a.minibatch_size)
+        self.aux = None
+        if a.aux_coeff > 0:
+            encoders = self.student.module[0].module.encoders
+            self.aux = ObjectFromImages(encoders, self.spec["privileged_parts"], a.aux_parts)
+        params = [*self.student.parameters(), *(self.aux.parameters() if self.aux is not None else [])]
+        self.optimizer = torch.optim.Adam(params, lr=a.lr)
+        keys = [*self.student.in_keys, *([PRIVILEGED_KEY] if self.aux is not None else [])]
+        self.data = LabelledFrames(keys, a.buffer_frames, a.minibatch_size)
         self.frames, self.batches_seen, self.generation, self.last_eval = 0, 0, 0, None
         self.best_success = -math.inf
         if resumed is not None:
@@ -144,26 +152,33 @@ class Distiller:
         a = self.cfg.algo
         t0 = time.perf_counter()
         actor_norm(self.student).update(batch["observation"])
+        if self.aux is not None:
+            self.aux.update(batch)
         self.data.extend(batch)
         updates = max(1, math.ceil(a.epochs * batch.numel() / a.minibatch_size))
         lr = a.lr * max(a.min_lr_frac, 1.0 - self.frames / self.cfg.total_frames)
         for group in self.optimizer.param_groups:
             group["lr"] = lr
-        total = 0.0
+        total, aux_total = 0.0, 0.0
         for _ in range(updates):
-            sample = self.data.sample()
+            sample = augment(self.data.sample(), a.augment)
             sample["action"] = sample[LABEL_KEY]
             with set_exploration_type(ExplorationType.DETERMINISTIC):
                 loss = self.loss(sample)["loss_bc"]
+            total += loss.item()
+            if self.aux is not None:  # the features of the forward the action loss just ran
+                aux = self.aux.loss(sample)
+                aux_total += aux.item()
+                loss = loss + a.aux_coeff * aux
             self.optimizer.zero_grad()
             loss.backward()
             self.optimizer.step()
-            total += loss.item()
         beta = self.policy.beta.item()
         self.batches_seen += 1
         self.policy.beta.fill_(a.beta0 * a.beta_decay**self.batches_seen)
         return {
             "losses/bc_loss": total / updates,
+            **({"losses/aux_loss": aux_total / updates} if self.aux is not None else {}),
             "charts/beta": beta,
             "charts/learning_rate": lr,
             "charts/dataset_frames": len(self.data),
@@ -211,6 +226,7 @@ class Distiller:
             "format": ckpt_lib.FORMAT,
             "kind": "vision",
             "actor": self.student.state_dict(),
+            "aux": self.aux.state_dict() if self.aux is not None else None,
             "optimizer": self.optimizer.state_dict(),
             "frames": self.frames,
             "updates": self.batches_seen,
@@ -231,6 +247,8 @@ class Distiller:
             raise ConfigError(
                 f"checkpoint does not fit the camera student: {str(exc).splitlines()[0][:200]}"
             ) from exc
+        if self.aux is not None and state.get("aux") is not None:
+            self.aux.load_state_dict(state["aux"])
         self.optimizer.load_state_dict(state["optimizer"])
         ckpt_lib.set_rng_state(state["rng"])
         self.frames, self.batches_seen = state["frames"], state["updates"]

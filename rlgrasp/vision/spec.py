@@ -25,6 +25,8 @@ def vision_spec(make_env: EnvFactory) -> dict[str, Any]:
             "obs_key": "observation",
             "obs_dim": int(space["state"].shape[-1]),
             "privileged_dim": int(space["privileged"].shape[-1]),
+            # where each named part lies in `privileged` (for the student's auxiliary targets)
+            "privileged_parts": {n: [s.start, s.stop] for n, s in env.unwrapped.obs_slices.items()},
             "images": {k: list(space[k].shape) for k in IMAGE_KEYS if k in space.spaces},
             "far": float(env.unwrapped.camera.spec.far),
             "action_dim": int(env.action_space.shape[0]),
