@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import multiprocessing as mp
 import signal
 import threading
 from collections.abc import Callable, Mapping, Sequence
+from multiprocessing.context import SpawnContext, SpawnProcess
 from multiprocessing.pool import Pool
 from typing import Any
 
@@ -49,23 +49,42 @@ def pyplot() -> Any:
     return plt
 
 
+class _SpawnIgnoringCtrlC(SpawnProcess):
+    """A spawned process born with SIGINT ignored (see ``spawn_pool``)."""
+
+    @staticmethod
+    def _Popen(process_obj: Any) -> Any:  # noqa: N802 (multiprocessing's name)
+        if threading.current_thread() is not threading.main_thread():  # the pool replacing a worker
+            return SpawnProcess._Popen(process_obj)
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            return SpawnProcess._Popen(process_obj)
+        finally:
+            signal.signal(signal.SIGINT, previous)
+
+
+class _SpawnIgnoringCtrlCContext(SpawnContext):
+    Process = _SpawnIgnoringCtrlC
+
+
+def _init_from_queue(handoff: Any) -> None:
+    initializer, initargs = handoff.get()
+    initializer(*initargs)
+
+
 def spawn_pool(workers: int, initializer: Callable[..., None], initargs: tuple[Any, ...]) -> Pool:
     """A pool of spawned processes that leave Ctrl-C to the parent, from their first instruction.
 
     A Ctrl-C at a terminal reaches the whole process group. Ignoring SIGINT in a pool initializer
     is too late for a worker still importing torch (seconds on a busy machine): it prints a
     KeyboardInterrupt traceback. An ignored signal stays ignored across exec, and Python then
-    installs no KeyboardInterrupt handler, so the workers are started with SIGINT ignored here.
-    SIGINT is also blocked meanwhile: a Ctrl-C in that window waits for the parent's own handler
-    instead of being lost (the kernel keeps a blocked signal pending even while it is ignored).
+    installs no KeyboardInterrupt handler, so each worker is launched while this process ignores
+    SIGINT. ``initargs`` (a policy's weights) follow through a queue: passed at launch, they would
+    keep the launch, and the parent deaf to Ctrl-C, waiting until the worker had imported torch.
     """
-    ctx = mp.get_context("spawn")
-    if threading.current_thread() is not threading.main_thread():
-        return ctx.Pool(workers, initializer=initializer, initargs=initargs)
-    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        return ctx.Pool(workers, initializer=initializer, initargs=initargs)
-    finally:
-        signal.signal(signal.SIGINT, previous)
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    context = _SpawnIgnoringCtrlCContext()
+    handoff = context.Queue()
+    pool = Pool(workers, _init_from_queue, (handoff,), context=context)
+    for _ in range(workers):
+        handoff.put((initializer, initargs))
+    return pool
