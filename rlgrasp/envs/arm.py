@@ -14,6 +14,7 @@ import numpy as np
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
+from rlgrasp.envs.collision_model import collision_variant
 from rlgrasp.envs.robot_base import Robot
 from rlgrasp.envs.robot_check import check_model, check_spec_values
 from rlgrasp.envs.robot_spec import PANDA, RobotSpec
@@ -24,9 +25,10 @@ class ArmRobot(Robot):
     """One arm body in one physics client, built from its spec."""
 
     def __init__(self, spec: RobotSpec, client: BulletClient, model: str | None = None,
-                 render: str | None = None):
+                 render: str | None = None, collision: str = "mesh"):
         """``model`` overrides the spec's model file; ``render``: None (the model as it is),
-        ``low_poly`` or ``wrist`` (low-poly, wrist links only) when the spec has a low-poly rule."""
+        ``low_poly`` or ``wrist`` (low-poly, wrist links only) when the spec has a low-poly rule;
+        ``collision``: a name of ``rlgrasp.envs.collision_model.COLLISION_MODELS``."""
         check_spec_values(spec)
         self.spec, self.client = spec, client
         key = "robot_urdf" if model else "robot.model"
@@ -36,6 +38,7 @@ class ArmRobot(Robot):
             raise FileNotFoundError(f"{key}: {exc}") from None
         if render and model is None and spec.low_poly_meshes:
             path = low_poly_urdf(path, spec.low_poly_meshes, self.wrist_names if render == "wrist" else None)
+        path = collision_variant(path, spec.name, collision)
         self.body = self._load(path, key)
         joints, links = {}, {}
         for j in range(client.getNumJoints(self.body)):
@@ -240,8 +243,9 @@ def hold_target(value: Any, default_force: float) -> tuple[float, float]:
 class Panda(ArmRobot):
     """The Franka Panda of ``pybullet_data``; a subclass may set its own ``neutral_pose``."""
 
-    def __init__(self, client: BulletClient, urdf: str | None = None, render: str | None = None):
-        super().__init__(PANDA, client, urdf, render)
+    def __init__(self, client: BulletClient, urdf: str | None = None, render: str | None = None,
+                 collision: str = "mesh"):
+        super().__init__(PANDA, client, urdf, render, collision)
 
 
 def low_poly_urdf(path: str, meshes: tuple[str, str], visible_links: Sequence[str] | None = None) -> str:
