@@ -14,7 +14,7 @@ import numpy as np
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
-from rlgrasp.envs.collision_model import collision_variant
+from rlgrasp.envs.collision_model import collision_variant, keep_mesh_inertia
 from rlgrasp.envs.robot_base import Robot
 from rlgrasp.envs.robot_check import check_model, check_spec_values
 from rlgrasp.envs.robot_spec import PANDA, RobotSpec
@@ -38,8 +38,9 @@ class ArmRobot(Robot):
             raise FileNotFoundError(f"{key}: {exc}") from None
         if render and model is None and spec.low_poly_meshes:
             path = low_poly_urdf(path, spec.low_poly_meshes, self.wrist_names if render == "wrist" else None)
-        path = collision_variant(path, spec.name, collision)
+        mesh_path, path = path, collision_variant(path, spec.name, collision)
         self.body = self._load(path, key)
+        keep_mesh_inertia(client, self.body, mesh_path, spec.name, collision)
         joints, links = {}, {}
         for j in range(client.getNumJoints(self.body)):
             info = client.getJointInfo(self.body, j)

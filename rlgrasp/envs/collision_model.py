@@ -7,7 +7,10 @@ boxes with its box-box routine instead of running GJK over each mesh's vertices;
 weigh as before (their inertials, joints and contact parameters are untouched).
 
 The variant is opt-in because it changes the contacts, and so the episodes: a policy trained on
-the meshes (every policy in ``policies/``) is evaluated on the meshes.
+the meshes (every policy in ``policies/``) is evaluated on the meshes. PyBullet computes a link's
+inertia from its collision shapes (the URDF's tensor is read only with a flag rlgrasp does not
+pass), so ``keep_mesh_inertia`` gives the replaced links the inertia the mesh model has: only the
+contact geometry differs.
 
 The Panda's shapes follow the convex hulls of ``meshes/collision/finger.obj`` and ``hand.obj``
 (PyBullet collides a URDF mesh as its convex hull), in each link's own frame: the finger as a pad
@@ -24,6 +27,9 @@ import re
 import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+
+import pybullet
+from pybullet_utils.bullet_client import BulletClient
 
 COLLISION_MODELS = ("mesh", "primitive")
 MARGIN = 0.001  # PyBullet's URDF collision margin: around a hull, inside a box
@@ -110,6 +116,35 @@ def primitive_urdf(path: str, shapes: Mapping[str, Sequence[Box | Capsule]]) -> 
         body += "".join(part.urdf() for part in parts) + "\n"
         text = text[: found.start(1)] + body + text[found.end(1):]
     return write_once(text, "rlgrasp-primitive")
+
+
+def keep_mesh_inertia(client: BulletClient, body: int, mesh_path: str, robot: str, model: str) -> None:
+    """Give the links whose shapes ``model`` replaced the inertia they have in the model at
+    ``mesh_path`` (nothing to do for ``mesh``)."""
+    if model == "mesh":
+        return
+    inertia = _mesh_inertia(mesh_path, tuple(PRIMITIVES[robot]))
+    for j in range(client.getNumJoints(body)):
+        name = client.getJointInfo(body, j)[12].decode()
+        if name in inertia:
+            client.changeDynamics(body, j, localInertiaDiagonal=inertia[name])
+
+
+_INERTIA: dict[tuple[str, tuple[str, ...]], dict[str, tuple[float, float, float]]] = {}
+
+
+def _mesh_inertia(path: str, links: tuple[str, ...]) -> dict[str, tuple[float, float, float]]:
+    """Each link's local inertia diagonal as PyBullet computes it for the model at ``path``, read
+    once per process in a private client."""
+    if (path, links) not in _INERTIA:
+        client = BulletClient(pybullet.DIRECT)
+        try:
+            body = client.loadURDF(path, useFixedBase=True)
+            infos = {client.getJointInfo(body, j)[12].decode(): j for j in range(client.getNumJoints(body))}
+            _INERTIA[path, links] = {n: client.getDynamicsInfo(body, infos[n])[2] for n in links}
+        finally:
+            client.disconnect()
+    return _INERTIA[path, links]
 
 
 def write_once(text: str, prefix: str) -> str:
