@@ -73,6 +73,9 @@ class EnvConfig:
     # null, or a camera (rlgrasp.envs.cameras.CameraSpec keys); the `cameras` config group sets it.
     camera: Any = None
     visual: str = "none"  # none | default | wide | heldout (the `visual` config group)
+    # mesh: the arm's own collision meshes; primitive: boxes and capsules for the Panda's hand and
+    # fingers (rlgrasp/envs/collision_model.py). The shipped policies were trained on the meshes.
+    collision_model: str = "mesh"
 
 
 @dataclass

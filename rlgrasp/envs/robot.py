@@ -51,11 +51,14 @@ def robot_label(robot: Any) -> str:
 
 
 def make_robot(name: str | Mapping[str, Any] | RobotSpec, client: BulletClient, model: str | None = None,
-               render: str | None = None) -> Robot:
+               render: str | None = None, collision: str = "mesh") -> Robot:
     """The arm ``name`` (see ``resolve_robot``); ``model`` overrides its model file (a path or a
     pybullet_data name); ``render`` asks for the model cameras render cheaply (``low_poly``, or
-    ``wrist``: only what a wrist camera sees)."""
+    ``wrist``: only what a wrist camera sees); ``collision`` for its collision shapes
+    (``rlgrasp.envs.collision_model``)."""
     arm = resolve_robot(name)
     if isinstance(arm, RobotSpec):
-        return ArmRobot(arm, client, model, render=render)
+        return ArmRobot(arm, client, model, render=render, collision=collision)
+    if collision != "mesh":  # a registered class may not take the keyword
+        return arm(client, model, render=render, collision=collision)
     return arm(client, model, render=render)
