@@ -87,6 +87,9 @@ class PPOConfig:
     lr: float = 3e-4
     anneal_lr: bool = True  # linearly to min_lr_frac x lr at total_frames
     min_lr_frac: float = 0.0
+    # The schedule's length in frames; null: total_frames. A sweep trial sets the experiment's, so that
+    # it stops part-way along the real run's schedule (sweep.trial.lr_schedule=experiment).
+    anneal_lr_frames: int | None = None
     clip_epsilon: float = 0.2
     entropy_coeff: float = 0.0
     critic_coeff: float = 0.5
@@ -493,6 +496,8 @@ def _ppo_checks(a: Any, batch: int) -> list[tuple[str, Any, bool, str]]:
         ("algo.gae_lambda", a.gae_lambda, 0 <= a.gae_lambda <= 1, "must be in [0, 1]"),
         ("algo.clip_epsilon", a.clip_epsilon, a.clip_epsilon > 0, "must be > 0"),
         ("algo.max_grad_norm", a.max_grad_norm, a.max_grad_norm > 0, "must be > 0"),
+        ("algo.anneal_lr_frames", a.anneal_lr_frames, a.anneal_lr_frames is None or a.anneal_lr_frames > 0,
+         "must be > 0 or null (null: total_frames)"),
     ]
 
 
