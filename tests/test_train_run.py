@@ -176,7 +176,8 @@ def test_the_seed_check_catches_an_unseeded_worker(tmp_path: Path, train_cfg) ->
 #: experiment=smoke composed, except ``env`` (its own guard below) and ``paths.output_dir``.
 SMOKE_CONFIG = """
 algo: {name: ppo, gamma: 0.9, gae_lambda: 0.9, epochs: 2, minibatch_size: 256, lr: 0.0003, anneal_lr: true,
-       min_lr_frac: 0.0, clip_epsilon: 0.2, entropy_coeff: 0.0, critic_coeff: 0.5, loss_critic_type: l2,
+       min_lr_frac: 0.0, anneal_lr_frames: null, clip_epsilon: 0.2, entropy_coeff: 0.0, critic_coeff: 0.5,
+       loss_critic_type: l2,
        normalize_advantage: true, max_grad_norm: 0.5, target_kl: 0.05, adam_eps: 1.0e-05,
        gae_every_epoch: true, demos: null, demo_coeff: 0.1, demo_decay: 0.95, demo_minibatch_size: 256,
        bc_epochs: 0, bc_lr: 0.001, bc_minibatch_size: 64, bc_only: false, rnd_coeff: 0.0, rnd_gamma: 0.99,
