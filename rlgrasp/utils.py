@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import multiprocessing as mp
+import signal
+import threading
 from collections.abc import Callable, Mapping, Sequence
+from multiprocessing.pool import Pool
 from typing import Any
 
 
@@ -43,3 +47,25 @@ def pyplot() -> Any:
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def spawn_pool(workers: int, initializer: Callable[..., None], initargs: tuple[Any, ...]) -> Pool:
+    """A pool of spawned processes that leave Ctrl-C to the parent, from their first instruction.
+
+    A Ctrl-C at a terminal reaches the whole process group. Ignoring SIGINT in a pool initializer
+    is too late for a worker still importing torch (seconds on a busy machine): it prints a
+    KeyboardInterrupt traceback. An ignored signal stays ignored across exec, and Python then
+    installs no KeyboardInterrupt handler, so the workers are started with SIGINT ignored here.
+    SIGINT is also blocked meanwhile: a Ctrl-C in that window waits for the parent's own handler
+    instead of being lost (the kernel keeps a blocked signal pending even while it is ignored).
+    """
+    ctx = mp.get_context("spawn")
+    if threading.current_thread() is not threading.main_thread():
+        return ctx.Pool(workers, initializer=initializer, initargs=initargs)
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        return ctx.Pool(workers, initializer=initializer, initargs=initargs)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})

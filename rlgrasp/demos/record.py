@@ -8,8 +8,6 @@ on the number of workers (``rlgrasp.evaluation.episodes`` explains why, for eval
 from __future__ import annotations
 
 import math
-import multiprocessing as mp
-import signal
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -18,13 +16,13 @@ import torch
 from tensordict import TensorDict
 
 from rlgrasp.evaluation.policies import PolicySource, build_policy
+from rlgrasp.utils import spawn_pool
 
 _WORKER: dict[str, Any] = {}
 
 
 def _init(source: PolicySource) -> None:
-    """One torch thread, one env, one policy per process; Ctrl-C is the parent's to handle."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    """One torch thread, one env, one policy per process."""
     torch.set_num_threads(1)
     env = source.make_env()
     _WORKER.update(env=env, actor=build_policy(source, env, deterministic=True))
@@ -81,12 +79,11 @@ def record(
                 if progress:
                     progress(len(results), episodes)
         finally:
-            signal.signal(signal.SIGINT, signal.default_int_handler)
             _WORKER.pop("env").close()
             torch.set_num_threads(threads)
     else:
-        ctx = mp.get_context("spawn")
-        with ctx.Pool(min(workers, len(chunks)), initializer=_init, initargs=(source,)) as pool:
+        # Ctrl-C is the parent's to handle: spawn_pool starts the workers ignoring SIGINT.
+        with spawn_pool(min(workers, len(chunks)), _init, (source,)) as pool:
             for chunk_result in pool.imap_unordered(_chunk, chunks):
                 results.extend(chunk_result)
                 if progress:

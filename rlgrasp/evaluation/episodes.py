@@ -14,8 +14,6 @@ connected inside each worker, never inherited.
 from __future__ import annotations
 
 import math
-import multiprocessing as mp
-import signal
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -27,6 +25,7 @@ import torch
 from rlgrasp.evaluation.outcomes import SUCCESS, failure_reason
 from rlgrasp.evaluation.policies import Actor, PolicySource, build_policy
 from rlgrasp.evaluation.views import render_frame
+from rlgrasp.utils import spawn_pool
 
 
 @dataclass
@@ -109,13 +108,6 @@ def _init_worker(source: PolicySource, deterministic: bool, video_episodes: int)
     _WORKER.update(env=env, actor=build_policy(source, env, deterministic), video_episodes=video_episodes)
 
 
-def _init_pool_worker(source: PolicySource, deterministic: bool, video_episodes: int) -> None:
-    """A pool worker leaves Ctrl-C to the parent, which terminates the pool: without this, a Ctrl-C
-    at a terminal (sent to the whole group) also prints a KeyboardInterrupt traceback per worker."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    _init_worker(source, deterministic, video_episodes)
-
-
 def _run_chunk(jobs: Sequence[tuple[int, int]]) -> list[EpisodeResult]:
     env, actor, k = _WORKER["env"], _WORKER["actor"], _WORKER["video_episodes"]
     return [run_episode(env, actor, i, seed, render=i < k) for i, seed in jobs]
@@ -168,10 +160,8 @@ def run_episodes(
             _close_worker()
             torch.set_num_threads(threads)
     else:
-        ctx = mp.get_context("spawn")
-        with ctx.Pool(
-            workers, initializer=_init_pool_worker, initargs=(source, deterministic, video_episodes)
-        ) as pool:
+        # The parent handles Ctrl-C and terminates the pool (spawn_pool starts it ignoring SIGINT).
+        with spawn_pool(workers, _init_worker, (source, deterministic, video_episodes)) as pool:
             for chunk_result in pool.imap_unordered(_run_chunk, chunks):
                 results.extend(chunk_result)
                 if progress:
