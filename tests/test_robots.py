@@ -8,12 +8,13 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pybullet
 import pybullet_data
 import pytest
 from gymnasium.utils.env_checker import check_env
 from omegaconf import OmegaConf
 
-from rlgrasp.envs import PandaGraspEnv, ScriptedExpert
+from rlgrasp.envs import PandaGraspEnv, ScriptedExpert, grasp_env
 from rlgrasp.envs.robot import ROBOTS, robot_label
 from rlgrasp.envs.robot_spec import KUKA_IIWA, PANDA, XARM6
 from rlgrasp.evaluation.source import EvaluationError, check_robot
@@ -219,10 +220,20 @@ def test_unknown_robot_names_the_valid_ones():
         PandaGraspEnv(robot="ur5")
 
 
-def test_torque_control_is_refused_where_the_model_says_it_is_not_meaningful():
+def test_torque_control_is_refused_where_the_model_says_it_is_not_meaningful(monkeypatch):
+    scenes = []
+
+    class RecordedScene(grasp_env.Scene):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            scenes.append(self)
+
+    monkeypatch.setattr(grasp_env, "Scene", RecordedScene)
     mapping = {**dataclasses.asdict(PANDA), "torque_control": False, "fingers": PANDA_FINGERS}
     with pytest.raises(ValueError, match="control_mode=joint_torque: this arm's model has no meaningful"):
         PandaGraspEnv(robot=mapping, control_mode="joint_torque")
+    # The refused env leaves no physics server behind for the garbage collector.
+    assert len(scenes) == 1 and not pybullet.isConnected(scenes[0].client._client)
 
 
 # --- a policy never leaks across arms ---------------------------------------------------------
