@@ -6,6 +6,7 @@ a checkpoint of one arm is refused by an env of another."""
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pybullet
@@ -16,11 +17,13 @@ from omegaconf import OmegaConf
 
 from rlgrasp.envs import PandaGraspEnv, ScriptedExpert, grasp_env
 from rlgrasp.envs.robot import ROBOTS, robot_label
-from rlgrasp.envs.robot_spec import KUKA_IIWA, PANDA, XARM6
+from rlgrasp.envs.robot_spec import BUILTIN_DIR, BUILTIN_ROBOTS, builtin_spec, spec_from_file
 from rlgrasp.evaluation.source import EvaluationError, check_robot
 from rlgrasp.overrides import rewrite
 
+PANDA, KUKA_IIWA, XARM6 = (builtin_spec(name) for name in ("panda", "kuka_iiwa", "xarm6"))
 ARMS = {"panda": (PANDA, 7), "kuka_iiwa": (KUKA_IIWA, 7), "xarm6": (XARM6, 6)}
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture
@@ -38,8 +41,17 @@ def arm_env():
         env.close()
 
 
-def test_the_shipped_arms_are_registered():
-    assert {n: ROBOTS[n] for n in ARMS} == {n: spec for n, (spec, _) in ARMS.items()}
+def test_the_shipped_arms_are_registered_from_their_files():
+    assert BUILTIN_ROBOTS == tuple(ARMS) and all(ROBOTS[n] is builtin_spec(n) for n in ARMS)
+    assert {n: ROBOTS[n].label for n in ARMS} == {n: n for n in ARMS}
+    assert sorted(p.stem for p in BUILTIN_DIR.glob("*.yaml")) == sorted(ARMS)
+
+
+def test_a_non_editable_install_ships_the_arms_files():
+    tomllib = pytest.importorskip("tomllib")  # python >= 3.11
+    data = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]
+    shipped = {p for glob in data["rlgrasp.envs"] for p in (ROOT / "rlgrasp" / "envs").glob(glob)}
+    assert set(BUILTIN_DIR.glob("*.yaml")) <= shipped
 
 
 @pytest.mark.parametrize("robot", ARMS)
@@ -155,6 +167,17 @@ def test_an_arm_from_yaml_is_the_shipped_arm(tmp_path, arm_env):
     action = np.array([0.3, -0.2, -1.0, 1.0], np.float32)
     np.testing.assert_array_equal(env.step(action)[0], shipped.step(action)[0])
     assert robot_label(robot) == "xarm6_with_gripper"  # no name: the model file's stem
+
+
+def test_a_shipped_arms_file_copied_as_a_users_config_is_that_arm(tmp_path):
+    """The walk-through's claim: a built-in arm's file, copied to configs/robot/my_arm.yaml with an
+    absolute model path, is the same arm."""
+    text = (BUILTIN_DIR / "kuka_iiwa.yaml").read_text()
+    model = f"{pybullet_data.getDataPath()}/{KUKA_IIWA.model}"
+    mine = tmp_path / "my_arm.yaml"
+    mine.write_text(text.replace(f"model: {KUKA_IIWA.model}", f"model: {model}"))
+    assert spec_from_file(mine) == dataclasses.replace(KUKA_IIWA, model=model)
+    assert OmegaConf.load(mine).robot.name == "kuka_iiwa" and text.startswith("# @package env\n")
 
 
 def test_a_user_arm_on_the_command_line_reaches_env_robot(train_cfg):

@@ -16,7 +16,7 @@ from pybullet_utils.bullet_client import BulletClient
 
 from rlgrasp.envs.robot_base import Robot
 from rlgrasp.envs.robot_check import check_model, check_spec_values
-from rlgrasp.envs.robot_spec import PANDA, RobotSpec
+from rlgrasp.envs.robot_spec import RobotSpec, builtin_spec
 from rlgrasp.envs.scene import data_path
 
 
@@ -237,7 +237,7 @@ class Panda(ArmRobot):
     """The Franka Panda of ``pybullet_data``; a subclass may set its own ``neutral_pose``."""
 
     def __init__(self, client: BulletClient, urdf: str | None = None, render: str | None = None):
-        super().__init__(PANDA, client, urdf, render)
+        super().__init__(builtin_spec("panda"), client, urdf, render)
 
 
 def low_poly_urdf(path: str, meshes: tuple[str, str], visible_links: Sequence[str] | None = None) -> str:
