@@ -16,6 +16,7 @@ from gymnasium.utils.env_checker import check_env
 from omegaconf import OmegaConf
 
 from rlgrasp.envs import PandaGraspEnv, ScriptedExpert, grasp_env
+from rlgrasp.envs.render_model import mesh_bounds
 from rlgrasp.envs.robot import ROBOTS, robot_label
 from rlgrasp.envs.robot_spec import BUILTIN_DIR, BUILTIN_ROBOTS, builtin_spec, spec_from_file
 from rlgrasp.evaluation.source import EvaluationError, check_robot
@@ -136,6 +137,35 @@ def test_a_wrist_camera_rides_on_each_arm(robot, arm_env):
     assert np.median(depth) < 0.5 and depth.max() - depth.min() > 0.02
 
 
+@pytest.mark.parametrize("robot", ["kuka_iiwa", "xarm6"])
+def test_cameras_see_the_arms_links_as_boxes_and_the_physics_is_unchanged(robot, arm_env):
+    """The render model (``low_poly_meshes: boxes``) boxes every link but the gripper's and leaves
+    every collision shape as it is: the arm moves as the arm without a camera does."""
+    plain = arm_env(robot, control_mode="joint_delta")
+    seen = arm_env(robot, control_mode="joint_delta", camera={"mount": "fixed", "modality": "depth",
+                                                              "width": 32, "height": 32})
+    shapes = {s[1]: s[2] for s in seen.client.getVisualShapeData(seen.robot.body)}
+    keep = {j for j, name in seen.robot.link_names.items() if name in seen.robot.wrist_names}
+    assert shapes and all(shape == pybullet.GEOM_BOX for link, shape in shapes.items() if link not in keep)
+    assert any(shapes.get(link) == pybullet.GEOM_MESH for link in keep)  # the gripper keeps its meshes
+    a, b = plain.reset(seed=5)[0], seen.reset(seed=5)[0]
+    rng = np.random.default_rng(0)
+    for _ in range(10):
+        action = rng.uniform(-1, 1, plain.action_dim)
+        a, b = plain.step(action)[0], seen.step(action)[0]
+    np.testing.assert_array_equal(a, b["privileged"])
+
+
+def test_mesh_bounds_read_binary_stl_with_a_solid_header_and_obj():
+    root = pybullet_data.getDataPath()
+    # A binary STL whose 80-byte header starts with "solid", as an ASCII one does.
+    low, high = mesh_bounds(f"{root}/xarm/xarm_gripper/meshes/base_link.STL")
+    assert np.all(high - low > 0.03) and np.all(high - low < 0.2)
+    low, high = mesh_bounds(f"{root}/cube.obj")
+    np.testing.assert_allclose([low, high], [[-0.5] * 3, [0.5] * 3])
+    assert mesh_bounds(f"{root}/racecar/meshes/cone.dae") is None  # not read: kept as a mesh
+
+
 @pytest.mark.parametrize("robot", ARMS)
 def test_each_arms_expert_lifts_the_cube(robot, arm_env):
     env = arm_env(robot)
@@ -211,6 +241,8 @@ BAD_ARMS = [
      ValueError, r"robot.neutral_pose: panda_joint4=1.85 is outside its limits \[-3.1416, 0.0\]"),
     ("neutral pose of another size", {"neutral_pose": [0.0, 0.41]}, ValueError,
      "robot.neutral_pose has 2 angles: must have one per arm joint"),
+    ("unknown render rule", {"low_poly_meshes": "spheres"}, ValueError,
+     "robot.low_poly_meshes='spheres': must be null, boxes or"),
     ("unknown key", {"grasp_lnk": "x"}, ValueError,
      "robot.grasp_lnk: unknown key; a robot has model, arm_joints"),
     ("a finger entry that is not one", {"fingers": ["panda_finger_joint1"]}, ValueError,

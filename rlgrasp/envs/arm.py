@@ -3,10 +3,6 @@ by name in its URDF or SDF; ``Panda`` is that of the Franka Panda."""
 
 from __future__ import annotations
 
-import hashlib
-import os
-import re
-import tempfile
 from collections.abc import Sequence
 from typing import Any
 
@@ -14,6 +10,7 @@ import numpy as np
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
+from rlgrasp.envs.render_model import boxed_model, low_poly_urdf
 from rlgrasp.envs.robot_base import Robot
 from rlgrasp.envs.robot_check import check_model, check_spec_values
 from rlgrasp.envs.robot_spec import RobotSpec, builtin_spec
@@ -35,7 +32,11 @@ class ArmRobot(Robot):
         except FileNotFoundError as exc:
             raise FileNotFoundError(f"{key}: {exc}") from None
         if render and model is None and spec.low_poly_meshes:
-            path = low_poly_urdf(path, spec.low_poly_meshes, self.wrist_names if render == "wrist" else None)
+            visible = self.wrist_names if render == "wrist" else None
+            if spec.low_poly_meshes == "boxes":
+                path = boxed_model(path, self.wrist_names, visible)
+            else:
+                path = low_poly_urdf(path, spec.low_poly_meshes, visible)
         self.body = self._load(path, key)
         joints, links = {}, {}
         for j in range(client.getNumJoints(self.body)):
@@ -238,36 +239,3 @@ class Panda(ArmRobot):
 
     def __init__(self, client: BulletClient, urdf: str | None = None, render: str | None = None):
         super().__init__(builtin_spec("panda"), client, urdf, render)
-
-
-def low_poly_urdf(path: str, meshes: tuple[str, str], visible_links: Sequence[str] | None = None) -> str:
-    """The same URDF with each visual mesh replaced by its collision mesh, for cameras; with
-    ``visible_links``, the other links lose their visuals altogether (a wrist camera never sees them).
-    ``meshes``: the visual and the collision mesh folders under ``package://``.
-
-    Rendering cost on the CPU follows the robot's visual triangles: the Panda's visual meshes make a
-    64x64 image cost ten times what its collision meshes do, and every visual shape costs a sync per
-    image even when transparent. Physics reads only the collision shapes, so the robot moves exactly
-    as before. Written once per machine into the temp directory (mesh paths made absolute),
-    atomically: several workers may ask at once.
-    """
-    text = open(path).read()
-    folder = os.path.dirname(path)
-    visual, collision = meshes
-    low = text.replace("package://" + visual, os.path.join(folder, collision))
-    low = low.replace("package://", folder + os.sep)
-    if visible_links is not None:
-        def strip(link: re.Match) -> str:
-            text = link.group(0)
-            name = re.search(r'<link\s+name="([^"]+)"', text).group(1)
-            return text if name in visible_links else re.sub(r"<visual>.*?</visual>", "", text, flags=re.S)
-
-        low = re.sub(r"<link\s+name=.*?</link>", strip, low, flags=re.S)
-    digest = hashlib.sha1(low.encode()).hexdigest()[:12]
-    target = os.path.join(tempfile.gettempdir(), f"rlgrasp-lowpoly-{digest}.urdf")
-    if not os.path.isfile(target):
-        fd, scratch = tempfile.mkstemp(suffix=".urdf", dir=tempfile.gettempdir())
-        with os.fdopen(fd, "w") as f:
-            f.write(low)
-        os.replace(scratch, target)
-    return target

@@ -69,9 +69,10 @@ class RobotSpec:
     max_torque: tuple[float, ...] | None = None
     camera_link: str = ""  # a wrist camera's mount (its z axis along the fingers); empty: grasp_link
     wrist_links: tuple[str, ...] = ()  # what a wrist camera can see; empty: the finger links
-    #: A low-poly render model: (visual mesh folder, collision mesh folder) rewritten in the URDF;
-    #: null: cameras render the model as it is.
-    low_poly_meshes: tuple[str, str] | None = None
+    #: The cheap model cameras render (``rlgrasp.envs.render_model``): [visual mesh folder, collision
+    #: mesh folder] rewritten in the URDF, or ``boxes`` (the visual meshes of links outside
+    #: ``wrist_links`` become their bounding boxes); null: cameras render the model as it is.
+    low_poly_meshes: tuple[str, str] | str | None = None
     #: Whether joint torques are a meaningful action: false for a model whose masses and inertias
     #: are placeholders (control_mode=joint_torque is then refused).
     torque_control: bool = True
@@ -108,6 +109,11 @@ def spec_from_mapping(mapping: Mapping[str, Any]) -> RobotSpec:
     for key in _TUPLES & set(data):
         value = data[key]
         if value is None and key in ("max_torque", "low_poly_meshes"):
+            continue
+        if key == "low_poly_meshes" and isinstance(value, str):
+            if value != "boxes":
+                raise ValueError(f"robot.low_poly_meshes={value!r}: must be null, boxes or [visual mesh "
+                                 "folder, collision mesh folder]")
             continue
         if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
             raise ValueError(f"robot.{key}={value!r}: must be a list")
