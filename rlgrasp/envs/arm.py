@@ -3,10 +3,6 @@ by name in its URDF or SDF; ``Panda`` is that of the Franka Panda."""
 
 from __future__ import annotations
 
-import hashlib
-import os
-import re
-import tempfile
 from collections.abc import Sequence
 from typing import Any
 
@@ -15,9 +11,10 @@ import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
 from rlgrasp.envs.collision_model import collision_variant, keep_mesh_inertia
+from rlgrasp.envs.render_model import boxed_model, low_poly_urdf
 from rlgrasp.envs.robot_base import Robot
 from rlgrasp.envs.robot_check import check_model, check_spec_values
-from rlgrasp.envs.robot_spec import PANDA, RobotSpec
+from rlgrasp.envs.robot_spec import RobotSpec, builtin_spec
 from rlgrasp.envs.scene import data_path
 
 
@@ -37,7 +34,11 @@ class ArmRobot(Robot):
         except FileNotFoundError as exc:
             raise FileNotFoundError(f"{key}: {exc}") from None
         if render and model is None and spec.low_poly_meshes:
-            path = low_poly_urdf(path, spec.low_poly_meshes, self.wrist_names if render == "wrist" else None)
+            visible = self.wrist_names if render == "wrist" else None
+            if spec.low_poly_meshes == "boxes":
+                path = boxed_model(path, self.wrist_names, visible)
+            else:
+                path = low_poly_urdf(path, spec.low_poly_meshes, visible)
         mesh_path, path = path, collision_variant(path, spec.name, collision)
         self.body = self._load(path, key)
         keep_mesh_inertia(client, self.body, mesh_path, spec.name, collision)
@@ -98,7 +99,6 @@ class ArmRobot(Robot):
                       if c.getJointInfo(self.body, j)[2] != pybullet.JOINT_FIXED]
         self._arm_in_dofs = [self._dofs.index(j) for j in self.arm]
         self._offset = np.array(spec.grasp_offset, dtype=float)
-        self._has_offset = bool(self._offset.any())  # read every step: asked once
 
     def _tie_mimic_joints(self, joints: dict[str, int]) -> None:
         """A gear constraint per mimic finger joint (at the ratio of the two joints' ranges), and no
@@ -145,7 +145,7 @@ class ArmRobot(Robot):
         state = self.client.getLinkState(
             self.body, self.grasp_link, computeLinkVelocity=1, computeForwardKinematics=1
         )
-        if not self._has_offset:
+        if not self._offset.any():
             return np.array(state[4]), np.array(state[6])
         arm = np.array(self.client.getMatrixFromQuaternion(state[5])).reshape(3, 3) @ self._offset
         return np.array(state[4]) + arm, np.array(state[6]) + np.cross(state[7], arm)
@@ -189,9 +189,7 @@ class ArmRobot(Robot):
     def command_fingers(self, width: float) -> None:
         force = self.finger_force * self.spec.finger_force_scale
         driven = self._driven
-        if not 0.0 <= width <= self.max_finger_width:  # np.clip costs more than the rest when in range
-            width = np.clip(width, 0.0, self.max_finger_width)
-        targets = self.finger_positions(float(width))
+        targets = self.finger_positions(float(np.clip(width, 0.0, self.max_finger_width)))
         self.client.setJointMotorControlArray(
             self.body,
             [self.fingers[i] for i in driven],
@@ -223,14 +221,13 @@ class ArmRobot(Robot):
 
     def inverse_kinematics(self, position: np.ndarray, orientation=None) -> np.ndarray:
         orientation = self.gripper_down() if orientation is None else orientation
-        if self._has_offset:  # aim the link so that the fixed frame lands on the target
+        if self._offset.any():  # aim the link so that the fixed frame lands on the target
             rotation = np.array(self.client.getMatrixFromQuaternion(orientation)).reshape(3, 3)
             position = np.asarray(position) - rotation @ self._offset
         q = self.client.calculateInverseKinematics(
             self.body, self.grasp_link, position, orientation, maxNumIterations=self.spec.ik_iterations,
         )
-        # np.minimum/np.maximum: np.clip's result, at a fraction of its call cost
-        return np.minimum(np.maximum(np.array(q)[self._arm_in_dofs], self.lower), self.upper)
+        return np.clip(np.array(q)[self._arm_in_dofs], self.lower, self.upper)
 
 
 def hold_target(value: Any, default_force: float) -> tuple[float, float]:
@@ -246,37 +243,4 @@ class Panda(ArmRobot):
 
     def __init__(self, client: BulletClient, urdf: str | None = None, render: str | None = None,
                  collision: str = "mesh"):
-        super().__init__(PANDA, client, urdf, render, collision)
-
-
-def low_poly_urdf(path: str, meshes: tuple[str, str], visible_links: Sequence[str] | None = None) -> str:
-    """The same URDF with each visual mesh replaced by its collision mesh, for cameras; with
-    ``visible_links``, the other links lose their visuals altogether (a wrist camera never sees them).
-    ``meshes``: the visual and the collision mesh folders under ``package://``.
-
-    Rendering cost on the CPU follows the robot's visual triangles: the Panda's visual meshes make a
-    64x64 image cost ten times what its collision meshes do, and every visual shape costs a sync per
-    image even when transparent. Physics reads only the collision shapes, so the robot moves exactly
-    as before. Written once per machine into the temp directory (mesh paths made absolute),
-    atomically: several workers may ask at once.
-    """
-    text = open(path).read()
-    folder = os.path.dirname(path)
-    visual, collision = meshes
-    low = text.replace("package://" + visual, os.path.join(folder, collision))
-    low = low.replace("package://", folder + os.sep)
-    if visible_links is not None:
-        def strip(link: re.Match) -> str:
-            text = link.group(0)
-            name = re.search(r'<link\s+name="([^"]+)"', text).group(1)
-            return text if name in visible_links else re.sub(r"<visual>.*?</visual>", "", text, flags=re.S)
-
-        low = re.sub(r"<link\s+name=.*?</link>", strip, low, flags=re.S)
-    digest = hashlib.sha1(low.encode()).hexdigest()[:12]
-    target = os.path.join(tempfile.gettempdir(), f"rlgrasp-lowpoly-{digest}.urdf")
-    if not os.path.isfile(target):
-        fd, scratch = tempfile.mkstemp(suffix=".urdf", dir=tempfile.gettempdir())
-        with os.fdopen(fd, "w") as f:
-            f.write(low)
-        os.replace(scratch, target)
-    return target
+        super().__init__(builtin_spec("panda"), client, urdf, render, collision)

@@ -110,11 +110,15 @@ class GraspEnv(gym.Env):
         )
         self._build_task(objects, reward, weights, success_height)
         self.control_mode = control_mode
-        self.control = make_control(
-            control_mode, self.robot, ee_step=ee_step, ee_yaw=ee_yaw, yaw_step=yaw_step,
-            joint_step=joint_step, torque_fraction=torque_fraction,
-            gravity_compensation=gravity_compensation,
-        )
+        try:  # an arm may refuse a mode (joint_torque without meaningful dynamics)
+            self.control = make_control(
+                control_mode, self.robot, ee_step=ee_step, ee_yaw=ee_yaw, yaw_step=yaw_step,
+                joint_step=joint_step, torque_fraction=torque_fraction,
+                gravity_compensation=gravity_compensation,
+            )
+        except BaseException:
+            self.close()
+            raise
         self._build_spaces()
 
     def _build_world(
