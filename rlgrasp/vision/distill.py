@@ -17,7 +17,7 @@ import os
 import signal
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import torch
 from hydra.utils import instantiate
@@ -34,7 +34,7 @@ from rlgrasp.train.collectors import collector_backend, shut_down
 from rlgrasp.train.eval_process import EvalProcessError, background_evaluator
 from rlgrasp.train.evaluate import periodic_evaluator
 from rlgrasp.train.logger import log, setup_text_log
-from rlgrasp.train.loop import seed_everything
+from rlgrasp.train.loop import TrainingError, seed_everything
 from rlgrasp.train.metrics import Due, finished_episodes
 from rlgrasp.train.preemption import StopSignals
 from rlgrasp.train.resume import prepare_run
@@ -148,7 +148,10 @@ class Distiller:
             return self._is_best(self.evaluate(self.cfg.eval.episodes))
         if self._pick_up_eval():
             snapshot = copy.deepcopy(self.state_dict())
-            self.background.submit(self.frames, snapshot["actor"], self.cfg.eval.episodes, keep=snapshot)
+            try:
+                self.background.submit(self.frames, snapshot["actor"], self.cfg.eval.episodes, keep=snapshot)
+            except EvalProcessError as exc:
+                self._eval_process_failed(exc)
         return False
 
     def _pick_up_eval(self) -> bool:
@@ -158,10 +161,10 @@ class Distiller:
             return True
         try:
             done = self.background.wait(stop=self._stopping)
-        except EvalProcessError:
-            if not self._stopping():
-                raise
-            done = None  # a scheduler's signal reached the evaluation process too
+        except EvalProcessError as exc:
+            if not self._stopping():  # else a scheduler's signal reached the evaluation process too
+                self._eval_process_failed(exc)
+            done = None
         if done is None:
             return False  # stopping: the loop saves and returns
         pending, student = done
@@ -169,6 +172,11 @@ class Distiller:
             pending.keep.update(last_eval=self.last_eval, best_eval_success=self.best_success)
             ckpt_lib.save_checkpoint(self.run_dir / "checkpoints" / "best.pt", pending.keep)
         return True
+
+    def _eval_process_failed(self, exc: EvalProcessError) -> NoReturn:
+        self.save()
+        where = f"at {self.frames:,} frames; checkpoint saved in {self.run_dir / 'checkpoints'}"
+        raise TrainingError(f"{exc}\n  {where}") from exc
 
     def _stopping(self) -> bool:
         return self.signals.received is not None
