@@ -258,7 +258,7 @@ class MlflowLoggerConfig(TrackerLoggerConfig):
 
 @dataclass
 class PeriodicEvalConfig:
-    """Training's own evaluation: deterministic actions on separately seeded episodes, in-process."""
+    """Training's own evaluation: deterministic actions on separately seeded episodes."""
 
     interval_frames: int = 20_000
     episodes: int = 16
@@ -267,6 +267,11 @@ class PeriodicEvalConfig:
     final_episodes: int | None = 100
     num_envs: int = 8
     seed_offset: int = 1_000_000
+    # The periodic evaluations in a process of their own (rlgrasp.train.eval_process) while training
+    # goes on; each result is logged at the frames of the weights it evaluated, and picked up when the
+    # next one is due (so a sweep's pruner hears of it one interval later). false: in the learner's
+    # process, training waits. The final evaluation always runs in the learner's process.
+    background: bool = False
 
 
 @dataclass

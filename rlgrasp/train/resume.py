@@ -42,6 +42,7 @@ MUTABLE = (
     "eval.episodes",
     "eval.final_episodes",
     "eval.num_envs",
+    "eval.background",
     "checkpoint.interval_frames",
     "checkpoint.keep_last",
     "logger.",
