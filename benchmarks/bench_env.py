@@ -7,6 +7,10 @@ moving arm makes contacts that an idle one does not, the table also gives the sh
 spent inside ``stepSimulation`` during the env run: 1 - that share is the env's own overhead.
 
     python benchmarks/bench_env.py [--steps 1000] [--rounds 5] [--randomization default] [--objects cube]
+        [--modes ee_delta ...] [--collision-model mesh|primitive] [--cpu-time]
+
+``--cpu-time`` times with the process's CPU clock instead of the wall clock: on a shared machine
+(or at ``nice -n 19``) the wall clock counts the time other processes held the core.
 """
 
 from __future__ import annotations
@@ -19,6 +23,8 @@ import numpy as np
 
 from rlgrasp.envs import CONTROL_MODES, PandaGraspEnv, ScriptedExpert
 
+clock = time.perf_counter  # --cpu-time: time.process_time
+
 
 class PhysicsTimer:
     """Wraps a client's stepSimulation to add up the time spent in it."""
@@ -29,9 +35,9 @@ class PhysicsTimer:
         env.client.stepSimulation = self  # an instance attribute wins over BulletClient.__getattr__
 
     def __call__(self):
-        start = time.perf_counter()
+        start = clock()
         self._step()
-        self.seconds += time.perf_counter() - start
+        self.seconds += clock() - start
 
 
 def env_rate(env: PandaGraspEnv, steps: int, policy) -> tuple[float, float]:
@@ -39,23 +45,23 @@ def env_rate(env: PandaGraspEnv, steps: int, policy) -> tuple[float, float]:
     timer = env.client.stepSimulation
     timer.seconds = 0.0
     obs, _ = env.reset()
-    start = time.perf_counter()
+    start = clock()
     for _ in range(steps):
         obs, _, terminated, truncated, _ = env.step(policy(obs))
         if terminated or truncated:
             obs, _ = env.reset()
             getattr(policy, "reset", lambda: None)()
-    elapsed = time.perf_counter() - start
+    elapsed = clock() - start
     return steps / elapsed, timer.seconds / elapsed
 
 
 def bare_rate(env: PandaGraspEnv, steps: int) -> float:
     env.reset(seed=0)
     step = env.client.stepSimulation._step
-    start = time.perf_counter()
+    start = clock()
     for _ in range(steps * env.substeps):
         step()
-    return steps / (time.perf_counter() - start)
+    return steps / (clock() - start)
 
 
 def main() -> None:
@@ -64,18 +70,28 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--randomization", default="default")
     parser.add_argument("--objects", default="cube", help="object set (rlgrasp.envs.objects)")
+    parser.add_argument("--modes", nargs="+", default=list(CONTROL_MODES) + ["expert"],
+                        help="control modes (random actions) and/or expert (ee_delta, scripted expert)")
+    parser.add_argument("--collision-model", default="mesh", choices=["mesh", "primitive"])
+    parser.add_argument("--cpu-time", action="store_true", help="time with the process's CPU clock")
     args = parser.parse_args()
+    global clock
+    clock = time.process_time if args.cpu_time else time.perf_counter
+    scene = dict(randomization=args.randomization, objects=args.objects)
+    if args.collision_model != "mesh":  # the default unnamed: the script runs on env code before the option
+        scene["collision_model"] = args.collision_model
 
     rng = np.random.default_rng(0)
-    print(f"randomization={args.randomization}  objects={args.objects}  steps/round={args.steps}  "
-          f"rounds={args.rounds}")
+    print(f"randomization={args.randomization}  objects={args.objects}  "
+          f"collision_model={args.collision_model}  steps/round={args.steps}  rounds={args.rounds}  "
+          f"clock={'cpu' if args.cpu_time else 'wall'}")
     print(f"{'control_mode':<14}{'policy':<9}{'env steps/s':>12}{'bare steps/s':>13}{'ratio':>7}"
-          f"{'physics share':>15}")
-    bare_env = PandaGraspEnv(randomization=args.randomization, objects=args.objects)
+          f"{'physics share':>15}{'other ms/step':>15}")
+    bare_env = PandaGraspEnv(**scene)
     PhysicsTimer(bare_env)
-    cases = [(mode, "random") for mode in CONTROL_MODES] + [("ee_delta", "expert")]
+    cases = [("ee_delta", "expert") if m == "expert" else (m, "random") for m in args.modes]
     for mode, policy_name in cases:
-        env = PandaGraspEnv(control_mode=mode, randomization=args.randomization, objects=args.objects)
+        env = PandaGraspEnv(control_mode=mode, **scene)
         PhysicsTimer(env)
         env.reset(seed=int(rng.integers(1 << 31)))
         if policy_name == "expert":
@@ -89,9 +105,9 @@ def main() -> None:
             rate, share = env_rate(env, args.steps, policy)
             rates.append(rate)
             shares.append(share)
-        e, b = statistics.median(rates), statistics.median(bares)
+        e, b, share = statistics.median(rates), statistics.median(bares), statistics.median(shares)
         print(f"{mode:<14}{policy_name:<9}{e:>12.0f}{b:>13.0f}{e / b:>7.2f}"
-              f"{statistics.median(shares):>15.2f}", flush=True)
+              f"{share:>15.2f}{(1 - share) / e * 1e3:>15.3f}", flush=True)
         env.close()
 
 

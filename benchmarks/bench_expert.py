@@ -7,7 +7,7 @@ Each failure gets one reason, read from the episode's info by the rules the eval
 ``slipped`` or ``held, not lifted``.
 
     python benchmarks/bench_expert.py [--episodes 100] [--presets none default wide] [--objects cube]
-        [--robot panda kuka_iiwa xarm6]
+        [--robot panda kuka_iiwa xarm6] [--collision-model mesh|primitive]
 """
 
 from __future__ import annotations
@@ -29,8 +29,10 @@ def failure_reason(infos: list[dict]) -> str:
     )
 
 
-def run(preset: str, objects, episodes: int, ee_yaw: bool, robot: str = "panda", first_seed: int = 0) -> dict:
-    env = PandaGraspEnv(randomization=preset, objects=objects, ee_yaw=ee_yaw, robot=robot)
+def run(preset: str, objects, episodes: int, ee_yaw: bool, robot: str = "panda", first_seed: int = 0,
+        collision_model: str = "mesh") -> dict:
+    env = PandaGraspEnv(randomization=preset, objects=objects, ee_yaw=ee_yaw, robot=robot,
+                        collision_model=collision_model)
     expert = ScriptedExpert(env.obs_slices, action_dim=env.action_dim)
     successes, steps_to_success, reasons, failed = 0, [], collections.Counter(), []
     for seed in range(first_seed, first_seed + episodes):
@@ -65,11 +67,13 @@ def main() -> None:
     parser.add_argument("--first-seed", type=int, default=0,
                         help="seeds first-seed.. (a long measurement in parts: their counts add up)")
     parser.add_argument("--list-failures", action="store_true", help="print seed:object:reason")
+    parser.add_argument("--collision-model", default="mesh", choices=["mesh", "primitive"],
+                        help="the arm's collision shapes (rlgrasp.envs.collision_model)")
     args = parser.parse_args()
     print(f"{'robot':<11}{'objects':<20}{'preset':<9}{'success at end':>16}{'95% Wilson':>16}"
           f"{'steps to success':>18}  failure reasons")
     for robot, objects, preset in itertools.product(args.robot, args.objects, args.presets):
-        r = run(preset, objects, args.episodes, not args.no_yaw, robot, args.first_seed)
+        r = run(preset, objects, args.episodes, not args.no_yaw, robot, args.first_seed, args.collision_model)
         low, high = wilson_interval(r["successes"], args.episodes)
         reasons = ", ".join(f"{k} {v}" for k, v in r["reasons"].most_common()) or "-"
         print(f"{robot:<11}{objects:<20}{preset:<9}{r['successes']:>9d}/{args.episodes:<6d}"

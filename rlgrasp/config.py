@@ -73,6 +73,9 @@ class EnvConfig:
     # null, or a camera (rlgrasp.envs.cameras.CameraSpec keys); the `cameras` config group sets it.
     camera: Any = None
     visual: str = "none"  # none | default | wide | heldout (the `visual` config group)
+    # mesh: the arm's own collision meshes; primitive: boxes and capsules for the Panda's hand and
+    # fingers (rlgrasp/envs/collision_model.py). The shipped policies were trained on the meshes.
+    collision_model: str = "mesh"
 
 
 @dataclass
@@ -87,6 +90,9 @@ class PPOConfig:
     lr: float = 3e-4
     anneal_lr: bool = True  # linearly to min_lr_frac x lr at total_frames
     min_lr_frac: float = 0.0
+    # The schedule's length in frames; null: total_frames. A sweep trial sets the experiment's, so that
+    # it stops part-way along the real run's schedule (sweep.trial.lr_schedule=experiment).
+    anneal_lr_frames: int | None = None
     clip_epsilon: float = 0.2
     entropy_coeff: float = 0.0
     critic_coeff: float = 0.5
@@ -252,7 +258,7 @@ class MlflowLoggerConfig(TrackerLoggerConfig):
 
 @dataclass
 class PeriodicEvalConfig:
-    """Training's own evaluation: deterministic actions on separately seeded episodes, in-process."""
+    """Training's own evaluation: deterministic actions on separately seeded episodes."""
 
     interval_frames: int = 20_000
     episodes: int = 16
@@ -261,6 +267,11 @@ class PeriodicEvalConfig:
     final_episodes: int | None = 100
     num_envs: int = 8
     seed_offset: int = 1_000_000
+    # The periodic evaluations in a process of their own (rlgrasp.train.eval_process) while training
+    # goes on; each result is logged at the frames of the weights it evaluated, and picked up when the
+    # next one is due (so a sweep's pruner hears of it one interval later). false: in the learner's
+    # process, training waits. The final evaluation always runs in the learner's process.
+    background: bool = False
 
 
 @dataclass
@@ -374,15 +385,35 @@ class TrialBudget:
 
     total_frames: int = 100_000
     time_budget_min: float | None = None
+    # One run per seed, in turn, with the same parameters; the trial's value is their mean and the
+    # pruner sees the first seed's evaluations. Empty: one run with the training config's seed.
+    seeds: list[int] = field(default_factory=list)
+    # Over how many frames the learning rate anneals: "trial" (trial.total_frames: the trial ends at
+    # lr 0) or "experiment" (the experiment's total_frames: the trial is the start of the real run).
+    lr_schedule: str = "trial"
+
+
+@dataclass
+class SweepObjective:
+    """What a trial scores (``rlgrasp.sweep.score``). ``final``: the last evaluation's ``metric``.
+    ``first_reach`` (minimize): F x (1 - tie_break x final success), F the env frames at the first
+    evaluation whose ``metric`` >= ``threshold``; a run that never reaches it scores
+    trial.total_frames x (2 - final success), worse than any run that does."""
+
+    kind: str = "final"  # final | first_reach
+    threshold: float = 0.9
+    tie_break: float = 0.01
 
 
 @dataclass
 class SweepConfig:
     study_name: str = "sweep"
     n_trials: int = 20
-    # Metric of the periodic evaluation to optimize and report to the pruner.
+    # Metric of the periodic evaluation to optimize and report to the pruner (first_reach: the one
+    # compared to the threshold, success_rate).
     metric: str = "success_rate"
-    direction: str = "maximize"
+    objective: SweepObjective = field(default_factory=SweepObjective)
+    direction: str | None = None  # null: the objective's (final: maximize, first_reach: minimize)
     # null: journal file <root_dir>/<study_name>/journal.log; a path: a journal file there;
     # a URL with "://" (sqlite:///x.db, postgresql://...): Optuna's RDB storage.
     storage: str | None = None
@@ -499,6 +530,8 @@ def _ppo_checks(a: Any, batch: int) -> list[tuple[str, Any, bool, str]]:
         ("algo.gae_lambda", a.gae_lambda, 0 <= a.gae_lambda <= 1, "must be in [0, 1]"),
         ("algo.clip_epsilon", a.clip_epsilon, a.clip_epsilon > 0, "must be > 0"),
         ("algo.max_grad_norm", a.max_grad_norm, a.max_grad_norm > 0, "must be > 0"),
+        ("algo.anneal_lr_frames", a.anneal_lr_frames, a.anneal_lr_frames is None or a.anneal_lr_frames > 0,
+         "must be > 0 or null (null: total_frames)"),
     ]
 
 

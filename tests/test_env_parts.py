@@ -64,3 +64,38 @@ def test_make_robot_loads_a_model_file_override(make_env):
     env = make_env()
     robot = make_robot("panda", env.client, "franka_panda/panda.urdf")
     assert robot.arm_dof == 7 and robot.body != env.robot.body
+
+
+@pytest.mark.parametrize("mode", ["ee_delta", "joint_delta"])
+def test_a_step_reuses_readings_that_are_still_the_robots_state(mode, make_env):
+    """The control target starts from the last observation's readings instead of reading the robot
+    again: they must equal a fresh reading, and give the same target."""
+    env = make_env(control_mode=mode)
+    env.reset(seed=3)
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        env.step(rng.uniform(-1, 1, env.action_dim).astype(np.float32))
+        fresh = env.robot.readings()
+        for name in ("arm_q", "grasp_pos"):
+            assert np.array_equal(env._readings[name], fresh[name])
+        action = rng.uniform(-1, 1, env.action_dim)
+        assert np.array_equal(env.control.arm_target(action, env._readings), env.control.arm_target(action))
+
+
+def test_the_cached_client_fails_after_close_as_pybullet_does():
+    """Cached client-bound functions are dropped on disconnect: a call after close must not reach a
+    client that later got the same id."""
+    import pybullet
+
+    from rlgrasp.envs.scene import Scene
+
+    scene = Scene()
+    client = scene.client
+    assert client.getNumBodies() == 1  # the ground; the bound function is now cached
+    scene.close()
+    other = Scene()
+    try:
+        with pytest.raises(pybullet.error):
+            client.getNumBodies()
+    finally:
+        other.close()

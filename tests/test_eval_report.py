@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from rlgrasp.evaluation.report import band, build_report, expand_runs, main, read_scalars
-from rlgrasp.stats import iqm
+from rlgrasp.evaluation.report import band, build_report, expand_runs, main, read_scalars, training_evaluation
+from rlgrasp.stats import iqm, wilson_interval
+from rlgrasp.train.checkpoint import load_checkpoint, save_checkpoint
+from rlgrasp.train.loop import train
+from tests.test_eval import make_run
 
 
 def fake_run(root: Path, name: str, seed: int, final: float, experiment: str = "exp") -> Path:
@@ -80,3 +84,53 @@ def test_report_cli_errors_and_folder_expansion(tmp_path: Path, capsys) -> None:
     assert [p.name for p in expand_runs([str(tmp_path / "exp")])] == ["a"]  # a folder of runs
     assert main([str(tmp_path / "exp"), "--out", str(tmp_path / "rep"), "--reps", "100"]) == 0
     assert "Aggregate across seeds" in capsys.readouterr().out
+
+
+#: A real training run in seconds: 16 frames in the learner's process, then a 3-episode final evaluation.
+TINY = ("collector=single", "collector.envs_per_worker=1", "collector.steps_per_env=16",
+        "algo.minibatch_size=16", "total_frames=16", "eval.episodes=1", "eval.final_episodes=3",
+        "eval.num_envs=3", "experiment_name=tiny", "seed=5")
+
+
+def test_report_takes_trainings_final_evaluation_unless_rlgrasp_eval_has_one(tmp_path: Path, train_cfg):
+    runs = tmp_path / "runs"
+    train(train_cfg(*TINY, run_dir=runs / "trained"))
+    last_eval = load_checkpoint(runs / "trained")["last_eval"]
+    assert last_eval["frames"] == 16 and last_eval["episodes"] == 3
+    shutil.copytree(runs / "trained", runs / "evaluated")  # the same run, then also through rlgrasp-eval
+    ev = fake_run(tmp_path / "fake", "r", 6, 0.5, experiment="tiny") / "eval" / "final"
+    shutil.copytree(ev, runs / "evaluated" / "eval" / "final")
+    stopped = make_run(tmp_path / "stopped")  # checkpoints, no final evaluation
+
+    result = build_report([str(runs / "*"), str(stopped)], tmp_path / "report", reps=100)
+    by_name = {r.path.name: r for r in result["records"]}
+    trained = by_name["trained"]
+    sources = (trained.source, by_name["evaluated"].source, by_name["run"].source)
+    assert sources == ("training", "rlgrasp-eval", None)
+    wins = round(last_eval["success_rate"] * 3)
+    assert trained.evaluation["success_at_end"] == {
+        "rate": last_eval["success_rate"], "successes": wins, "episodes": 3,
+        "ci95": list(wilson_interval(wins, 3)),
+    }
+    assert (trained.experiment, trained.seed) == ("tiny", 5)
+    assert result["aggregate"]["tiny"]["success_at_end"]["runs"] == 2 and "unit" not in result["aggregate"]
+    assert result["aggregate"]["tiny"]["sources"] == "rlgrasp-eval 1, training 1"
+    text = result["text"]
+    assert all(s in text for s in ("training's final eval", "rlgrasp-eval final", "(no final evaluation)"))
+
+    named = build_report([str(runs / "*")], tmp_path / "named", eval_name="final", reps=100)
+    assert named["aggregate"]["tiny"]["sources"] == "rlgrasp-eval 1"  # a named evaluation: no fallback
+    alone = build_report([str(stopped)], tmp_path / "alone", reps=100)
+    assert "no run has a final evaluation yet" in alone["text"]
+
+
+def test_a_run_from_before_last_eval_kept_its_episodes_counts_the_final_episodes(tmp_path: Path) -> None:
+    run = make_run(tmp_path)  # eval.final_episodes=100 in its config
+    ckpt = load_checkpoint(run)
+    ckpt["last_eval"] = {"mean_reward": 2.0, "success_rate": 0.87, "frames": ckpt["frames"]}
+    save_checkpoint(run / "checkpoints" / "last.pt", ckpt)
+    evaluation = training_evaluation(run)
+    assert evaluation["episodes"] == 100 and evaluation["success_at_end"]["successes"] == 87
+    ckpt["last_eval"]["frames"] -= 1  # a periodic evaluation of earlier weights: not the run's result
+    save_checkpoint(run / "checkpoints" / "last.pt", ckpt)
+    assert training_evaluation(run) is None

@@ -1,6 +1,7 @@
 """Every entry point exits: ``rlgrasp-eval``, the sweep and ``rlgrasp-export`` run to the end, or stop
 on a signal midway, within a timeout, with a clear exit status, leaving no process of their group
-(pool workers, collector workers) behind. Training and the resume of a finished run: tests/test_resume.py."""
+(pool workers, collector workers, training's evaluation process) behind. Training and the resume of a
+finished run: tests/test_resume.py."""
 
 from __future__ import annotations
 
@@ -95,3 +96,30 @@ def test_export_runs_to_the_end_and_exits(tmp_path: Path, script) -> None:
     assert done.wait(timeout=300) == 0, done.output()[-2000:]
     assert {p.name for p in (run / "export").glob("policy.*")} >= {"policy.pt", "policy.onnx", "policy.pt2"}
     assert done.left() == []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("to_group", [False, True], ids=["sigterm-to-main", "sigterm-to-group"])
+def test_training_stopped_mid_background_evaluation_exits_and_leaves_nothing(
+    tmp_path: Path, script, to_group: bool
+) -> None:
+    """SIGTERM while the evaluation process runs a long evaluation (training may be waiting for it):
+    to the main process (`kill`), or to the whole group (a scheduler); the run saves its checkpoint and
+    exits 0 within a timeout, and its evaluation process and workers end with it."""
+    run = tmp_path / "run"
+    started = script("train", "experiment=smoke", "collector.steps_per_env=64", "eval.background=true",
+                     "eval.interval_frames=256", "eval.episodes=400", "total_frames=100000", "logger=none",
+                     f"hydra.run.dir={run}")
+    evaluating = "periodic evaluations run in process"
+    wait_for(lambda: True if evaluating in started.output() else None, 600, started)  # a loaded machine
+    time.sleep(5)  # 400 episodes take minutes: the learner collects, then waits for them at 512 frames
+    if to_group:
+        os.killpg(started.pid, signal.SIGTERM)
+    else:
+        started.proc.send_signal(signal.SIGTERM)
+    # The batches in flight are collected first: seconds, minutes on a machine busy with other work.
+    assert started.wait(timeout=300) == 0, started.output()[-3000:]
+    out = started.output()
+    assert re.search(r"SIGTERM at [\d,]+ frames: saving a checkpoint", out), out[-3000:]
+    assert "Traceback" not in out, out[-3000:]
+    assert started.left() == []  # the evaluation process is of the group too

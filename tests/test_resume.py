@@ -23,7 +23,7 @@ from rlgrasp.config import ConfigError, validate_train
 from rlgrasp.evaluation.source import EvaluationError, load_checked_checkpoint
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.loop import Trainer
-from rlgrasp.train.resume import merged_config, prepare_run
+from rlgrasp.train.resume import command_line_keys, merged_config, prepare_run
 from rlgrasp.train.rundir import run_dir
 from tests.procs import wait_for
 
@@ -93,6 +93,23 @@ def test_resume_refuses_a_change_of_a_fixed_key_naming_both_values(run: Path) ->
     cfg = compose_train([*SMOKE, f"paths.output_dir={run}", "randomization=wide"])
     with pytest.raises(ConfigError, match="env.randomization"):
         merged_config(cfg, saved, {"env.randomization"})
+
+
+def test_resume_refuses_a_group_choice_that_equals_the_default(run: Path) -> None:
+    """``robot=panda`` changes no key from the defaults, yet on an iiwa run it asks for another arm."""
+    saved = ckpt_lib.load_checkpoint(run)["config"]
+    saved["env"]["robot"] = "kuka_iiwa"
+    for line, arm in ((["robot=panda"], None), ([], "kuka_iiwa"), (["robot=kuka_iiwa"], "kuka_iiwa")):
+        overrides = [*SMOKE, f"paths.output_dir={run}", f"resume={run}", *line]
+        cfg = compose_train(overrides)
+        changed = command_line_keys(overrides, cfg)
+        if arm is None:
+            with pytest.raises(ConfigError, match="^cannot change on resume: env.robot: the checkpoint has "
+                                                  "'kuka_iiwa', the command line 'panda';") as info:
+                merged_config(cfg, saved, changed)
+            assert "\n" not in str(info.value)
+        else:
+            assert merged_config(cfg, saved, changed).env.robot == arm
 
 
 def test_resume_may_switch_the_collector_and_logger_classes(run: Path) -> None:

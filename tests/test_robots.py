@@ -6,20 +6,25 @@ a checkpoint of one arm is refused by an env of another."""
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
+import pybullet
 import pybullet_data
 import pytest
 from gymnasium.utils.env_checker import check_env
 from omegaconf import OmegaConf
 
-from rlgrasp.envs import PandaGraspEnv, ScriptedExpert
+from rlgrasp.envs import PandaGraspEnv, ScriptedExpert, grasp_env
+from rlgrasp.envs.render_model import mesh_bounds
 from rlgrasp.envs.robot import ROBOTS, robot_label
-from rlgrasp.envs.robot_spec import KUKA_IIWA, PANDA, XARM6
+from rlgrasp.envs.robot_spec import BUILTIN_DIR, BUILTIN_ROBOTS, builtin_spec, spec_from_file
 from rlgrasp.evaluation.source import EvaluationError, check_robot
 from rlgrasp.overrides import rewrite
 
+PANDA, KUKA_IIWA, XARM6 = (builtin_spec(name) for name in ("panda", "kuka_iiwa", "xarm6"))
 ARMS = {"panda": (PANDA, 7), "kuka_iiwa": (KUKA_IIWA, 7), "xarm6": (XARM6, 6)}
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture
@@ -37,8 +42,17 @@ def arm_env():
         env.close()
 
 
-def test_the_shipped_arms_are_registered():
-    assert {n: ROBOTS[n] for n in ARMS} == {n: spec for n, (spec, _) in ARMS.items()}
+def test_the_shipped_arms_are_registered_from_their_files():
+    assert BUILTIN_ROBOTS == tuple(ARMS) and all(ROBOTS[n] is builtin_spec(n) for n in ARMS)
+    assert {n: ROBOTS[n].label for n in ARMS} == {n: n for n in ARMS}
+    assert sorted(p.stem for p in BUILTIN_DIR.glob("*.yaml")) == sorted(ARMS)
+
+
+def test_a_non_editable_install_ships_the_arms_files():
+    tomllib = pytest.importorskip("tomllib")  # python >= 3.11
+    data = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]
+    shipped = {p for glob in data["rlgrasp.envs"] for p in (ROOT / "rlgrasp" / "envs").glob(glob)}
+    assert set(BUILTIN_DIR.glob("*.yaml")) <= shipped
 
 
 @pytest.mark.parametrize("robot", ARMS)
@@ -123,6 +137,35 @@ def test_a_wrist_camera_rides_on_each_arm(robot, arm_env):
     assert np.median(depth) < 0.5 and depth.max() - depth.min() > 0.02
 
 
+@pytest.mark.parametrize("robot", ["kuka_iiwa", "xarm6"])
+def test_cameras_see_the_arms_links_as_boxes_and_the_physics_is_unchanged(robot, arm_env):
+    """The render model (``low_poly_meshes: boxes``) boxes every link but the gripper's and leaves
+    every collision shape as it is: the arm moves as the arm without a camera does."""
+    plain = arm_env(robot, control_mode="joint_delta")
+    seen = arm_env(robot, control_mode="joint_delta", camera={"mount": "fixed", "modality": "depth",
+                                                              "width": 32, "height": 32})
+    shapes = {s[1]: s[2] for s in seen.client.getVisualShapeData(seen.robot.body)}
+    keep = {j for j, name in seen.robot.link_names.items() if name in seen.robot.wrist_names}
+    assert shapes and all(shape == pybullet.GEOM_BOX for link, shape in shapes.items() if link not in keep)
+    assert any(shapes.get(link) == pybullet.GEOM_MESH for link in keep)  # the gripper keeps its meshes
+    a, b = plain.reset(seed=5)[0], seen.reset(seed=5)[0]
+    rng = np.random.default_rng(0)
+    for _ in range(10):
+        action = rng.uniform(-1, 1, plain.action_dim)
+        a, b = plain.step(action)[0], seen.step(action)[0]
+    np.testing.assert_array_equal(a, b["privileged"])
+
+
+def test_mesh_bounds_read_binary_stl_with_a_solid_header_and_obj():
+    root = pybullet_data.getDataPath()
+    # A binary STL whose 80-byte header starts with "solid", as an ASCII one does.
+    low, high = mesh_bounds(f"{root}/xarm/xarm_gripper/meshes/base_link.STL")
+    assert np.all(high - low > 0.03) and np.all(high - low < 0.2)
+    low, high = mesh_bounds(f"{root}/cube.obj")
+    np.testing.assert_allclose([low, high], [[-0.5] * 3, [0.5] * 3])
+    assert mesh_bounds(f"{root}/racecar/meshes/cone.dae") is None  # not read: kept as a mesh
+
+
 @pytest.mark.parametrize("robot", ARMS)
 def test_each_arms_expert_lifts_the_cube(robot, arm_env):
     env = arm_env(robot)
@@ -156,6 +199,17 @@ def test_an_arm_from_yaml_is_the_shipped_arm(tmp_path, arm_env):
     assert robot_label(robot) == "xarm6_with_gripper"  # no name: the model file's stem
 
 
+def test_a_shipped_arms_file_copied_as_a_users_config_is_that_arm(tmp_path):
+    """The walk-through's claim: a built-in arm's file, copied to configs/robot/my_arm.yaml with an
+    absolute model path, is the same arm."""
+    text = (BUILTIN_DIR / "kuka_iiwa.yaml").read_text()
+    model = f"{pybullet_data.getDataPath()}/{KUKA_IIWA.model}"
+    mine = tmp_path / "my_arm.yaml"
+    mine.write_text(text.replace(f"model: {KUKA_IIWA.model}", f"model: {model}"))
+    assert spec_from_file(mine) == dataclasses.replace(KUKA_IIWA, model=model)
+    assert OmegaConf.load(mine).robot.name == "kuka_iiwa" and text.startswith("# @package env\n")
+
+
 def test_a_user_arm_on_the_command_line_reaches_env_robot(train_cfg):
     arm = "{model:franka_panda/panda.urdf,name:mine}"
     assert rewrite([f"robot={arm}"]) == ["robot=panda", f"env.robot={arm}"]
@@ -187,6 +241,8 @@ BAD_ARMS = [
      ValueError, r"robot.neutral_pose: panda_joint4=1.85 is outside its limits \[-3.1416, 0.0\]"),
     ("neutral pose of another size", {"neutral_pose": [0.0, 0.41]}, ValueError,
      "robot.neutral_pose has 2 angles: must have one per arm joint"),
+    ("unknown render rule", {"low_poly_meshes": "spheres"}, ValueError,
+     "robot.low_poly_meshes='spheres': must be null, boxes or"),
     ("unknown key", {"grasp_lnk": "x"}, ValueError,
      "robot.grasp_lnk: unknown key; a robot has model, arm_joints"),
     ("a finger entry that is not one", {"fingers": ["panda_finger_joint1"]}, ValueError,
@@ -219,10 +275,20 @@ def test_unknown_robot_names_the_valid_ones():
         PandaGraspEnv(robot="ur5")
 
 
-def test_torque_control_is_refused_where_the_model_says_it_is_not_meaningful():
+def test_torque_control_is_refused_where_the_model_says_it_is_not_meaningful(monkeypatch):
+    scenes = []
+
+    class RecordedScene(grasp_env.Scene):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            scenes.append(self)
+
+    monkeypatch.setattr(grasp_env, "Scene", RecordedScene)
     mapping = {**dataclasses.asdict(PANDA), "torque_control": False, "fingers": PANDA_FINGERS}
     with pytest.raises(ValueError, match="control_mode=joint_torque: this arm's model has no meaningful"):
         PandaGraspEnv(robot=mapping, control_mode="joint_torque")
+    # The refused env leaves no physics server behind for the garbage collector.
+    assert len(scenes) == 1 and not pybullet.isConnected(scenes[0].client._client)
 
 
 # --- a policy never leaks across arms ---------------------------------------------------------

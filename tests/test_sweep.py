@@ -11,14 +11,20 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import optuna
 import pytest
+from omegaconf import OmegaConf
 
+from rlgrasp.config import PPOConfig, SweepObjective
 from rlgrasp.sweep.cli import is_sweep_override, main
-from rlgrasp.sweep.runner import run_sweep
+from rlgrasp.sweep.objective import schedule_overrides
+from rlgrasp.sweep.runner import compose, run_sweep
+from rlgrasp.sweep.score import RunScore
 from rlgrasp.sweep.space import parse_space, to_overrides
 from rlgrasp.sweep.study import ATTR_INTERRUPTED, ATTR_RETRY_OF
+from rlgrasp.train.ppo import PPOLearner
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -31,8 +37,8 @@ def test_space_parses_nested_params_and_names_bad_keys() -> None:
             "collector": {"envs_per_worker": {"type": "int", "low": 2, "high": 8, "step": 2}},
         }
     )
-    assert set(space) == {"algo.lr", "model.hidden_sizes", "collector.envs_per_worker"}
-    assert space["model.hidden_sizes"].choices == ("[64,64]", "[128]")
+    assert set(space.dists) == {"algo.lr", "model.hidden_sizes", "collector.envs_per_worker"}
+    assert space.dists["model.hidden_sizes"].choices == ("[64,64]", "[128]")
     assert to_overrides({"algo.lr": 0.1, "a.b": None, "c": True}) == ["algo.lr=0.1", "a.b=null", "c=true"]
     with pytest.raises(ValueError, match="algo.lr: type float needs 'high'"):
         parse_space({"algo": {"lr": {"type": "float", "low": 1.0}}})
@@ -151,3 +157,142 @@ def test_two_processes_share_one_study(tmp_path: Path) -> None:
     pids = {t.user_attrs["pid"] for t in trials}
     assert 4 <= len(trials) <= 5 and len(pids) == 2  # both worked; at most one overshoot
     assert len({tuple(sorted(t.params.items())) for t in trials}) == len(trials)
+
+
+# --- objectives, several seeds per trial -------------------------------------------------------
+BUDGET = 163_840
+
+
+def _score(evals: list[tuple[int, float]], kind: str = "first_reach", budget: int = BUDGET) -> RunScore:
+    score = RunScore(SweepObjective(kind=kind, threshold=0.9, tie_break=0.01), "success_rate", budget)
+    for frames, success in evals:
+        score.add(frames, {"success_rate": success, "mean_reward": 1.0})
+    return score
+
+
+def test_first_reach_ranks_reached_runs_by_frames_then_final_success() -> None:
+    reached = _score([(20480, 0.5), (40960, 0.92), (61440, 0.8), (BUDGET, 0.95)])
+    assert reached.reached_at == 40960
+    assert reached.value() == pytest.approx(40960 * (1 - 0.01 * 0.95))
+    never = _score([(20480, 0.3), (40960, 0.6), (BUDGET, 0.7)])
+    assert never.reached_at is None and never.value() == pytest.approx(BUDGET * 1.3)
+    # 0.9 of 30 episodes is 0.8999... in float32: it counts
+    assert _score([(20480, 0.8999999), (BUDGET, 0.9)]).reached_at == 20480
+    # the tie-break: the same first eval, the better final success wins ...
+    same_eval_worse_end = _score([(40960, 0.9), (BUDGET, 0.91)])
+    assert reached.value() < same_eval_worse_end.value() < 40960
+    # ... but never over an earlier first eval, nor over a run that did not reach 0.9
+    earlier = _score([(20480, 0.9), (BUDGET, 0.0)])
+    last_minute = _score([(20480, 0.2), (BUDGET, 0.9)])  # the final evaluation counts too
+    almost = _score([(20480, 0.2), (BUDGET, 0.89)])
+    assert earlier.value() < reached.value() < last_minute.value() < BUDGET < almost.value() < never.value()
+    # the final objective: the last evaluation's metric
+    assert _score([(20480, 0.5), (BUDGET, 0.7)], kind="final").value() == pytest.approx(0.7)
+
+
+def _run_trial(study: optuna.Study, evals: list[tuple[int, float]]) -> bool:
+    """Report ``evals`` as a sweep's first seed does; True if the pruner stopped the trial."""
+    trial, score = study.ask(), RunScore(SweepObjective(kind="first_reach"), "success_rate", BUDGET)
+    for frames, success in evals:
+        trial.report(score.add(frames, {"success_rate": success}), step=frames)
+        if frames < BUDGET and trial.should_prune():
+            study.tell(trial, state=optuna.trial.TrialState.PRUNED)
+            return True
+    study.tell(trial, score.value())
+    return False
+
+
+def test_median_pruner_compares_first_reach_reports_like_with_like() -> None:
+    """The reports are projections onto the trial's budget: a slow learner is pruned at once. (A
+    projection onto the frames so far would make a trial's first report its best: never pruned.)"""
+    study = optuna.create_study(direction="minimize", pruner=optuna.pruners.MedianPruner(
+        n_startup_trials=3, n_warmup_steps=0))
+    steps = (20480, 40960, 61440, BUDGET)
+    for curve in ((0.4, 0.9, 0.95, 0.97), (0.3, 0.6, 0.9, 0.95), (0.2, 0.6, 0.7, 0.8)):
+        assert not _run_trial(study, list(zip(steps, curve)))
+    assert not _run_trial(study, list(zip(steps, (0.9, 0.95, 0.9, 0.97))))  # the best so far
+    assert _run_trial(study, list(zip(steps, (0.1, 0.2, 0.3, 0.4))))
+    assert study.trials[-1].last_step == 20480
+
+
+def test_bad_objective_keys_are_refused_in_one_line(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    root = tmp_path / "sweeps"
+    cases = {
+        "sweep.objective.kind=fastest": (2, "objective.kind=fastest: must be one of final, first_reach"),
+        "sweep.objective.treshold=0.8": (1, "treshold"),
+        "sweep.objective.threshold=90": (2, "sweep.objective.threshold=90.0: must be in (0, 1]"),
+        "sweep.direction=maximize": (2, "sweep.direction=maximize: objective.kind=first_reach counts frames"),
+        "sweep.metric=mean_reward": (2, "sweep.metric=mean_reward: objective.kind=first_reach compares"),
+        "sweep.trial.seeds=[0,0]": (2, "sweep.trial.seeds=[0, 0]: must not repeat a seed"),
+        "sweep.trial.lr_schedule=run": (2, "sweep.trial.lr_schedule=run: must be one of trial, experiment"),
+    }
+    for override, (code, message) in cases.items():
+        argv = ["sweep=grasp_ppo_speed", f"sweep.root_dir={root}", override, "experiment=smoke"]
+        assert main(argv) == code, override
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and err.count("\n") == 1 and message in err, err
+    assert not root.exists()
+
+
+def test_named_choice_sets_several_keys_and_the_lr_schedule_can_stay_the_experiments() -> None:
+    space = parse_space({"control": {"type": "categorical", "choices": {
+        "joint_delta": {"env": {"control_mode": "joint_delta", "ee_yaw": False}},
+        "ee_delta_yaw": {"env": {"control_mode": "ee_delta", "ee_yaw": True}},
+    }}, "algo": {"epochs": {"type": "int", "low": 1, "high": 3}}})
+    assert space.dists["control"].choices == ("joint_delta", "ee_delta_yaw") and "control" in space
+    assert space.overrides({"control": "ee_delta_yaw", "algo.epochs": 2}) == [
+        "env.control_mode=ee_delta", "env.ee_yaw=true", "algo.epochs=2"]
+    with pytest.raises(ValueError, match="control='ee': must be one of joint_delta, ee_delta_yaw"):
+        space.overrides({"control": "ee"})
+    with pytest.raises(ValueError, match="sweep.params.control.choices.a: must map training keys"):
+        parse_space({"control": {"type": "categorical", "choices": {"a": 1}}})
+    # a trial on 163,840 frames anneals as grasp_ppo's run does, over its 270,336
+    cfg, configs = compose(["sweep=grasp_ppo_speed"], ROOT / "configs"), ROOT / "configs"
+    assert schedule_overrides(cfg, ["experiment=grasp_ppo"], configs) == ["algo.anneal_lr_frames=270336"]
+    algo = OmegaConf.structured(PPOConfig(lr=1.0, anneal_lr_frames=200))
+    learner = SimpleNamespace(cfg=algo)
+    assert PPOLearner.lr_at(learner, 50, 100) == pytest.approx(0.75)  # not 0.5: over 200 frames
+    algo.anneal_lr_frames = None
+    assert PPOLearner.lr_at(learner, 50, 100) == pytest.approx(0.5)
+
+
+@pytest.mark.slow
+def test_several_seeds_per_trial_mean_and_first_seed_pruning(tmp_path: Path) -> None:
+    root = tmp_path / "sweeps"
+    sweep = [
+        "sweep=smoke", f"sweep.root_dir={root}", "sweep.plots=false", "sweep.pruner.name=none",
+        "sweep.metric=success_rate", "sweep.direction=null", "sweep.objective.kind=first_reach",
+        "sweep.trial.seeds=[3,4]", "sweep.trial.lr_schedule=experiment",
+    ]
+    # 1) one trial, two seeds: its value is their mean, each is kept and shown
+    result = run_sweep([*sweep, "sweep.n_trials=1"], ["experiment=smoke"])
+    study_dir = root / "smoke"
+    storage = optuna.storages.JournalStorage(
+        optuna.storages.journal.JournalFileBackend(str(study_dir / "journal.log"))
+    )
+    study = optuna.load_study(study_name="smoke", storage=storage)
+    assert study.direction == optuna.study.StudyDirection.MINIMIZE
+    (trial,) = study.get_trials()
+    runs = trial.user_attrs["runs"]
+    assert [r["seed"] for r in runs] == [3, 4] and trial.state.name == "COMPLETE"
+    values = [r["value"] for r in runs]
+    assert trial.value == pytest.approx(sum(values) / 2)
+    for r in runs:  # smoke learns nothing in 1,024 frames: never 0.9, scored 1,024 x (2 - final)
+        assert r["reached_at"] is None and r["value"] == pytest.approx(1024 * (2 - r["success_rate"]))
+    assert {p.name for p in (study_dir / "trials" / "0000").iterdir()} == {"seed_3", "seed_4"}
+    assert "algo.anneal_lr_frames=2048" in trial.user_attrs["overrides"]  # smoke's total_frames
+    assert not any(o.startswith("seed=") for o in trial.user_attrs["overrides"])
+    with (study_dir / "trials.csv").open() as f:
+        (row,) = list(csv.DictReader(f))
+    assert [float(row["value_seed3"]), float(row["value_seed4"])] == pytest.approx(values)
+    assert "Mean over the runs with seeds [3, 4]" in (study_dir / "trials.md").read_text()
+    assert result["best_value"] == pytest.approx(trial.value)
+    assert "anneal_lr_frames" not in result["best_config"].read_text()  # the experiment's own schedule
+
+    # 2) the pruner sees the first seed; pruned, the trial ends there (the second seed never runs)
+    run_sweep([*sweep, "sweep.n_trials=2", "sweep.pruner.name=threshold", "+sweep.pruner.kwargs.upper=1000"],
+              ["experiment=smoke"])
+    pruned = optuna.load_study(study_name="smoke", storage=storage).get_trials()[1]
+    assert pruned.state.name == "PRUNED" and pruned.last_step == 512
+    assert pruned.intermediate_values[512] > 1000 and "runs" not in pruned.user_attrs
+    assert {p.name for p in (study_dir / "trials" / "0001").iterdir()} == {"seed_3"}

@@ -163,6 +163,26 @@ def test_a_seed_gives_one_run_on_this_machine(tmp_path: Path, train_cfg) -> None
     assert _differences(first, second) == []
 
 
+@pytest.mark.slow
+def test_evaluating_in_the_background_gives_the_same_run(tmp_path: Path, train_cfg) -> None:
+    """``eval.background=true``: the same curves (``eval/*`` at the frames of the weights evaluated),
+    checkpoints, final evaluation and weights as evaluating in the learner's process, and a ``best.pt``
+    holding the weights that were evaluated; only when the results reach the learner differs."""
+    overrides = ("collector.steps_per_env=128", "eval.interval_frames=512")  # 3 periodic evaluations
+    records, best = [], []
+    for background in ("false", "true"):
+        run = tmp_path / background
+        train(train_cfg("experiment=smoke", *overrides, f"eval.background={background}", run_dir=run))
+        records.append(_record(run))
+        ckpt = read_checkpoint(run / "checkpoints" / "best.pt")
+        weights = {k: v.numpy().tobytes() for k, v in ckpt["actor"].items()}
+        best.append((ckpt["frames"], ckpt["last_eval"], ckpt["best_eval_success"], weights))
+    in_learner, in_background = records
+    assert [step for step, _ in in_learner["curves"]["eval/mean_reward"]] == [512, 1024, 1536, 2048]
+    assert _differences(in_learner, in_background) == []
+    assert best[0][0] < 2048 and best[0] == best[1]  # a periodic evaluation's weights
+
+
 def test_the_seed_check_catches_an_unseeded_worker(tmp_path: Path, train_cfg) -> None:
     """The check above is not vacuous: workers that draw their torch seed from the OS (a forgotten
     worker seed) sample other actions each run, and the check names what moved."""
@@ -176,7 +196,8 @@ def test_the_seed_check_catches_an_unseeded_worker(tmp_path: Path, train_cfg) ->
 #: experiment=smoke composed, except ``env`` (its own guard below) and ``paths.output_dir``.
 SMOKE_CONFIG = """
 algo: {name: ppo, gamma: 0.9, gae_lambda: 0.9, epochs: 2, minibatch_size: 256, lr: 0.0003, anneal_lr: true,
-       min_lr_frac: 0.0, clip_epsilon: 0.2, entropy_coeff: 0.0, critic_coeff: 0.5, loss_critic_type: l2,
+       min_lr_frac: 0.0, anneal_lr_frames: null, clip_epsilon: 0.2, entropy_coeff: 0.0, critic_coeff: 0.5,
+       loss_critic_type: l2,
        normalize_advantage: true, max_grad_norm: 0.5, target_kl: 0.05, adam_eps: 1.0e-05,
        gae_every_epoch: true, demos: null, demo_coeff: 0.1, demo_decay: 0.95, demo_minibatch_size: 256,
        bc_epochs: 0, bc_lr: 0.001, bc_minibatch_size: 64, bc_only: false, rnd_coeff: 0.0, rnd_gamma: 0.99,
@@ -186,7 +207,8 @@ model: {name: mlp, hidden_sizes: [64, 64], activation: tanh, init_log_std: -0.5,
 collector: {_target_: rlgrasp.train.collectors.ProcessCollector, num_workers: 2, envs_per_worker: 2,
             steps_per_env: 256, torch_threads: 1, overlap: true, stagger_starts: false}
 logger: {_target_: rlgrasp.train.logger.TensorBoardLogger, console_interval_s: 0.0}
-eval: {interval_frames: 1024, episodes: 4, final_episodes: 8, num_envs: 4, seed_offset: 1000000}
+eval: {interval_frames: 1024, episodes: 4, final_episodes: 8, num_envs: 4, seed_offset: 1000000,
+       background: false}
 checkpoint: {interval_frames: 1024, keep_last: 2}
 paths: {root_dir: .}
 experiment_name: smoke

@@ -164,6 +164,19 @@ def test_a_teacher_of_another_control_mode_is_refused():
         load_teacher("policies/grasp_ppo.pt", spec, {"control_mode": "ee_delta", "ee_yaw": False})
 
 
+@pytest.mark.parametrize("robot", ["kuka_iiwa", "xarm6"])
+def test_a_teacher_of_another_arm_is_refused(robot):
+    # The iiwa's state has the Panda's size (7 joints): only the arm's name tells them apart.
+    spec = dict(SPEC, privileged_dim=49)
+    with pytest.raises(CheckpointError, match=f"it was trained on the robot 'panda' and this env has the "
+                                              f"robot '{robot}'") as info:
+        load_teacher("policies/grasp_ppo.pt", spec, {"control_mode": "joint_delta", "ee_yaw": False,
+                                                     "robot": robot})
+    assert "\n" not in str(info.value)
+    load_teacher("policies/grasp_ppo.pt", spec, {"control_mode": "joint_delta", "ee_yaw": False,
+                                                 "robot": "panda"})
+
+
 SMALL_DISTILL = (
     "experiment=grasp_vision_distill",
     "total_frames=2048",

@@ -3,10 +3,6 @@ by name in its URDF or SDF; ``Panda`` is that of the Franka Panda."""
 
 from __future__ import annotations
 
-import hashlib
-import os
-import re
-import tempfile
 from collections.abc import Sequence
 from typing import Any
 
@@ -14,9 +10,11 @@ import numpy as np
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
+from rlgrasp.envs.collision_model import collision_variant, keep_mesh_inertia
+from rlgrasp.envs.render_model import boxed_model, low_poly_urdf
 from rlgrasp.envs.robot_base import Robot
 from rlgrasp.envs.robot_check import check_model, check_spec_values
-from rlgrasp.envs.robot_spec import PANDA, RobotSpec
+from rlgrasp.envs.robot_spec import RobotSpec, builtin_spec
 from rlgrasp.envs.scene import data_path
 
 
@@ -24,9 +22,10 @@ class ArmRobot(Robot):
     """One arm body in one physics client, built from its spec."""
 
     def __init__(self, spec: RobotSpec, client: BulletClient, model: str | None = None,
-                 render: str | None = None):
+                 render: str | None = None, collision: str = "mesh"):
         """``model`` overrides the spec's model file; ``render``: None (the model as it is),
-        ``low_poly`` or ``wrist`` (low-poly, wrist links only) when the spec has a low-poly rule."""
+        ``low_poly`` or ``wrist`` (low-poly, wrist links only) when the spec has a low-poly rule;
+        ``collision``: a name of ``rlgrasp.envs.collision_model.COLLISION_MODELS``."""
         check_spec_values(spec)
         self.spec, self.client = spec, client
         key = "robot_urdf" if model else "robot.model"
@@ -35,8 +34,14 @@ class ArmRobot(Robot):
         except FileNotFoundError as exc:
             raise FileNotFoundError(f"{key}: {exc}") from None
         if render and model is None and spec.low_poly_meshes:
-            path = low_poly_urdf(path, spec.low_poly_meshes, self.wrist_names if render == "wrist" else None)
+            visible = self.wrist_names if render == "wrist" else None
+            if spec.low_poly_meshes == "boxes":
+                path = boxed_model(path, self.wrist_names, visible)
+            else:
+                path = low_poly_urdf(path, spec.low_poly_meshes, visible)
+        mesh_path, path = path, collision_variant(path, spec.name, collision)
         self.body = self._load(path, key)
+        keep_mesh_inertia(client, self.body, mesh_path, spec.name, collision)
         joints, links = {}, {}
         for j in range(client.getNumJoints(self.body)):
             info = client.getJointInfo(self.body, j)
@@ -236,38 +241,6 @@ def hold_target(value: Any, default_force: float) -> tuple[float, float]:
 class Panda(ArmRobot):
     """The Franka Panda of ``pybullet_data``; a subclass may set its own ``neutral_pose``."""
 
-    def __init__(self, client: BulletClient, urdf: str | None = None, render: str | None = None):
-        super().__init__(PANDA, client, urdf, render)
-
-
-def low_poly_urdf(path: str, meshes: tuple[str, str], visible_links: Sequence[str] | None = None) -> str:
-    """The same URDF with each visual mesh replaced by its collision mesh, for cameras; with
-    ``visible_links``, the other links lose their visuals altogether (a wrist camera never sees them).
-    ``meshes``: the visual and the collision mesh folders under ``package://``.
-
-    Rendering cost on the CPU follows the robot's visual triangles: the Panda's visual meshes make a
-    64x64 image cost ten times what its collision meshes do, and every visual shape costs a sync per
-    image even when transparent. Physics reads only the collision shapes, so the robot moves exactly
-    as before. Written once per machine into the temp directory (mesh paths made absolute),
-    atomically: several workers may ask at once.
-    """
-    text = open(path).read()
-    folder = os.path.dirname(path)
-    visual, collision = meshes
-    low = text.replace("package://" + visual, os.path.join(folder, collision))
-    low = low.replace("package://", folder + os.sep)
-    if visible_links is not None:
-        def strip(link: re.Match) -> str:
-            text = link.group(0)
-            name = re.search(r'<link\s+name="([^"]+)"', text).group(1)
-            return text if name in visible_links else re.sub(r"<visual>.*?</visual>", "", text, flags=re.S)
-
-        low = re.sub(r"<link\s+name=.*?</link>", strip, low, flags=re.S)
-    digest = hashlib.sha1(low.encode()).hexdigest()[:12]
-    target = os.path.join(tempfile.gettempdir(), f"rlgrasp-lowpoly-{digest}.urdf")
-    if not os.path.isfile(target):
-        fd, scratch = tempfile.mkstemp(suffix=".urdf", dir=tempfile.gettempdir())
-        with os.fdopen(fd, "w") as f:
-            f.write(low)
-        os.replace(scratch, target)
-    return target
+    def __init__(self, client: BulletClient, urdf: str | None = None, render: str | None = None,
+                 collision: str = "mesh"):
+        super().__init__(builtin_spec("panda"), client, urdf, render, collision)

@@ -12,6 +12,7 @@ import gymnasium as gym
 import numpy as np
 
 from rlgrasp.envs.cameras import Camera, CameraSpec
+from rlgrasp.envs.collision_model import COLLISION_MODELS
 from rlgrasp.envs.control import CONTROL_MODES, make_control
 from rlgrasp.envs.observation import PROPRIOCEPTION, ObservationLayout, full_parts
 from rlgrasp.envs.randomization import Randomizer
@@ -22,11 +23,14 @@ from rlgrasp.envs.visuals import VisualRandomizer
 
 
 def _check_args(
-    control_mode: str, render_mode: str | None, max_episode_steps: int, substeps: int, time_step: float
+    control_mode: str, render_mode: str | None, max_episode_steps: int, substeps: int, time_step: float,
+    collision_model: str,
 ) -> None:
     """Bad constructor values fail here, naming the argument, before a physics client exists."""
     if control_mode not in CONTROL_MODES:
         raise ValueError(f"unknown control_mode {control_mode!r}; valid modes: {', '.join(CONTROL_MODES)}")
+    if collision_model not in COLLISION_MODELS:
+        raise ValueError(f"unknown collision_model {collision_model!r}; valid: {', '.join(COLLISION_MODELS)}")
     modes = GraspEnv.metadata["render_modes"]
     if render_mode is not None and render_mode not in modes:
         raise ValueError(f"unknown render_mode {render_mode!r}; valid: {', '.join(modes)}")
@@ -53,7 +57,9 @@ class GraspEnv(gym.Env):
     With a ``camera`` (``rlgrasp.envs.cameras.CameraSpec`` keys) the observation is a ``Dict``:
     ``state`` (proprioception only: nothing about the object), ``depth`` and/or ``rgb`` (channel
     first) and ``privileged`` (the flat state vector above, for a teacher or a critic). ``visual``
-    names a visual randomization preset (``rlgrasp.envs.visuals``).
+    names a visual randomization preset (``rlgrasp.envs.visuals``). ``collision_model``: ``mesh`` (the
+    arm's own collision meshes) or ``primitive`` (boxes and capsules for the hand and fingers:
+    ``rlgrasp.envs.collision_model``; the shipped policies were trained on the meshes).
     """
 
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 20}
@@ -87,8 +93,9 @@ class GraspEnv(gym.Env):
         objects: str | list[str] | Mapping[str, Any] | None = "cube",
         camera: Mapping[str, Any] | None = None,
         visual: str | None = "none",
+        collision_model: str = "mesh",
     ):
-        _check_args(control_mode, render_mode, max_episode_steps, substeps, time_step)
+        _check_args(control_mode, render_mode, max_episode_steps, substeps, time_step, collision_model)
         camera_spec = CameraSpec.from_config(camera) if camera else None
         self.randomizer = Randomizer(randomization)
         weights = RewardWeights.from_mapping(reward_weights)
@@ -98,19 +105,25 @@ class GraspEnv(gym.Env):
                            yaw=camera_yaw, pitch=camera_pitch)
         self.metadata = {**self.metadata, "render_fps": round(1.0 / (time_step * substeps))}
 
-        self._build_world(time_step, solver_iterations, robot, robot_urdf, camera_spec, visual)
+        self._build_world(
+            time_step, solver_iterations, robot, robot_urdf, camera_spec, visual, collision_model
+        )
         self._build_task(objects, reward, weights, success_height)
         self.control_mode = control_mode
-        self.control = make_control(
-            control_mode, self.robot, ee_step=ee_step, ee_yaw=ee_yaw, yaw_step=yaw_step,
-            joint_step=joint_step, torque_fraction=torque_fraction,
-            gravity_compensation=gravity_compensation,
-        )
+        try:  # an arm may refuse a mode (joint_torque without meaningful dynamics)
+            self.control = make_control(
+                control_mode, self.robot, ee_step=ee_step, ee_yaw=ee_yaw, yaw_step=yaw_step,
+                joint_step=joint_step, torque_fraction=torque_fraction,
+                gravity_compensation=gravity_compensation,
+            )
+        except BaseException:
+            self.close()
+            raise
         self._build_spaces()
 
     def _build_world(
         self, time_step: float, solver_iterations: int, robot: str | Mapping[str, Any],
-        robot_urdf: str | None, camera_spec: CameraSpec | None, visual: str | None,
+        robot_urdf: str | None, camera_spec: CameraSpec | None, visual: str | None, collision_model: str,
     ) -> None:
         """The physics client, the robot (its cheap render model when a camera looks), the camera and
         the visual randomizer; the saved world each reset restores."""
@@ -118,7 +131,7 @@ class GraspEnv(gym.Env):
         self.client = self.scene.client
         try:
             render = None if camera_spec is None else "wrist" if camera_spec.mount == "wrist" else "low_poly"
-            self.robot = make_robot(robot, self.client, robot_urdf, render)
+            self.robot = make_robot(robot, self.client, robot_urdf, render, collision_model)
             self.visuals = VisualRandomizer(visual, self.client)
             self.camera = Camera(camera_spec, self.client) if camera_spec else None
         except BaseException:
@@ -149,6 +162,7 @@ class GraspEnv(gym.Env):
         self._idle_action[-1] = 1.0  # fingers open
         self._steps = 0
         self.episode: dict[str, float] = {}
+        self._readings: dict[str, Any] | None = None
 
     # --- gymnasium API -------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
@@ -206,15 +220,18 @@ class GraspEnv(gym.Env):
 
     def step(self, action):
         action = np.asarray(action, dtype=np.float32).reshape(self.action_dim)
-        if not np.all(np.isfinite(action)):
+        if not np.isfinite(action).all():
             raise ValueError(f"action must be finite, got {action.tolist()}")
-        action = np.clip(action, -1.0, 1.0)
+        # np.minimum/np.maximum: np.clip's result for finite values, at a fraction of its call cost
+        action = np.minimum(np.maximum(action, -1.0), 1.0)
         # Action delay: the arm executes what the agent chose `action_delay` steps ago.
         self._pending.append(action)
         applied = self._pending.popleft()
         step_noise = self.np_random.normal(0.0, self.episode["action_noise_step"], self.action_dim)
         noise = self._action_offset + step_noise
-        self.control.apply(np.clip(applied + noise, -1.0, 1.0), self.substeps, self.client.stepSimulation)
+        # The last observation's readings are the robot's state now: nothing steps between the two.
+        self.control.apply(np.minimum(np.maximum(applied + noise, -1.0), 1.0), self.substeps,
+                           self.client.stepSimulation, self._readings)
         self._prev_action = action
         self._steps += 1
 
@@ -246,6 +263,7 @@ class GraspEnv(gym.Env):
     def _observe(self) -> tuple[Any, dict[str, Any]]:
         """The observation (with this step's sensor noise) and the true readings it came from."""
         vector, readings = self._state_vector()
+        self._readings = readings
         if self.camera is None:
             return vector, readings
         mount = self.robot.camera_mount() if self.camera.spec.mount == "wrist" else None

@@ -68,8 +68,12 @@ class ObservationLayout:
         return int(self.noisy_index.size)
 
     def assemble(self, readings: Mapping[str, np.ndarray]) -> np.ndarray:
-        vector = np.concatenate([np.asarray(readings[p.name]).reshape(-1) for p in self.parts])
-        return vector.astype(np.float32)
+        # Each part written into its slice: the float32 values a float64 concatenation cast to
+        # float32 gives, without the intermediate arrays.
+        vector = np.empty(self.size, np.float32)
+        for name, where in self.slices.items():
+            vector[where] = readings[name]
+        return vector
 
     def add_noise(self, vector: np.ndarray, noise: np.ndarray) -> None:
         """Add ``noise`` (one value per noisy entry) in place."""

@@ -16,13 +16,14 @@ from pybullet_utils.bullet_client import BulletClient
 
 from rlgrasp.envs.arm import ArmRobot, Panda, low_poly_urdf
 from rlgrasp.envs.robot_base import GRIPPER_DOWN, Robot
-from rlgrasp.envs.robot_spec import KUKA_IIWA, PANDA, XARM6, RobotSpec, spec_from_mapping
+from rlgrasp.envs.robot_spec import BUILTIN_ROBOTS, RobotSpec, builtin_spec, spec_from_mapping
 
 __all__ = ["GRIPPER_DOWN", "ROBOTS", "ArmRobot", "Panda", "Robot", "low_poly_urdf", "make_robot",
            "resolve_robot", "robot_label"]
 
-#: ``env.robot`` names -> the arm's spec (or a ``Robot`` class, built with ``(client, model, render)``).
-ROBOTS: dict[str, RobotSpec | type[Robot]] = {"panda": PANDA, "kuka_iiwa": KUKA_IIWA, "xarm6": XARM6}
+#: ``env.robot`` names -> the arm's spec (or a ``Robot`` class, built with ``(client, model, render)``);
+#: the built-in arms' specs are read from ``rlgrasp/envs/robots/<name>.yaml``.
+ROBOTS: dict[str, RobotSpec | type[Robot]] = {name: builtin_spec(name) for name in BUILTIN_ROBOTS}
 
 
 def resolve_robot(robot: str | Mapping[str, Any] | RobotSpec) -> RobotSpec | type[Robot]:
@@ -51,11 +52,14 @@ def robot_label(robot: Any) -> str:
 
 
 def make_robot(name: str | Mapping[str, Any] | RobotSpec, client: BulletClient, model: str | None = None,
-               render: str | None = None) -> Robot:
+               render: str | None = None, collision: str = "mesh") -> Robot:
     """The arm ``name`` (see ``resolve_robot``); ``model`` overrides its model file (a path or a
     pybullet_data name); ``render`` asks for the model cameras render cheaply (``low_poly``, or
-    ``wrist``: only what a wrist camera sees)."""
+    ``wrist``: only what a wrist camera sees); ``collision`` for its collision shapes
+    (``rlgrasp.envs.collision_model``)."""
     arm = resolve_robot(name)
     if isinstance(arm, RobotSpec):
-        return ArmRobot(arm, client, model, render=render)
+        return ArmRobot(arm, client, model, render=render, collision=collision)
+    if collision != "mesh":  # a registered class may not take the keyword
+        return arm(client, model, render=render, collision=collision)
     return arm(client, model, render=render)

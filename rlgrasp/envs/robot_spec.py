@@ -1,21 +1,26 @@
-"""An arm with a gripper, described by data: ``RobotSpec`` and the arms rlgrasp ships.
+"""An arm with a gripper, described by data: ``RobotSpec``, and the arms rlgrasp ships as such data.
 
 A spec names everything the generic ``rlgrasp.envs.robot.ArmRobot`` needs from a model file (URDF
 or SDF): the arm joints, the grasp point, the finger joints and how their positions map to an
 opening width, the neutral pose, gains and the wrist camera's mount. A user's arm is the same data
 as a mapping (``robot={model: /my/arm.urdf, arm_joints: [...], ...}``): ``spec_from_mapping``
 refuses an unknown key or a value of the wrong shape in one line naming the key; what needs the
-model itself (names, limits, a gripper that opens) is checked when the arm is loaded. Figures of
-each arm's scripted expert: docs/robots.md.
+model itself (names, limits, a gripper that opens) is checked when the arm is loaded. The built-in
+arms are YAML files of the same format (``rlgrasp/envs/robots/<name>.yaml``, ``builtin_spec``).
+Figures of each arm's scripted expert: docs/robots.md.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import MISSING, asdict, dataclass, field, fields
+from pathlib import Path
 from typing import Any
+
+from omegaconf import OmegaConf
 
 
 @dataclass(frozen=True)
@@ -64,9 +69,10 @@ class RobotSpec:
     max_torque: tuple[float, ...] | None = None
     camera_link: str = ""  # a wrist camera's mount (its z axis along the fingers); empty: grasp_link
     wrist_links: tuple[str, ...] = ()  # what a wrist camera can see; empty: the finger links
-    #: A low-poly render model: (visual mesh folder, collision mesh folder) rewritten in the URDF;
-    #: null: cameras render the model as it is.
-    low_poly_meshes: tuple[str, str] | None = None
+    #: The cheap model cameras render (``rlgrasp.envs.render_model``): [visual mesh folder, collision
+    #: mesh folder] rewritten in the URDF, or ``boxes`` (the visual meshes of links outside
+    #: ``wrist_links`` become their bounding boxes); null: cameras render the model as it is.
+    low_poly_meshes: tuple[str, str] | str | None = None
     #: Whether joint torques are a meaningful action: false for a model whose masses and inertias
     #: are placeholders (control_mode=joint_torque is then refused).
     torque_control: bool = True
@@ -103,6 +109,11 @@ def spec_from_mapping(mapping: Mapping[str, Any]) -> RobotSpec:
     for key in _TUPLES & set(data):
         value = data[key]
         if value is None and key in ("max_torque", "low_poly_meshes"):
+            continue
+        if key == "low_poly_meshes" and isinstance(value, str):
+            if value != "boxes":
+                raise ValueError(f"robot.low_poly_meshes={value!r}: must be null, boxes or [visual mesh "
+                                 "folder, collision mesh folder]")
             continue
         if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
             raise ValueError(f"robot.{key}={value!r}: must be a list")
@@ -143,60 +154,22 @@ def _fingers(value: Any) -> tuple[FingerJoint, ...]:
     return tuple(out)
 
 
-# --- the arms rlgrasp ships (configs/robot/<name>.yaml selects one) -----------------------------
-PANDA = RobotSpec(
-    name="panda",
-    model="franka_panda/panda.urdf",
-    arm_joints=tuple(f"panda_joint{i}" for i in range(1, 8)),
-    grasp_link="panda_grasptarget",  # a fixed link of the Panda URDF between the fingertips
-    fingers=(FingerJoint("panda_finger_joint1", 0.04), FingerJoint("panda_finger_joint2", 0.04)),
-    finger_links=("panda_leftfinger", "panda_rightfinger"),
-    neutral_pose=(0.0, 0.41, 0.0, -1.85, 0.0, 2.26, 0.79),
-    max_finger_width=0.08,
-    position_gain=0.2,  # twice PyBullet's default: the grasp point keeps up with 4 cm steps
-    ik_iterations=20,  # fewer lag behind when reaching out along x; converged solves exit early
-    camera_link="panda_hand",
-    wrist_links=("panda_hand", "panda_leftfinger", "panda_rightfinger", "panda_grasptarget"),
-    low_poly_meshes=("meshes/visual/", "meshes/collision/"),
-)
+# --- the arms rlgrasp ships: rlgrasp/envs/robots/<name>.yaml, files of a user's arm's format ----
+#: Where the built-in arms' descriptions live (package data: pyproject.toml ships them).
+BUILTIN_DIR = Path(__file__).with_name("robots")
+#: The built-in arms, the default first (configs/robot/<name>.yaml selects one by name).
+BUILTIN_ROBOTS = ("panda", "kuka_iiwa", "xarm6")
 
-KUKA_IIWA = RobotSpec(
-    name="kuka_iiwa",
-    model="kuka_iiwa/kuka_with_gripper2.sdf",
-    arm_joints=tuple(f"J{i}" for i in range(7)),
-    grasp_link="lbr_iiwa_link_7",
-    grasp_offset=(0.0, 0.0215, 0.28),
-    fingers=(FingerJoint("base_left_finger_joint", -0.3), FingerJoint("base_right_finger_joint", 0.3)),
-    finger_links=("left_finger_tip", "right_finger_tip"),
-    neutral_pose=(-0.195, 0.646, 0.319, -1.299, -0.201, 1.228, -1.44),  # IK: grasp point at (0.6, 0, 0.2)
-    max_finger_width=0.1,
-    gripper_down=(0.0, math.pi, math.pi / 2),
-    base_position=(-0.1, 0.0, 0.07),
-    # The wrist joint is stiff; the fingertips comply (2 N m, as pybullet_envs' Kuka does) and lie
-    # flat on the object's faces instead of wedging it out of the grip.
-    hold_joints={"gripper_to_arm": 0.0, "left_base_tip_joint": [0.0, 2.0],
-                 "right_base_tip_joint": [0.0, 2.0]},
-    finger_force_scale=0.3,  # N m per N: 3-12 N m for the `default` finger forces of 10-40 N
-    camera_link="base_link",
-)
 
-XARM6 = RobotSpec(
-    name="xarm6",
-    model="xarm/xarm6_with_gripper.urdf",
-    arm_joints=tuple(f"joint{i}" for i in range(1, 7)),
-    grasp_link="xarm_gripper_base_link",
-    grasp_offset=(0.0, 0.0, 0.17),
-    # One motor on the drive joint; the linkage's five other joints follow it (gear constraints).
-    fingers=(FingerJoint("drive_joint", 0.0, 0.85), *(
-        FingerJoint(j, 0.0, 0.85, mimic="drive_joint") for j in (
-            "left_finger_joint", "left_inner_knuckle_joint", "right_outer_knuckle_joint",
-            "right_finger_joint", "right_inner_knuckle_joint"))),
-    finger_links=("left_finger", "right_finger"),
-    neutral_pose=(0.0, 0.449, -1.701, 0.0, 1.251, 0.0),  # IK: grasp point at (0.6, 0, 0.2)
-    max_finger_width=0.085,
-    # The drive joint's torque reaches the pads through a ~5 cm lever: 0.6 N m per 20 N keeps the
-    # pad force near a parallel gripper's; a full 20 N m squeezes the cube out of the grip.
-    finger_force_scale=0.03,
-    base_position=(0.0, 0.0, 0.0),
-    camera_link="xarm_gripper_base_link",
-)
+@functools.cache
+def builtin_spec(name: str) -> RobotSpec:
+    """A built-in arm's spec, read from its YAML file as a user's ``configs/robot/<arm>.yaml`` is."""
+    return spec_from_file(BUILTIN_DIR / f"{name}.yaml")
+
+
+def spec_from_file(path: str | os.PathLike) -> RobotSpec:
+    """The arm of a YAML file holding ``robot: {model: ..., ...}`` (a ``robot`` config group file)."""
+    node = OmegaConf.to_container(OmegaConf.load(path), resolve=True)
+    if not isinstance(node, Mapping) or not isinstance(node.get("robot"), Mapping):
+        raise ValueError(f"{path}: must hold a mapping `robot: {{model: ..., arm_joints: [...], ...}}`")
+    return spec_from_mapping(node["robot"])

@@ -8,6 +8,7 @@ frees a removed body's shapes.
 
 from __future__ import annotations
 
+import functools
 import os
 
 import numpy as np
@@ -31,11 +32,31 @@ def data_path(name: str) -> str:
     return path
 
 
+class CachedClient(BulletClient):
+    """A ``BulletClient`` that builds each pybullet function's client-bound partial once.
+
+    ``BulletClient.__getattr__`` runs ``inspect.isbuiltin`` and makes a new ``functools.partial`` on
+    every call; an env step makes a dozen calls, and that was a tenth of its Python time. Keeping the
+    partial as an instance attribute makes later look-ups ordinary attribute reads. Disconnecting
+    drops them, so that a call after ``close`` fails as before instead of reaching whichever client
+    later gets the same id.
+    """
+
+    def __getattr__(self, name: str):
+        attribute = super().__getattr__(name)
+        if name == "disconnect":
+            for key in [k for k, v in self.__dict__.items() if isinstance(v, functools.partial)]:
+                del self.__dict__[key]
+        elif isinstance(attribute, functools.partial):
+            self.__dict__[name] = attribute
+        return attribute
+
+
 class Scene:
     """Owns the physics client. Connect inside the process that steps it (never before a fork)."""
 
     def __init__(self, time_step: float = 1.0 / 240.0, gui: bool = False, solver_iterations: int = 20):
-        self.client = BulletClient(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
+        self.client = CachedClient(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
         c = self.client
         c.setTimeStep(time_step)
         # Deterministic overlapping pairs make a replay after restoreState bit-identical; without

@@ -69,6 +69,7 @@ class LiftTask:
         self.object_name = ""
         self.object_extents = np.zeros(3, np.float32)
         self._offset = np.zeros(3)
+        self._has_offset = False
         self.rest_z = 0.0
         self.settle_substeps = 0
 
@@ -84,6 +85,7 @@ class LiftTask:
         self.object_name = f"cube/{scale:.1f}" if choice.name == "cube" else choice.name
         self.object_extents = np.array(geometry.extents, np.float32) * np.float32(scale)
         self._offset = np.array(geometry.offset) * scale
+        self._has_offset = bool(self._offset.any())  # read every step: asked once an episode
         self.rest_z = geometry.rest_height * scale
         self.settle_substeps = 0
         xy = np.add(NOMINAL_OBJECT_XY, (episode["object_x"], episode["object_y"]))
@@ -135,7 +137,7 @@ class LiftTask:
         object_linvel, object_angvel = c.getBaseVelocity(body)
         object_pos = np.array(object_pos)
         centre = object_pos
-        if self._offset.any():
+        if self._has_offset:
             rotation = np.array(c.getMatrixFromQuaternion(object_quat)).reshape(3, 3)
             centre = object_pos + rotation @ self._offset
         grasped = self.grasped(robot_body, finger_links)
@@ -158,7 +160,8 @@ class LiftTask:
         if self.reward_kind == "sparse":
             return float(success), success
         w = self.weights
-        reach = 1.0 - math.tanh(5.0 * float(np.linalg.norm(readings["object_centre"] - grasp_pos)))
+        offset = readings["object_centre"] - grasp_pos  # its norm as np.linalg.norm computes it
+        reach = 1.0 - math.tanh(5.0 * math.sqrt(offset.dot(offset)))
         progress = min(max(lift / self.success_height, 0.0), 1.0) if grasped else 0.0
         total = w.reach * reach + w.grasp * grasped + w.lift * progress + w.success * success
         return total / (w.reach + w.grasp + w.lift + w.success), success

@@ -1,9 +1,10 @@
 """Compare runs: ``rlgrasp-report <run dirs or globs> [--out DIR]`` (or ``python scripts/report.py``).
 
-For each run: its final evaluation (the newest ``eval/*/metrics.json``, or ``--eval NAME``). For
-each group of runs that differ only by seed (same ``experiment_name``, or ``--group-by none``): the
-mean and the interquartile mean of the final success rate with stratified-bootstrap 95% intervals,
-as rliable reports them. Learning curves (success rate and return against env frames) come from
+For each run: its final evaluation, from ``rlgrasp-eval`` (the newest ``eval/*/metrics.json``, or
+``--eval NAME``), else the one training ran at its end (``training_evaluation``); the tables say
+which. For each group of runs that differ only by seed (same ``experiment_name``, or ``--group-by
+none``): the mean and the interquartile mean of the final success rate with stratified-bootstrap 95%
+intervals, as rliable reports them. Learning curves (success rate and return against env frames) come from
 the runs' TensorBoard logs: the mean across seeds with a bootstrap 95% band, as a PNG.
 """
 
@@ -24,10 +25,14 @@ import numpy as np
 from omegaconf import OmegaConf
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from rlgrasp.stats import iqm, stratified_bootstrap_ci
+from rlgrasp.stats import iqm, stratified_bootstrap_ci, wilson_interval
+from rlgrasp.train.checkpoint import CheckpointError, read_checkpoint
+from rlgrasp.train.rundir import CHECKPOINTS
 from rlgrasp.utils import markdown_table, pyplot
 
 SUCCESS_TAGS = ("eval/success_rate", "charts/success_rate")
+#: Where a run's final evaluation comes from (the reports say which).
+FROM_EVAL, FROM_TRAINING = "rlgrasp-eval", "training"
 RETURN_TAGS = ("charts/episodic_return", "eval/mean_reward")
 
 
@@ -40,6 +45,7 @@ class RunRecord:
     seed: Any
     evaluation: dict[str, Any] | None
     eval_dir: Path | None
+    source: str | None = None  # FROM_EVAL or FROM_TRAINING (None: no evaluation)
     curves: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
 
 
@@ -74,6 +80,34 @@ def final_evaluation(run: Path, name: str | None = None) -> tuple[dict[str, Any]
     return (json.loads(files[-1].read_text()), files[-1].parent) if files else (None, None)
 
 
+def training_evaluation(run: Path) -> dict[str, Any] | None:
+    """The evaluation training ran at its end, in the shape of an ``rlgrasp-eval`` ``metrics.json``:
+    ``last.pt``'s ``last_eval`` when it evaluated that checkpoint's weights (its success over its
+    episodes, with a Wilson interval; no ``success_once``). None for a run without one (stopped
+    midway, or an env without success)."""
+    try:
+        ckpt = read_checkpoint(run / CHECKPOINTS / "last.pt")
+    except CheckpointError:
+        return None
+    last, cfg = ckpt.get("last_eval") or {}, ckpt["config"]
+    if last.get("frames") != ckpt.get("frames") or "success_rate" not in last:
+        return None
+    periodic = cfg.get("eval") or {}
+    # Runs from before ``last_eval`` kept its episode count ended with eval.final_episodes.
+    episodes = int(last.get("episodes") or periodic.get("final_episodes") or periodic.get("episodes"))
+    rate = float(last["success_rate"])
+    wins = round(rate * episodes)
+    return {
+        "episodes": episodes,
+        "success_at_end": {"rate": rate, "successes": wins, "episodes": episodes,
+                           "ci95": list(wilson_interval(wins, episodes))},
+        "success_once": None,
+        "return": {"mean": float(last["mean_reward"])},
+        "checkpoint": {"path": str(run / CHECKPOINTS / "last.pt"), "frames": ckpt["frames"]},
+        "config": {"train": {"experiment_name": cfg.get("experiment_name"), "seed": cfg.get("seed")}},
+    }
+
+
 def _run_identity(run: Path, evaluation: dict[str, Any] | None) -> tuple[str, Any]:
     """experiment_name and seed: from the evaluation, else the run's saved Hydra config."""
     train = ((evaluation or {}).get("config") or {}).get("train")
@@ -104,12 +138,18 @@ def read_scalars(log_dir: Path, tags: Sequence[str]) -> dict[str, tuple[np.ndarr
 
 
 def load_runs(patterns: Sequence[str], eval_name: str | None = None) -> list[RunRecord]:
+    """Each run with its final evaluation: ``rlgrasp-eval``'s if it has one, else training's own
+    (not when ``eval_name`` asks for a named one: that compares like with like)."""
     records = []
     for run in expand_runs(patterns):
         evaluation, eval_dir = final_evaluation(run, eval_name)
+        source = FROM_EVAL if evaluation else None
+        if evaluation is None and eval_name is None:
+            evaluation = training_evaluation(run)
+            source = FROM_TRAINING if evaluation else None
         experiment, seed = _run_identity(run, evaluation)
         curves = read_scalars(run / "tensorboard", SUCCESS_TAGS + RETURN_TAGS)
-        records.append(RunRecord(run, experiment, seed, evaluation, eval_dir, curves))
+        records.append(RunRecord(run, experiment, seed, evaluation, eval_dir, source, curves))
     return records
 
 
@@ -191,13 +231,23 @@ def _pct(x: float | None) -> str:
     return "n/a" if x is None else f"{x:.1%}"
 
 
+def _source(r: RunRecord) -> str:
+    """Where a run's numbers come from, as the tables say it."""
+    return f"{FROM_EVAL} {r.eval_dir.name}" if r.source == FROM_EVAL else "training's final eval"
+
+
+def _sources(runs: Sequence[RunRecord]) -> str:
+    counts = {s: sum(r.source == s for r in runs) for s in (FROM_EVAL, FROM_TRAINING)}
+    return ", ".join(f"{s} {n}" for s, n in counts.items() if n)
+
+
 def runs_table(records: Sequence[RunRecord], root: Path | None = None) -> tuple[list[str], list[list[str]]]:
     head = [
         "run",
         "experiment",
         "seed",
         "frames",
-        "eval",
+        "source",
         "episodes",
         "success at end [95% Wilson]",
         "success once",
@@ -208,7 +258,7 @@ def runs_table(records: Sequence[RunRecord], root: Path | None = None) -> tuple[
         e = r.evaluation
         name = str(r.path.relative_to(root)) if root and r.path.is_relative_to(root) else str(r.path)
         if e is None:
-            rows.append([name, r.experiment, str(r.seed), "", "(no evaluation)", "", "", "", ""])
+            rows.append([name, r.experiment, str(r.seed), "", "(no final evaluation)", "", "", "", ""])
             continue
         s = e["success_at_end"]
         frames = (e.get("checkpoint") or {}).get("frames")
@@ -218,11 +268,30 @@ def runs_table(records: Sequence[RunRecord], root: Path | None = None) -> tuple[
                 r.experiment,
                 str(r.seed),
                 "" if frames is None else f"{frames:,}",
-                r.eval_dir.name,
+                _source(r),
                 str(e["episodes"]),
                 f"{_pct(s['rate'])} [{_pct(s['ci95'][0])}, {_pct(s['ci95'][1])}]",
-                _pct(e["success_once"]["rate"]),
+                _pct((e["success_once"] or {}).get("rate")),
                 f"{e['return']['mean']:.2f}",
+            ]
+        )
+    return head, rows
+
+
+def aggregate_table(agg: dict[str, dict[str, Any]]) -> tuple[list[str], list[list[str]]]:
+    head = ["group", "runs", "success mean [95% CI]", "success IQM [95% CI]", "return mean [95% CI]",
+            "source"]
+    rows = []
+    for name, a in agg.items():
+        s, ret = a["success_at_end"], a["return_mean"]
+        rows.append(
+            [
+                name,
+                str(s["runs"]),
+                f"{_pct(s['mean'])} [{_pct(s['mean_ci95'][0])}, {_pct(s['mean_ci95'][1])}]",
+                f"{_pct(s['iqm'])} [{_pct(s['iqm_ci95'][0])}, {_pct(s['iqm_ci95'][1])}]",
+                f"{ret['mean']:.2f} [{ret['mean_ci95'][0]:.2f}, {ret['mean_ci95'][1]:.2f}]",
+                a["sources"],
             ]
         )
     return head, rows
@@ -249,20 +318,9 @@ def build_report(
             "success_at_end": aggregate([r.evaluation["success_at_end"]["rate"] for r in evaluated], reps),
             "return_mean": aggregate([r.evaluation["return"]["mean"] for r in evaluated], reps),
             "runs": [str(r.path) for r in evaluated],
+            "sources": _sources(evaluated),
         }
-    agg_head = ["group", "runs", "success mean [95% CI]", "success IQM [95% CI]", "return mean [95% CI]"]
-    agg_rows = []
-    for name, a in agg.items():
-        s, ret = a["success_at_end"], a["return_mean"]
-        agg_rows.append(
-            [
-                name,
-                str(s["runs"]),
-                f"{_pct(s['mean'])} [{_pct(s['mean_ci95'][0])}, {_pct(s['mean_ci95'][1])}]",
-                f"{_pct(s['iqm'])} [{_pct(s['iqm_ci95'][0])}, {_pct(s['iqm_ci95'][1])}]",
-                f"{ret['mean']:.2f} [{ret['mean_ci95'][0]:.2f}, {ret['mean_ci95'][1]:.2f}]",
-            ]
-        )
+    agg_head, agg_rows = aggregate_table(agg)
     out.mkdir(parents=True, exist_ok=True)
     curves = plot_learning_curves(groups, out / "learning_curves.png")
     with open(out / "runs.csv", "w", newline="") as f:
@@ -274,7 +332,7 @@ def build_report(
         + (
             markdown_table(agg_head, agg_rows)
             if agg_rows
-            else "(no run has an evaluation yet: run rlgrasp-eval)"
+            else "(no run has a final evaluation yet: let training finish, or run rlgrasp-eval)"
         )
         + (
             "\n\n![learning curves](learning_curves.png)\n"

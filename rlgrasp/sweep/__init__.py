@@ -3,6 +3,7 @@ periodic evaluation, summaries. Entry point: ``rlgrasp-sweep`` / ``python script
 
 Modules (the schema is ``rlgrasp.config.SweepConfig``): ``space`` (distributions from config),
 ``study`` (storage, sampler, pruner, resume bookkeeping), ``objective`` (one trial = one training
-run composed by Hydra), ``summary`` (tables, best config, plots), ``checks`` (refusing bad input
-before anything is written), ``runner`` (check, run, summarize) and ``cli`` (the command line).
+run per seed, composed by Hydra), ``score`` (a run's value from its evaluations), ``summary``
+(tables, best config, plots), ``checks`` (refusing bad input before anything is written),
+``runner`` (check, run, summarize) and ``cli`` (the command line).
 """

@@ -17,8 +17,9 @@ from rlgrasp.config import ConfigError, validate_train
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.evaluation.source import ENV_ERRORS
 from rlgrasp.overrides import CommandLineError, check, unwritable
-from rlgrasp.sweep.objective import trial_overrides
-from rlgrasp.sweep.space import to_overrides
+from rlgrasp.sweep.objective import schedule_overrides, trial_overrides
+from rlgrasp.sweep.score import KINDS
+from rlgrasp.sweep.space import Space, to_overrides
 from rlgrasp.sweep.study import PRUNERS, SAMPLERS, open_study, study_dir
 from rlgrasp.utils import flatten
 
@@ -26,18 +27,40 @@ from rlgrasp.utils import flatten
 #: sweep can optimize.
 METRICS = ("success_rate", "mean_reward")
 DIRECTIONS = ("maximize", "minimize")
+LR_SCHEDULES = ("trial", "experiment")
 
 
 class SweepError(ValueError):
     """A bad sweep input; the message is one line naming the key, its value and what is allowed."""
 
 
+def _objective_checks(cfg: Any) -> list[tuple[str, Any, bool, str]]:
+    """``objective`` and the keys it constrains (``rlgrasp.sweep.score``)."""
+    o, reach = cfg.objective, cfg.objective.kind == "first_reach"
+    return [
+        ("objective.kind", o.kind, o.kind in KINDS, f"must be one of {', '.join(KINDS)}"),
+        ("objective.threshold", o.threshold, 0 < o.threshold <= 1, "must be in (0, 1] (a success rate)"),
+        ("objective.tie_break", o.tie_break, 0 <= o.tie_break < 1,
+         "must be in [0, 1) (a fraction of the frames; 0: no tie-break)"),
+        ("metric", cfg.metric, not reach or cfg.metric == "success_rate",
+         "objective.kind=first_reach compares the success rate to its threshold: must be success_rate"),
+        ("direction", cfg.direction, not reach or cfg.direction in (None, "minimize"),
+         "objective.kind=first_reach counts frames (fewer is better): must be minimize or null"),
+    ]
+
+
 def check_values(cfg: Any) -> None:
     """The sweep's own keys: ``SweepError`` naming the first bad one."""
+    seeds = list(cfg.trial.seeds)
     checks = [
         ("n_trials", cfg.n_trials, cfg.n_trials >= 1, "must be >= 1"),
         ("metric", cfg.metric, cfg.metric in METRICS, f"must be one of {', '.join(METRICS)}"),
-        ("direction", cfg.direction, cfg.direction in DIRECTIONS, f"must be one of {', '.join(DIRECTIONS)}"),
+        ("direction", cfg.direction, cfg.direction is None or cfg.direction in DIRECTIONS,
+         f"must be one of {', '.join(DIRECTIONS)} or null (the objective's)"),
+        *_objective_checks(cfg),
+        ("trial.seeds", seeds, len(set(seeds)) == len(seeds), "must not repeat a seed"),
+        ("trial.lr_schedule", cfg.trial.lr_schedule, cfg.trial.lr_schedule in LR_SCHEDULES,
+         f"must be one of {', '.join(LR_SCHEDULES)}"),
         ("sampler.name", cfg.sampler.name, cfg.sampler.name in SAMPLERS,
          f"must be one of {', '.join(SAMPLERS)}"),
         ("pruner.name", cfg.pruner.name, cfg.pruner.name in PRUNERS, f"must be one of {', '.join(PRUNERS)}"),
@@ -61,16 +84,23 @@ def _sample(d: BaseDistribution) -> Any:
 def check_training(
     cfg: Any,
     train_overrides: Sequence[str],
-    space: Mapping[str, BaseDistribution],
+    space: Space,
     enqueue: Sequence[Mapping[str, Any]],
     config_dir: str | Path,
 ) -> None:
     """The training config of a trial composes and is valid (``rlgrasp.config.validate_train``), and so
-    do those with a value of every parameter and with each enqueued set (a key naming no training key
-    fails here). ``CommandLineError`` (the command line) or ``SweepError`` (a sweep value)."""
+    do those with a value of every parameter (every choice of a named one) and with each enqueued
+    set (a key naming no training key fails here). ``CommandLineError`` (the command line) or
+    ``SweepError`` (a sweep value)."""
     run_dir = Path("/nonexistent/trial")  # composed, never created
-    base = trial_overrides(cfg, train_overrides, {}, run_dir)
-    check("train", base, config_dir)
+    check("train", trial_overrides(cfg, train_overrides, [], run_dir), config_dir)
+    seed = [f"seed={s}" for s in cfg.trial.seeds[:1]]
+    fixed = [*schedule_overrides(cfg, train_overrides, config_dir), *seed]
+    base = trial_overrides(cfg, train_overrides, [], run_dir, fixed)
+    try:
+        check("train", base, config_dir)
+    except CommandLineError as exc:  # e.g. lr_schedule=experiment with an algo that has no such key
+        raise SweepError(f"sweep.trial (lr_schedule={cfg.trial.lr_schedule}, seeds): {exc}") from None
     train_cfg = compose_train(base, config_dir)
     try:
         validate_train(train_cfg)
@@ -80,15 +110,20 @@ def check_training(
         env_factory(train_cfg.env)().close()
     except ENV_ERRORS as exc:
         raise SweepError(f"a trial's env: {exc}") from None
-    sampled = {key: _sample(d) for key, d in space.items()}
-    try:
-        check("train", [*base, *to_overrides(sampled)], config_dir)
-    except CommandLineError as exc:
-        raise SweepError(f"sweep.params: {exc}") from None
-    for i, item in enumerate(enqueue):
+    sampled = {key: _sample(d) for key, d in space.dists.items()}
+    variants = [sampled, *({**sampled, name: c} for name, sets in space.sets.items() for c in list(sets)[1:])]
+    for params in variants:
         try:
-            check("train", [*base, *to_overrides(flatten(item))], config_dir)
+            check("train", [*base, *space.overrides(params)], config_dir)
         except CommandLineError as exc:
+            raise SweepError(f"sweep.params: {exc}") from None
+    for i, item in enumerate(enqueue):
+        flat = flatten(item)
+        params = {k: v for k, v in flat.items() if k in space}
+        others = {k: v for k, v in flat.items() if k not in space}
+        try:
+            check("train", [*base, *space.overrides(params), *to_overrides(others)], config_dir)
+        except ValueError as exc:  # CommandLineError, or a named choice's unknown value
             raise SweepError(f"sweep.enqueue[{i}]: {exc}") from None
 
 

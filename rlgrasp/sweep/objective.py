@@ -1,4 +1,5 @@
-"""One trial = one training run: compose its config with Hydra, train, report evals to the pruner."""
+"""One trial = one training run per seed: compose its config with Hydra, train, score its evaluations
+(``rlgrasp.sweep.score``) and report them to the pruner."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import math
 import os
 import signal
 import socket
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -16,8 +17,9 @@ import optuna
 from omegaconf import DictConfig
 
 from rlgrasp.compose import compose_train
-from rlgrasp.sweep.space import suggest, to_overrides
-from rlgrasp.sweep.study import ATTR_HOST, ATTR_INTERRUPTED, ATTR_OVERRIDES, ATTR_PID, study_dir
+from rlgrasp.sweep.score import RunScore
+from rlgrasp.sweep.space import Space, suggest
+from rlgrasp.sweep.study import ATTR_HOST, ATTR_INTERRUPTED, ATTR_OVERRIDES, ATTR_PID, ATTR_RUNS, study_dir
 from rlgrasp.train.loop import train
 
 log = logging.getLogger("rlgrasp.sweep")
@@ -28,48 +30,87 @@ class Interrupted(KeyboardInterrupt):
 
 
 def trial_overrides(
-    cfg: Any, train_overrides: list[str], params: Mapping[str, Any], run_dir: Path
+    cfg: Any, train_overrides: Sequence[str], params: Sequence[str], run_dir: Path, fixed: Sequence[str] = ()
 ) -> list[str]:
-    """Command-line overrides, then the sweep's fixed ones, the trial budget, the sampled values."""
+    """Command-line overrides, then the sweep's fixed ones, the trial budget, ``fixed`` (the learning
+    rate schedule's, a seed), the sampled values (as overrides)."""
     return [
         *train_overrides,
         *cfg.overrides,
         f"total_frames={cfg.trial.total_frames}",
         f"time_budget_min={'null' if cfg.trial.time_budget_min is None else cfg.trial.time_budget_min}",
-        *to_overrides(params),
+        *fixed,
+        *params,
         f"paths.output_dir={run_dir}",
     ]
 
 
-class Objective:
-    """Callable for ``study.optimize``: returns the final eval ``metric`` of the trial's run.
+def schedule_overrides(cfg: Any, train_overrides: Sequence[str], config_dir: str | Path) -> list[str]:
+    """``trial.lr_schedule=experiment``: anneal over the experiment's frames, not the trial's (the
+    trial is then the first part of the run it stands for, at that run's learning rates)."""
+    if cfg.trial.lr_schedule != "experiment":
+        return []
+    experiment = compose_train([*train_overrides, *cfg.overrides], config_dir)
+    frames = experiment.algo.get("anneal_lr_frames") or experiment.total_frames
+    return [f"algo.anneal_lr_frames={frames}"]
 
-    Each eval is reported at step = frames; the pruner may then stop the run (``TrialPruned``
-    propagates out of ``train``, which saves a checkpoint first). A crash is an ordinary exception,
-    which Optuna records as a failed trial. A Ctrl-C or SIGTERM makes training save and return; the
-    trial is then marked interrupted and failed, and a resumed sweep runs its parameters again.
+
+class Objective:
+    """Callable for ``study.optimize``: trains the trial's parameters once per seed of
+    ``trial.seeds`` (or once) and returns the mean of the runs' values (``sweep.objective``).
+
+    The first run's evaluations are reported at step = frames; the pruner may then stop it
+    (``TrialPruned`` propagates out of ``train``, which saves a checkpoint first), which ends the
+    trial. Each run's value is kept in the trial's ``runs`` user attribute as it finishes. A crash
+    is an ordinary exception, which Optuna records as a failed trial. A Ctrl-C or SIGTERM makes
+    training save and return; the trial is then marked interrupted and failed, and a resumed sweep
+    runs its parameters again (every seed).
     """
 
-    def __init__(self, cfg: Any, config_dir: str | Path, train_overrides: list[str], space: Mapping) -> None:
+    def __init__(self, cfg: Any, config_dir: str | Path, train_overrides: list[str], space: Space) -> None:
         self.cfg = cfg
         self.config_dir = Path(config_dir)
         self.train_overrides = list(train_overrides)
         self.space = space
+        self.schedule = schedule_overrides(cfg, self.train_overrides, self.config_dir)
 
-    def compose(self, trial: optuna.Trial) -> DictConfig:
-        params = suggest(trial, self.space)
-        run_dir = (study_dir(self.cfg) / "trials" / f"{trial.number:04d}").resolve()
+    def compose(self, trial: optuna.Trial, params: dict[str, Any], seed: int | None) -> DictConfig:
+        """The training config of one run: the trial's directory, or its ``seed_<n>`` folder."""
+        trial_dir = (study_dir(self.cfg) / "trials" / f"{trial.number:04d}").resolve()
+        run_dir = trial_dir if seed is None else trial_dir / f"seed_{seed}"
         extra = list(trial.user_attrs.get(ATTR_OVERRIDES, []))
-        overrides = trial_overrides(self.cfg, self.train_overrides, params, run_dir) + extra
-        trial.set_user_attr("run_dir", str(run_dir))
-        trial.set_user_attr("overrides", overrides)
-        return compose_train(overrides, self.config_dir)
+        values = self.space.overrides(params)
+
+        def overrides(fixed: list[str]) -> list[str]:
+            return trial_overrides(self.cfg, self.train_overrides, values, run_dir, fixed) + extra
+
+        if "overrides" not in trial.user_attrs:  # the first run's, without its seed: the best config's
+            trial.set_user_attr("run_dir", str(trial_dir))
+            trial.set_user_attr("overrides", overrides(self.schedule))
+        seeded = [*self.schedule, *([] if seed is None else [f"seed={seed}"])]
+        return compose_train(overrides(seeded), self.config_dir)
 
     def __call__(self, trial: optuna.Trial) -> float:
         trial.set_user_attr(ATTR_HOST, socket.gethostname())
         trial.set_user_attr(ATTR_PID, os.getpid())
-        train_cfg = self.compose(trial)
-        report = _Report(trial, self.cfg.metric, train_cfg.total_frames)
+        params = suggest(trial, self.space)
+        seeds: list[int | None] = list(self.cfg.trial.seeds) or [None]
+        runs: list[dict[str, Any]] = []
+        for i, seed in enumerate(seeds):
+            train_cfg = self.compose(trial, params, seed)
+            score = RunScore(self.cfg.objective, self.cfg.metric, train_cfg.total_frames)
+            self._train(trial, train_cfg, _Report(trial, score, prune=i == 0))
+            if math.isnan(score.value()):
+                raise RuntimeError(f"trial {trial.number}: no final value of {self.cfg.metric!r}")
+            runs.append({"seed": train_cfg.seed, **score.record()})
+            trial.set_user_attr(ATTR_RUNS, runs)
+            log.info("trial %d, seed %d: value %.6g", trial.number, train_cfg.seed, runs[-1]["value"])
+        value = sum(r["value"] for r in runs) / len(runs)
+        log.info("trial %d: value %.6g (%s)", trial.number, value, self.cfg.objective.kind)
+        return value
+
+    def _train(self, trial: optuna.Trial, train_cfg: DictConfig, report: _Report) -> None:
+        """One run; a signal marks the trial interrupted and raises ``Interrupted``."""
         interrupted = False
         try:
             with _closing_new_log_handlers():
@@ -84,29 +125,23 @@ class Objective:
         if _caught or interrupted:
             trial.set_user_attr(ATTR_INTERRUPTED, True)
             raise Interrupted(f"signal {_caught[0] if _caught else 'SIGINT'} during trial {trial.number}")
-        value = float(report.last.get(self.cfg.metric, math.nan))
-        if math.isnan(value):
-            raise RuntimeError(f"trial {trial.number}: no final value of {self.cfg.metric!r}")
-        trial.set_user_attr("final_eval", {k: float(v) for k, v in report.last.items()})
-        log.info("trial %d: %s=%.4f", trial.number, self.cfg.metric, value)
-        return value
 
 
 class _Report:
-    """Training's ``on_eval``: report ``metric`` at step = frames; raise ``TrialPruned`` when the
-    pruner says so (not at the final evaluation)."""
+    """Training's ``on_eval``: score each evaluation; with ``prune``, report the score at step =
+    frames and raise ``TrialPruned`` when the pruner says so (not at the final evaluation). Optuna
+    takes one report per step, so only a trial's first run reports."""
 
-    def __init__(self, trial: optuna.Trial, metric: str, total_frames: int) -> None:
-        self.trial, self.metric, self.total_frames = trial, metric, total_frames
-        self.last: dict[str, float] = {}
+    def __init__(self, trial: optuna.Trial, score: RunScore, prune: bool) -> None:
+        self.trial, self.score, self.prune = trial, score, prune
 
     def __call__(self, frames: int, metrics: dict[str, float]) -> None:
-        if self.metric not in metrics:
-            raise KeyError(f"sweep.metric={self.metric!r} is not an eval metric; have {sorted(metrics)}")
-        self.last = dict(metrics)
-        self.trial.report(float(metrics[self.metric]), step=int(frames))
-        if frames < self.total_frames and self.trial.should_prune():
-            raise optuna.TrialPruned(f"{self.metric}={metrics[self.metric]:.3f} at {frames:,} frames")
+        value = self.score.add(frames, metrics)
+        if not self.prune:
+            return
+        self.trial.report(value, step=int(frames))
+        if frames < self.score.budget and self.trial.should_prune():
+            raise optuna.TrialPruned(f"value {value:.6g} at {frames:,} frames")
 
 
 @contextlib.contextmanager

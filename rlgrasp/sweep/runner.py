@@ -17,8 +17,10 @@ from rlgrasp.config import CONFIG_DIR
 from rlgrasp.overrides import CommandLineError, explain
 from rlgrasp.sweep.checks import SweepError, check_training, check_values, load_existing
 from rlgrasp.sweep.objective import Interrupted, Objective, catch_signals, stop_requested
+from rlgrasp.sweep.score import describe
 from rlgrasp.sweep.space import parse_space
 from rlgrasp.sweep.study import (
+    ATTR_OBJECTIVE,
     enqueue_initial,
     fail_dead_trials,
     n_finished,
@@ -62,6 +64,7 @@ def run_sweep(
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "sweep.yaml").write_text(OmegaConf.to_yaml(cfg))
     study = open_study(cfg)
+    study.set_user_attr(ATTR_OBJECTIVE, describe(cfg))
     enqueue_initial(study, enqueue, space)
     dead = fail_dead_trials(study)
     retried = requeue_interrupted(study)

@@ -1,9 +1,15 @@
 """Search space: nested ``params`` of a sweep config -> Optuna distributions keyed by dotted training
-keys, and a trial's values -> Hydra overrides."""
+keys, and a trial's values -> Hydra overrides.
+
+A categorical whose ``choices`` is a mapping is a named choice that sets several training keys, e.g.
+``control: {type: categorical, choices: {ee_delta_yaw: {env: {control_mode: ee_delta, ee_yaw: true}},
+...}}``: Optuna samples the names; each name stands for the keys under it.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 import optuna
@@ -41,7 +47,7 @@ def distribution(key: str, spec: Mapping[str, Any]) -> BaseDistribution:
         if kind == "categorical":
             choices = [list(c) if isinstance(c, (list, tuple)) else c for c in spec["choices"]]
             # Optuna stores categorical values as None/bool/int/float/str: lists travel as text.
-            return CategoricalDistribution([_encode(c) for c in choices])
+            return CategoricalDistribution([encode_choice(c) for c in choices])
     except KeyError as exc:
         raise ValueError(f"sweep.params.{key}: type {kind} needs {exc.args[0]!r}") from None
     except ValueError as exc:
@@ -49,25 +55,74 @@ def distribution(key: str, spec: Mapping[str, Any]) -> BaseDistribution:
     raise ValueError(f"sweep.params.{key}: type must be float, int or categorical, got {kind!r}")
 
 
-def parse_space(params: Mapping[str, Any]) -> dict[str, BaseDistribution]:
-    """Dotted training key -> distribution, from the nested ``params`` mapping."""
+@dataclass(frozen=True)
+class Space:
+    """The parameters Optuna samples (name -> distribution; a name is a dotted training key, or a
+    named choice's) and what each named choice sets (name -> choice -> {training key: value})."""
+
+    dists: dict[str, BaseDistribution]
+    sets: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
+
+    def __contains__(self, name: object) -> bool:
+        return name in self.dists
+
+    def training_values(self, params: Mapping[str, Any]) -> dict[str, Any]:
+        """Training key -> value for a trial's parameters; ``ValueError`` for an unknown named choice."""
+        out: dict[str, Any] = {}
+        for name, value in params.items():
+            if name not in self.sets:
+                out[name] = value
+            elif value in self.sets[name]:
+                out.update(self.sets[name][value])
+            else:
+                raise ValueError(f"{name}={value!r}: must be one of {', '.join(self.sets[name])}")
+        return out
+
+    def overrides(self, params: Mapping[str, Any]) -> list[str]:
+        return to_overrides(self.training_values(params))
+
+
+def _named_choices(key: str, spec: Mapping[str, Any]) -> dict[str, dict[str, Any]] | None:
+    """A categorical's ``choices`` given as a mapping: name -> the training keys it sets (flattened)."""
+    choices = spec.get("choices")
+    if spec.get("type") != "categorical" or not isinstance(choices, Mapping):
+        return None
+    out = {}
+    for name, keys in choices.items():
+        if not isinstance(keys, Mapping) or not keys:
+            raise ValueError(f"sweep.params.{key}.choices.{name}: must map training keys to values, "
+                             f"e.g. {{env: {{control_mode: ee_delta}}}}")
+        out[str(name)] = flatten(keys)
+    return out
+
+
+def parse_space(params: Mapping[str, Any]) -> Space:
+    """The search space of the nested ``params`` mapping."""
     flat = flatten(params, leaf=_leaf)
     bad = [k for k, v in flat.items() if not _leaf(v)]
     if bad:
         raise ValueError(f"sweep.params: {bad} are not distributions (need a 'type' field)")
-    return {key: distribution(key, spec) for key, spec in flat.items()}
+    dists, sets = {}, {}
+    for key, spec in flat.items():
+        named = _named_choices(key, spec)
+        if named is not None:
+            sets[key] = named
+            spec = {**spec, "choices": list(named)}
+        dists[key] = distribution(key, spec)
+    return Space(dists, sets)
 
 
-def _encode(value: Any) -> Any:
-    if isinstance(value, list):
+def encode_choice(value: Any) -> Any:
+    """A categorical value as Optuna stores it: a list as its override text, ``[256,256]``."""
+    if isinstance(value, (list, tuple)):
         return "[" + ",".join(str(v) for v in value) + "]"
     return value
 
 
-def suggest(trial: optuna.Trial, space: Mapping[str, BaseDistribution]) -> dict[str, Any]:
+def suggest(trial: optuna.Trial, space: Space) -> dict[str, Any]:
     """Sample every parameter of ``space`` on ``trial``."""
     out: dict[str, Any] = {}
-    for key, d in space.items():
+    for key, d in space.dists.items():
         if isinstance(d, FloatDistribution):
             out[key] = trial.suggest_float(key, d.low, d.high, log=d.log, step=d.step)
         elif isinstance(d, IntDistribution):

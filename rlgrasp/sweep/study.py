@@ -10,7 +10,7 @@ import inspect
 import logging
 import os
 import socket
-from collections.abc import Mapping
+from collections.abc import Container, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -19,12 +19,14 @@ from optuna.storages import BaseStorage, JournalStorage
 from optuna.storages.journal import JournalFileBackend
 from optuna.trial import FrozenTrial, TrialState
 
-from rlgrasp.sweep.space import override_value
+from rlgrasp.sweep.space import encode_choice, override_value
 from rlgrasp.utils import flatten
 
 #: User attributes the objective writes on every trial.
 ATTR_HOST, ATTR_PID, ATTR_INTERRUPTED, ATTR_RETRY_OF = "host", "pid", "interrupted", "retry_of"
 ATTR_OVERRIDES = "extra_overrides"
+ATTR_RUNS = "runs"  # one record per seed: seed, value, frames, metric, first_reach: reached_at
+ATTR_OBJECTIVE = "objective"  # a study attribute: what a trial's value is, in words (the summary's)
 log = logging.getLogger("rlgrasp.sweep")
 
 SAMPLERS = {
@@ -47,6 +49,12 @@ PRUNERS = {
 def study_dir(cfg: Any) -> Path:
     """Where the study's journal, trial runs and summary live: ``<root_dir>/<study_name>``."""
     return Path(cfg.root_dir) / cfg.study_name
+
+
+def study_direction(cfg: Any) -> str:
+    """``sweep.direction``, or the objective's: first_reach counts frames (minimize); final scores a
+    success rate or a reward (maximize)."""
+    return cfg.direction or ("minimize" if cfg.objective.kind == "first_reach" else "maximize")
 
 
 def make_storage(cfg: Any) -> BaseStorage | str:
@@ -88,7 +96,7 @@ def open_study(cfg: Any, create: bool = True) -> optuna.Study:
         storage=storage,
         sampler=make_sampler(cfg),
         pruner=make_pruner(cfg),
-        direction=cfg.direction,
+        direction=study_direction(cfg),
         load_if_exists=True,
     )
 
@@ -144,13 +152,13 @@ def requeue_interrupted(study: optuna.Study) -> list[int]:
     return out
 
 
-def enqueue_initial(study: optuna.Study, items: list[Mapping[str, Any]], space: Mapping[str, Any]) -> int:
+def enqueue_initial(study: optuna.Study, items: list[Mapping[str, Any]], space: Container[str]) -> int:
     """Enqueue ``sweep.enqueue`` on a new study; keys outside the space become fixed overrides."""
     if study.get_trials(deepcopy=False):
         return 0
     for item in items:
         flat = flatten(item)
-        params = {k: v for k, v in flat.items() if k in space}
+        params = {k: encode_choice(v) for k, v in flat.items() if k in space}
         extra = [f"{k}={override_value(v)}" for k, v in flat.items() if k not in space]
         study.enqueue_trial(params, user_attrs={ATTR_OVERRIDES: extra} if extra else None)
     return len(items)

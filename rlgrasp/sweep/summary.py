@@ -20,20 +20,32 @@ from omegaconf import OmegaConf
 from optuna.trial import FrozenTrial, TrialState
 
 from rlgrasp.compose import compose_train
-from rlgrasp.sweep.study import ATTR_INTERRUPTED, ATTR_RETRY_OF
+from rlgrasp.sweep.study import ATTR_INTERRUPTED, ATTR_OBJECTIVE, ATTR_RETRY_OF, ATTR_RUNS
 from rlgrasp.utils import markdown_table, pyplot
 
 log = logging.getLogger("rlgrasp.sweep")
 
-#: Override keys that describe where/how long a trial ran, not what it was: left out of the best config.
-RUN_KEYS = ("paths.", "total_frames", "time_budget_min", "resume", "hydra.", "experiment_name")
+#: Override keys that describe where/how long a trial ran, not what it was: left out of the best config
+#: (``algo.anneal_lr_frames``: ``trial.lr_schedule=experiment`` sets it to the experiment's frames).
+RUN_KEYS = ("paths.", "total_frames", "time_budget_min", "resume", "hydra.", "experiment_name",
+            "algo.anneal_lr_frames")
+
+
+def _seed_values(t: FrozenTrial) -> dict[str, float]:
+    """``value_seed<n>`` -> the value of the trial's run with seed n (trials with ``trial.seeds``)."""
+    return {f"value_seed{r['seed']}": r["value"] for r in t.user_attrs.get(ATTR_RUNS, []) if "seed" in r}
 
 
 def trial_rows(study: optuna.Study) -> tuple[list[str], list[dict[str, Any]]]:
-    """One row per trial: number, state, value, last reported step, duration, parameters, notes."""
+    """One row per trial: number, state, value, each seed's value (several seeds per trial), last
+    reported step, duration, parameters, notes."""
     trials = study.get_trials(deepcopy=False)
     names = sorted({k for t in trials for k in t.params})
-    header = ["number", "state", "value", "last_step", "duration_s", *names, "note"]
+    per_seed = []  # with one run per trial, its value is the trial's
+    if any(len(t.user_attrs.get(ATTR_RUNS, [])) > 1 for t in trials):
+        found = {k for t in trials for k in _seed_values(t)}
+        per_seed = sorted(found, key=lambda k: int(k.removeprefix("value_seed")))
+    header = ["number", "state", "value", *per_seed, "last_step", "duration_s", *names, "note"]
     rows = []
     for t in trials:
         note = []
@@ -48,6 +60,7 @@ def trial_rows(study: optuna.Study) -> tuple[list[str], list[dict[str, Any]]]:
                 "number": t.number,
                 "state": t.state.name,
                 "value": t.value,
+                **{k: _seed_values(t).get(k) for k in per_seed},
                 "last_step": t.last_step,
                 "duration_s": round(t.duration.total_seconds(), 1) if t.duration else None,
                 **{k: t.params.get(k) for k in names},
@@ -78,6 +91,7 @@ def write_tables(study: optuna.Study, out_dir: Path) -> tuple[Path, Path]:
     lines = [
         f"# Study `{study.study_name}` ({study.direction.name.lower()})",
         "",
+        *([str(study.user_attrs[ATTR_OBJECTIVE]), ""] if ATTR_OBJECTIVE in study.user_attrs else []),
         ", ".join(f"{n} {k.lower()}" for k, n in counts.items() if n),
         "",
         markdown_table(header, [[_fmt(r[h]) for h in header] for r in ranked]),

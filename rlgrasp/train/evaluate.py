@@ -1,7 +1,7 @@
 """Periodic evaluation: deterministic actions on the same seeded episodes every time.
 
-Runs in the learner process on a small vector env (built like a collector worker's) so it needs no
-extra workers; with a few envs and one episode each it costs about one collection batch.
+Runs on a small vector env (built like a collector worker's): in the learner's process, or with
+``eval.background`` in a process of its own (``rlgrasp.train.eval_process``) that runs this same code.
 """
 
 from __future__ import annotations
@@ -76,6 +76,10 @@ class Evaluator:
         if successes:
             out["success_rate"] = float(torch.cat(successes)[:episodes].mean())
         return out
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled without its envs: a copy (the background evaluation process) builds its own."""
+        return {**self.__dict__, "_env": None}
 
     def close(self) -> None:
         if self._env is not None and not self._env.is_closed:

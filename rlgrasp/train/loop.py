@@ -14,7 +14,7 @@ import signal
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 import torch
@@ -31,6 +31,7 @@ from rlgrasp.train.adr_sync import AdrSync
 from rlgrasp.train.batches import Batches
 from rlgrasp.train.collect import read_env_errors
 from rlgrasp.train.collectors import shut_down
+from rlgrasp.train.eval_process import EvalProcessError, background_evaluator
 from rlgrasp.train.evaluate import periodic_evaluator
 from rlgrasp.train.logger import log, progress_line, setup_text_log
 from rlgrasp.train.metrics import Due, Throughput, finished_episodes
@@ -112,6 +113,7 @@ class Trainer:
         if resumed is None:
             self.logger.text("config", OmegaConf.to_yaml(self.config), 0)
         self.evaluator = periodic_evaluator(self.parts.make_env, cfg)
+        self.background = background_evaluator(cfg, self.evaluator, self.actor)  # None: in this process
         self.final_episodes = cfg.eval.final_episodes or cfg.eval.episodes
 
     def _extras(self) -> list[Any]:
@@ -187,6 +189,8 @@ class Trainer:
         with contextlib.ExitStack() as cleanup:
             cleanup.callback(self.logger.close)
             cleanup.callback(self.evaluator.close)
+            if self.background is not None:
+                cleanup.callback(self.background.close)
             log.info(
                 "run dir %s | device %s | %d frames per batch (%s) | %s",
                 self.run_dir,
@@ -258,10 +262,11 @@ class Trainer:
 
             is_best = False
             if eval_due(self.frames) and self.frames < cfg.total_frames:  # the final eval runs at the end
-                is_best = self.evaluate()
+                is_best = self.periodic_eval()
             if ckpt_due(self.frames) or is_best:
                 self.save(is_best)
             self.logger.progress(self.progress(sps, budget_s - (time.monotonic() - start)))
+        self.pick_up_eval()  # the one still in the background, before the final one
 
     def collect(self, batches: Iterator[TensorDictBase]) -> TensorDictBase:
         """The next batch, flattened to ``[envs * workers, time]`` (not yet counted in ``frames``: the
@@ -317,7 +322,8 @@ class Trainer:
         )
 
     def evaluate(self, final: bool = False) -> bool:
-        """Deterministic evaluation; logs it, reports it to ``on_eval``; returns whether it is the best.
+        """Deterministic evaluation in this process, of the current weights; logs it, reports it to
+        ``on_eval``; returns whether it is the best.
 
         An exception from ``on_eval`` (a sweep's pruner) saves a checkpoint and propagates.
         """
@@ -326,27 +332,84 @@ class Trainer:
         self.actor.eval()
         result = self.evaluator.run(self.actor, episodes)
         self.actor.train()
-        result["frames"] = self.frames
-        self.last_eval = result
-        self.logger.scalars({f"eval/{k}": v for k, v in result.items() if k != "frames"}, self.frames)
-        self.logger.scalars({"time/eval_s": time.perf_counter() - t0}, self.frames)
+        is_best = self.record_eval(result, self.frames, episodes, time.perf_counter() - t0, final)
+        self.report_eval(result, self.frames, lambda: self.save(is_best))
+        return is_best
+
+    def periodic_eval(self) -> bool:
+        """The evaluation due now; returns whether the checkpoint to save now is the best.
+
+        With ``eval.background`` the previous one is picked up first (``pick_up_eval``) and this one
+        starts in the evaluation process on the current weights, kept with a copy of the whole state
+        (what ``best.pt`` gets if it is the best); training goes on meanwhile.
+        """
+        if self.background is None:
+            return self.evaluate()
+        self.pick_up_eval()
+        snapshot = copy.deepcopy(self.state_dict())
+        try:
+            self.background.submit(self.frames, snapshot["actor"], self.cfg.eval.episodes, keep=snapshot)
+        except EvalProcessError as exc:
+            self._eval_process_failed(exc)
+        return False
+
+    def pick_up_eval(self) -> None:
+        """Wait for the background evaluation, if one is under way, and record it at the frames of
+        the weights it evaluated: a fixed point of the loop, so one seed still gives one run."""
+        bg = self.background
+        if bg is None or bg.pending is None:
+            return
+        t0 = time.perf_counter()
+        try:
+            done = bg.wait(stop=lambda: self.signals.received is not None)
+        except EvalProcessError as exc:
+            self._eval_process_failed(exc)
+        if done is None:
+            raise _Stopped
+        pending, result = done
+        self.logger.scalars({"time/eval_wait_s": time.perf_counter() - t0}, self.frames)
+        is_best = self.record_eval(result, pending.frames, pending.episodes, bg.seconds)
+        if is_best:  # the weights that were evaluated, with this evaluation's bookkeeping
+            pending.keep.update(last_eval=self.last_eval, best_eval_success=self.best_success)
+            path = ckpt_lib.save_checkpoint(self.ckpt_dir / "best.pt", pending.keep)
+            log.info("checkpoint %s (the weights of %s frames)", path, f"{pending.frames:,}")
+        self.report_eval(result, pending.frames, self.save)
+
+    def _eval_process_failed(self, exc: EvalProcessError) -> NoReturn:
+        self._check_stop()  # a scheduler's signal reached the evaluation process too: a stop
+        self.save()
+        where = f"at {self.frames:,} frames; checkpoint saved in {self.ckpt_dir}"
+        raise TrainingError(f"{exc}\n  {where}") from exc
+
+    def record_eval(
+        self, result: dict[str, float], frames: int, episodes: int, seconds: float, final: bool = False
+    ) -> bool:
+        """Log an evaluation of the weights of ``frames`` at ``frames``; keep it as ``last_eval``;
+        returns whether it is the best so far."""
+        self.last_eval = {**result, "frames": frames, "episodes": episodes}
+        self.logger.scalars({f"eval/{k}": v for k, v in result.items()}, frames)
+        self.logger.scalars({"time/eval_s": seconds}, frames)
         score = result.get("success_rate", result["mean_reward"])
         is_best = score > self.best_success
         if is_best:
             self.best_success = score
-        log.info("eval at %s frames: %s", f"{self.frames:,}", {k: round(v, 3) for k, v in result.items()})
+        log.info("eval at %s frames: %s", f"{frames:,}", {k: round(v, 3) for k, v in result.items()})
         if final and "success_rate" in result:
             wins = round(result["success_rate"] * episodes)
             low, high = wilson_interval(wins, episodes)
             log.info("final eval: success %d/%d [95%% Wilson %.3f, %.3f]", wins, episodes, low, high)
-        if self.on_eval is not None:
-            try:
-                self.on_eval(self.frames, dict(result))
-            except BaseException as exc:
-                log.warning("stopped by the eval callback at %s frames: %r", f"{self.frames:,}", exc)
-                self.save(is_best)
-                raise
         return is_best
+
+    def report_eval(self, result: dict[str, float], frames: int, save: Callable[[], None]) -> None:
+        """``on_eval(frames, result)``; an exception from it calls ``save`` and propagates."""
+        if self.on_eval is None:
+            return
+        try:
+            self.on_eval(frames, {**result, "frames": frames})
+        except BaseException as exc:
+            log.warning("stopped by the eval callback at %s frames: %r", f"{self.frames:,}", exc)
+            save()
+            raise
 
     def finish(self) -> float:
         """Final evaluation (unless the last one is current) and checkpoint; hparams; the result."""

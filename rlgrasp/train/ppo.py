@@ -82,10 +82,12 @@ class PPOLearner:
         self.optimizer = torch.optim.Adam(self.params, lr=algo_cfg.lr, eps=algo_cfg.adam_eps)
 
     def lr_at(self, frames: int, total_frames: int) -> float:
-        """Linear annealing by frames (so a resumed run continues the same schedule)."""
-        if not self.cfg.anneal_lr or total_frames <= 0:
+        """Linear annealing by frames (so a resumed run continues the same schedule), over
+        ``algo.anneal_lr_frames`` when set, else ``total_frames``."""
+        horizon = self.cfg.get("anneal_lr_frames") or total_frames
+        if not self.cfg.anneal_lr or horizon <= 0:
             return self.cfg.lr
-        frac = max(self.cfg.min_lr_frac, 1.0 - frames / total_frames)
+        frac = max(self.cfg.min_lr_frac, 1.0 - frames / horizon)
         return self.cfg.lr * frac
 
     def set_lr(self, lr: float) -> None:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -41,6 +42,7 @@ MUTABLE = (
     "eval.episodes",
     "eval.final_episodes",
     "eval.num_envs",
+    "eval.background",
     "checkpoint.interval_frames",
     "checkpoint.keep_last",
     "logger.",
@@ -184,11 +186,31 @@ def command_line_keys(task_overrides: list[str], cfg: DictConfig) -> set[str]:
             continue
         if (Path(CONFIG_DIR) / name).is_dir():
             groups.append(override.input_line)
+            keys |= {k for k in _keys_written_by(name, override.value()) if not _mutable(k)}
         else:
             keys.add(name)
     if groups:
         keys |= _keys_changed_by(groups, cfg)
     return keys
+
+
+def _keys_written_by(group: str, choice: Any) -> set[str]:
+    """The keys the group's chosen file writes itself (not its defaults list), at its package.
+
+    A choice equal to the default changes no key, so ``_keys_changed_by`` cannot see it: ``robot=panda``
+    on an iiwa run must still count as setting ``env.robot``. Only fixed keys are added by the caller,
+    so this can refuse a resume but never silently revert a mutable key the launch had changed.
+    """
+    path = Path(CONFIG_DIR) / group / f"{choice}.yaml"
+    if not isinstance(choice, str) or not path.is_file():
+        return set()
+    text = path.read_text()
+    header = re.search(r"^#\s*@package\s+(\S+)", text, flags=re.M)
+    package = header.group(1) if header else group.replace("/", ".")
+    prefix = "" if package == "_global_" else f"{package}."
+    node = OmegaConf.to_container(OmegaConf.create(text), resolve=False) or {}
+    node.pop("defaults", None)
+    return {prefix + k for k in flatten(node)}
 
 
 def _keys_changed_by(groups: list[str], cfg: DictConfig) -> set[str]:

@@ -15,6 +15,7 @@ from torchrl.data.replay_buffers import RandomSampler
 from torchrl.envs import ExplorationType, set_exploration_type
 
 from rlgrasp.config import CONFIG_DIR
+from rlgrasp.envs.robot import robot_label
 from rlgrasp.train.checkpoint import CheckpointError, load_checkpoint, policy_from_checkpoint
 from rlgrasp.train.models import OBS_KEY
 from rlgrasp.vision.spec import PRIVILEGED_KEY
@@ -55,6 +56,13 @@ def load_teacher(path: str, spec: dict[str, Any], env_cfg: Any) -> tuple[Privile
     or drive this env's action."""
     ckpt = load_checkpoint(path)
     t_spec, t_env = ckpt["spec"], ckpt["config"]["env"]
+    # The arm first: the Panda and the iiwa share the state's size while every joint means another thing.
+    trained, here = robot_label(t_env.get("robot", "panda")), robot_label(env_cfg.get("robot", "panda"))
+    if trained != here:
+        raise CheckpointError(
+            f"teacher={path}: it was trained on the robot {trained!r} and this env has the robot {here!r}: "
+            f"a teacher does not transfer between arms (give a teacher of {here!r})"
+        )
     if t_spec["obs_dim"] != spec["privileged_dim"]:
         raise CheckpointError(
             f"teacher={path}: it reads {t_spec['obs_dim']} state values, this env's privileged state has "

@@ -17,7 +17,7 @@ import os
 import signal
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import torch
 from hydra.utils import instantiate
@@ -31,9 +31,10 @@ from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.batches import Batches
 from rlgrasp.train.collectors import collector_backend, shut_down
+from rlgrasp.train.eval_process import EvalProcessError, background_evaluator
 from rlgrasp.train.evaluate import periodic_evaluator
 from rlgrasp.train.logger import log, setup_text_log
-from rlgrasp.train.loop import seed_everything
+from rlgrasp.train.loop import TrainingError, seed_everything
 from rlgrasp.train.metrics import Due, finished_episodes
 from rlgrasp.train.preemption import StopSignals
 from rlgrasp.train.resume import prepare_run
@@ -84,6 +85,9 @@ class Distiller:
         if resumed is None:
             self.logger.text("config", OmegaConf.to_yaml(cfg), 0)
         self.evaluator = periodic_evaluator(self.make_env, cfg)
+        # The student's periodic evaluations may run in the background (eval.background); its
+        # teacher's, once per episode count and kept, run here.
+        self.background = background_evaluator(cfg, self.evaluator, self.student)
         self._teacher_evals: dict[int, dict[str, float]] = {}
         self.signals = StopSignals()
 
@@ -92,6 +96,8 @@ class Distiller:
         with self.signals, contextlib.ExitStack() as cleanup:
             cleanup.callback(self.logger.close)
             cleanup.callback(self.evaluator.close)
+            if self.background is not None:
+                cleanup.callback(self.background.close)
             if self.frames < self.cfg.total_frames:
                 self._loop()
             if self.signals.received is not None:
@@ -137,12 +143,53 @@ class Distiller:
                 is_best = eval_due(self.frames) and self.frames < cfg.total_frames and self._periodic_eval()
                 if ckpt_due(self.frames) or is_best:
                     self.save(is_best)
+            self._pick_up_eval()  # the one still in the background, before the final one
         finally:
             batches.close()
             shut_down(collector)
 
     def _periodic_eval(self) -> bool:
-        success = self.evaluate(self.cfg.eval.episodes)
+        """The evaluation due now; whether the checkpoint to save now is the best. In the background
+        (as in PPO training, ``rlgrasp.train.loop.Trainer.periodic_eval``): the previous one is picked
+        up, this one starts on a copy of the current state."""
+        if self.background is None:
+            return self._is_best(self.evaluate(self.cfg.eval.episodes))
+        if self._pick_up_eval():
+            snapshot = copy.deepcopy(self.state_dict())
+            try:
+                self.background.submit(self.frames, snapshot["actor"], self.cfg.eval.episodes, keep=snapshot)
+            except EvalProcessError as exc:
+                self._eval_process_failed(exc)
+        return False
+
+    def _pick_up_eval(self) -> bool:
+        """Wait for the background evaluation, if any, and record it at its weights' frames (a best
+        one is saved as ``best.pt`` with those weights); False if a stop signal ended its process."""
+        if self.background is None or self.background.pending is None:
+            return True
+        try:
+            done = self.background.wait(stop=self._stopping)
+        except EvalProcessError as exc:
+            if not self._stopping():  # else a scheduler's signal reached the evaluation process too
+                self._eval_process_failed(exc)
+            done = None
+        if done is None:
+            return False  # stopping: the loop saves and returns
+        pending, student = done
+        if self._is_best(self.record_eval(student, pending.frames, pending.episodes)):
+            pending.keep.update(last_eval=self.last_eval, best_eval_success=self.best_success)
+            ckpt_lib.save_checkpoint(self.run_dir / "checkpoints" / "best.pt", pending.keep)
+        return True
+
+    def _eval_process_failed(self, exc: EvalProcessError) -> NoReturn:
+        self.save()
+        where = f"at {self.frames:,} frames; checkpoint saved in {self.run_dir / 'checkpoints'}"
+        raise TrainingError(f"{exc}\n  {where}") from exc
+
+    def _stopping(self) -> bool:
+        return self.signals.received is not None
+
+    def _is_best(self, success: float) -> bool:
         is_best = success > self.best_success
         self.best_success = max(self.best_success, success)
         return is_best
@@ -186,15 +233,23 @@ class Distiller:
         }
 
     def evaluate(self, episodes: int, final: bool = False) -> float:
-        """The student and its teacher on the same seeded episodes; returns the student's success."""
+        """The student (in this process) and its teacher on the same seeded episodes; returns the
+        student's success."""
         self.student.eval()
         student = self.evaluator.run(self.student, episodes)
         self.student.train()
+        return self.record_eval(student, self.frames, episodes, final)
+
+    def record_eval(
+        self, student: dict[str, float], frames: int, episodes: int, final: bool = False
+    ) -> float:
+        """Log the student's evaluation of the weights of ``frames`` beside its teacher's on the same
+        episodes; returns the student's success."""
         if episodes not in self._teacher_evals:
             self._teacher_evals[episodes] = self.evaluator.run(self.teacher, episodes)
         teacher = self._teacher_evals[episodes]
         s, t = student.get("success_rate", math.nan), teacher.get("success_rate", math.nan)
-        self.last_eval = {**student, "teacher_success_rate": t, "frames": self.frames}
+        self.last_eval = {**student, "teacher_success_rate": t, "frames": frames, "episodes": episodes}
         self.logger.scalars(
             {
                 "eval/success_rate": s,
@@ -202,14 +257,14 @@ class Distiller:
                 "eval/teacher_success_rate": t,
                 "eval/student_over_teacher": s / max(t, 1e-9),
             },
-            self.frames,
+            frames,
         )
         wins = round(s * episodes)
         low, high = wilson_interval(wins, episodes)
         log.info(
             "%seval at %s frames: student %d/%d [95%% Wilson %.3f, %.3f], teacher %.3f on the same episodes",
             "final " if final else "",
-            f"{self.frames:,}",
+            f"{frames:,}",
             wins,
             episodes,
             low,
