@@ -63,7 +63,10 @@ class _SpawnIgnoringCtrlC(SpawnProcess):
             signal.signal(signal.SIGINT, previous)
 
 
-class _SpawnIgnoringCtrlCContext(SpawnContext):
+class SpawnContextIgnoringCtrlC(SpawnContext):
+    """multiprocessing's spawn context, its processes born with SIGINT ignored (see ``spawn_pool``);
+    hand them large arguments after the launch, as ``spawn_pool`` does."""
+
     Process = _SpawnIgnoringCtrlC
 
 
@@ -82,7 +85,7 @@ def spawn_pool(workers: int, initializer: Callable[..., None], initargs: tuple[A
     SIGINT. ``initargs`` (a policy's weights) follow through a queue: passed at launch, they would
     keep the launch, and the parent deaf to Ctrl-C, waiting until the worker had imported torch.
     """
-    context = _SpawnIgnoringCtrlCContext()
+    context = SpawnContextIgnoringCtrlC()
     handoff = context.Queue()
     pool = Pool(workers, _init_from_queue, (handoff,), context=context)
     for _ in range(workers):

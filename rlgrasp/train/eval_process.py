@@ -31,6 +31,7 @@ import torch
 
 from rlgrasp.config import PeriodicEvalConfig
 from rlgrasp.train.evaluate import Evaluator
+from rlgrasp.utils import SpawnContextIgnoringCtrlC
 
 log = logging.getLogger("rlgrasp.train")
 #: How often ``wait`` checks whether to stop waiting.
@@ -61,12 +62,16 @@ def _to_bytes(obj: Any) -> bytes:
     return buf.getvalue()
 
 
-def _serve(conn: Connection, evaluator: Evaluator, policy: torch.nn.Module, threads: int) -> None:
+def _serve(conn: Connection) -> None:
     """The process: for each request ``(weights bytes, episodes)``, ``evaluator.run`` on the policy
     with those weights; answers ``("ok", metrics, seconds)`` or ``("error", message, traceback)``. Ends on
     ``None`` or when the learner's end of the pipe closes."""
-    # Ctrl-C reaches the whole process group: the learner decides when this process ends.
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # Born ignoring Ctrl-C (it reaches the whole process group): the learner decides when this
+    # process ends. The evaluator and the policy come first through the pipe, after the launch.
+    try:
+        evaluator, policy, threads = conn.recv()
+    except (EOFError, OSError):  # the learner is gone before it sent them
+        return
     torch.set_num_threads(threads)  # as the learner's: the same kernels, the same numbers
     policy.eval()
     try:
@@ -102,14 +107,12 @@ class BackgroundEvaluator:
         self._conn: Connection | None = None
 
     def _start(self) -> None:
-        ctx = multiprocessing.get_context("spawn")  # a forked child would share PyBullet and torch state
+        ctx = SpawnContextIgnoringCtrlC()  # a forked child would share PyBullet and torch state
         self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(
-            target=_serve, args=(child, self.evaluator, self.policy, self.threads), name="rlgrasp-eval",
-            daemon=True,
-        )
+        self._proc = ctx.Process(target=_serve, args=(child,), name="rlgrasp-eval", daemon=True)
         self._proc.start()
         child.close()
+        self._conn.send((self.evaluator, self.policy, self.threads))
         log.info("periodic evaluations run in process %d", self._proc.pid)
 
     def submit(self, frames: int, weights: dict[str, torch.Tensor], episodes: int, keep: Any = None) -> None:
