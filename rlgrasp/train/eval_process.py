@@ -128,6 +128,12 @@ class BackgroundEvaluator:
             raise EvalProcessError(f"the evaluation process is gone ({self._exit()})") from exc
         self.pending = Pending(frames, episodes, keep)
 
+    def submit_state(self, frames: int, state: dict[str, Any], episodes: int) -> None:
+        """``submit`` the actor of a copy of the whole training ``state``, kept with the evaluation:
+        if it is the best, ``best.pt`` gets that state, not the one training has moved on to."""
+        snapshot = copy.deepcopy(state)
+        self.submit(frames, snapshot["actor"], episodes, keep=snapshot)
+
     def wait(self, stop: Callable[[], bool] = lambda: False) -> tuple[Pending, dict[str, float]] | None:
         """Block until the pending evaluation's result arrives: ``(pending, metrics)``; None as soon as
         ``stop()`` is true (a stop signal: the evaluation is left to ``close``)."""

@@ -155,9 +155,8 @@ class Distiller:
         if self.background is None:
             return self._is_best(self.evaluate(self.cfg.eval.episodes))
         if self._pick_up_eval():
-            snapshot = copy.deepcopy(self.state_dict())
             try:
-                self.background.submit(self.frames, snapshot["actor"], self.cfg.eval.episodes, keep=snapshot)
+                self.background.submit_state(self.frames, self.state_dict(), self.cfg.eval.episodes)
             except EvalProcessError as exc:
                 self._eval_process_failed(exc)
         return False
