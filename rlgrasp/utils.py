@@ -87,6 +87,7 @@ def spawn_pool(workers: int, initializer: Callable[..., None], initargs: tuple[A
     """
     context = SpawnContextIgnoringCtrlC()
     handoff = context.Queue()
+    handoff.cancel_join_thread()  # a pool ended before its workers read their copies must not wait at exit
     pool = Pool(workers, _init_from_queue, (handoff,), context=context)
     for _ in range(workers):
         handoff.put((initializer, initargs))
