@@ -50,7 +50,8 @@ def pyplot() -> Any:
 
 
 class _SpawnIgnoringCtrlC(SpawnProcess):
-    """A spawned process born with SIGINT ignored (see ``spawn_pool``)."""
+    """A spawned process born with SIGINT ignored (see ``spawn_pool``). The parent ignores SIGINT for
+    the milliseconds of the launch: a Ctrl-C in them is lost, and the user presses it again."""
 
     @staticmethod
     def _Popen(process_obj: Any) -> Any:  # noqa: N802 (multiprocessing's name)
