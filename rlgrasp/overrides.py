@@ -27,6 +27,7 @@ from typing import Any
 # The parser hydra.main itself reads sys.argv with (not public API): flags are read exactly as it will.
 from hydra._internal.utils import get_args_parser
 from hydra.errors import HydraException, MissingConfigException, OverrideParseException
+from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from rlgrasp.compose import compose_config
@@ -94,7 +95,12 @@ def explain(exc: BaseException, overrides: Sequence[str] = (), root: str = "the 
         if "not in" in str(cause.msg) and parent is not None:
             keys = [str(k) for k in parent.keys() if k != "hydra"]
             where = cause.full_key.rpartition(".")[0]
-            return f"{shown}: unknown key '{cause.key}'; {where or root} has {', '.join(keys) or 'no keys'}"
+            line = f"{shown}: unknown key '{cause.key}'; {where or root} has {', '.join(keys) or 'no keys'}"
+            # A node with no schema (env.camera, a robot mapping) takes new keys, which its own
+            # reader checks; Hydra wants them marked as new.
+            if where and OmegaConf.get_type(parent) is dict:
+                line += f" (a new key of {where}: +{shown})"
+            return line
         return f"{shown}: {str(cause.msg).splitlines()[0]}"
     lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
     return "; ".join(lines[:3]) or type(exc).__name__

@@ -105,6 +105,9 @@ BAD_ARM = ("model:franka_panda/panda.urdf,arm_joints:[panda_joint1,panda_joint9]
 # (entry point, what, arguments after BASE (placeholders filled by _fill), a fragment of the one line)
 TRAIN = [
     ("unknown key", ["algo.lrr=1"], "algo.lrr=1: unknown key 'lrr'; algo has name, gamma"),
+    ("new key of an open node", ["cameras=wrist_depth", "model=cnn", "env.camera.width=48"],
+     "env.camera.width=48: unknown key 'width'; env.camera has mount, modality "
+     "(a new key of env.camera: +env.camera.width=48)"),
     ("wrong type", ["algo.lr=abc"], "algo.lr=abc: Value 'abc' of type 'str' could not be converted"),
     ("unknown group option", ["collector=bogus"],
      "collector=bogus: no such option; collector is one of process, ray, single"),
