@@ -13,6 +13,7 @@ advantages are still noise, then fades.
 from __future__ import annotations
 
 import math
+import warnings
 from typing import Any
 
 import torch
@@ -26,6 +27,15 @@ from rlgrasp.demos.dataset import Demos
 from rlgrasp.train.models import OBS_KEY, RunningNorm
 
 VALUE_TARGET = "value_target"
+
+
+def mse_bc_loss(actor: nn.Module) -> BCLoss:
+    """TorchRL's behaviour-cloning loss (MSE to the labelled actions), built without the
+    ``UserWarning`` TorchRL 0.14 prints on every construction about its own internal
+    ``target_actor_network_params`` attribute: nothing a user can act on."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="The name target_actor_network_params")
+        return BCLoss(actor, loss_function="mse")
 
 
 def successful(demos: Demos, gamma: float) -> TensorDict:
@@ -52,7 +62,7 @@ def pretrain(
         storage=LazyTensorStorage(data.numel()), sampler=SamplerWithoutReplacement(), batch_size=mb
     )
     buffer.extend(data)
-    bc = BCLoss(actor, loss_function="mse")
+    bc = mse_bc_loss(actor)
     params = list({id(p): p for p in [*actor.parameters(), *critic.parameters()]}.values())
     optimizer = torch.optim.Adam(params, lr=algo.bc_lr)
     epochs: list[tuple[float, float]] = []
@@ -94,7 +104,7 @@ class Imitation:
             batch_size=min(algo.demo_minibatch_size, data.numel()),
         )
         self.buffer.extend(data)
-        self.loss_fn = BCLoss(actor, loss_function="mse")
+        self.loss_fn = mse_bc_loss(actor)
         self.algo = algo
         self.weight = demo_weight(algo, 0)
 

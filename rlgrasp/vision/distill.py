@@ -23,9 +23,9 @@ import torch
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 from torchrl.envs import ExplorationType, set_exploration_type
-from torchrl.objectives import BCLoss
 
 from rlgrasp.config import ConfigError
+from rlgrasp.demos.bc import mse_bc_loss
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
@@ -64,7 +64,7 @@ class Distiller:
         self.teacher, _ = load_teacher(resolve_teacher(a.teacher), self.spec, cfg.env)
         self.student = build_vision_actor(self.spec, cfg.model)
         self.policy = DAggerPolicy(self.student, self.teacher, a.beta0)
-        self.loss = BCLoss(self.student, loss_function="mse")
+        self.loss = mse_bc_loss(self.student)
         self.aux = None
         if a.aux_coeff > 0:
             encoders = self.student.module[0].module.encoders
