@@ -182,6 +182,9 @@ class DistillConfig:
     # Training images recoloured per sample (rlgrasp/vision/augment.py): none | colour (RGB only).
     augment: str = "none"
     learner_threads: int | None = None  # null: every core (the learner, not the workers, is the bound)
+    # The deployed student (what acts, is evaluated and exported) is an exponential moving average of
+    # the trained weights with this decay per update; 0: the trained weights themselves.
+    ema_decay: float = 0.0
 
 
 @dataclass
@@ -569,6 +572,7 @@ def _distill_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
          "must be >= 1 or null"),
         ("algo.aux_coeff", a.aux_coeff, a.aux_coeff >= 0, "must be >= 0 (0: no auxiliary task)"),
         ("algo.augment", a.augment, a.augment in ("none", "colour"), "must be none or colour"),
+        ("algo.ema_decay", a.ema_decay, 0 <= a.ema_decay < 1, "must be in [0, 1) (0: no averaging)"),
     ]
 
 

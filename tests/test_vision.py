@@ -14,7 +14,7 @@ from rlgrasp.train.checkpoint import CheckpointError
 from rlgrasp.vision.augment import recolour
 from rlgrasp.vision.auxiliary import ObjectFromImages
 from rlgrasp.vision.dagger import LABEL_KEY, DAggerPolicy, LabelledFrames, PrivilegedTeacher, load_teacher
-from rlgrasp.vision.models import build_vision_actor
+from rlgrasp.vision.models import actor_norm, average_weights, build_vision_actor
 
 MODEL = OmegaConf.create(
     dict(
@@ -63,6 +63,18 @@ def test_vision_actor_reads_state_and_uint8_images():
     assert set(actor.in_keys) == {"observation", "depth", "rgb"}
     out = actor(frames(4))
     assert out["action"].shape == (4, 3) and out["action"].abs().max() <= 1.0
+
+
+def test_the_weight_average_moves_a_share_of_the_way_and_copies_the_normalizer():
+    torch.manual_seed(0)
+    model, average = build_vision_actor(SPEC, MODEL), build_vision_actor(SPEC, MODEL)
+    actor_norm(model).update(torch.randn(64, 5) * 3 + 1)
+    before = [p.clone() for p in average.parameters()]
+    average_weights(average, model, decay=0.9)
+    for old, avg, new in zip(before, average.parameters(), model.parameters()):
+        torch.testing.assert_close(avg, 0.9 * old + 0.1 * new)
+    for avg, buf in zip(average.buffers(), model.buffers()):
+        assert torch.equal(avg, buf)
 
 
 def test_bc_loss_lowers_on_a_fixed_batch():
@@ -209,6 +221,10 @@ def test_distillation_trains_checkpoints_resumes_and_evaluates(tmp_path, train_c
     assert ckpt["last_eval"]["teacher_success_rate"] >= 0.0 and "head.weight" in ckpt["aux"]
     policy = policy_from_checkpoint(ckpt)
     assert set(policy.in_keys) == {"observation", "depth"}
+    # The experiment deploys a moving average of the student: both are kept, and they differ.
+    trained, deployed = ckpt["student"], ckpt["actor"]
+    assert trained.keys() == deployed.keys()
+    assert any(not torch.equal(trained[k], deployed[k]) for k in trained)
     distill(train_cfg(*with_aux, f"resume={run}", "total_frames=3072", run_dir=run))
     resumed = load_checkpoint(run)
     assert resumed["frames"] == 3072 and resumed["generation"] == 1 and resumed["updates"] > ckpt["updates"]
@@ -220,6 +236,7 @@ def test_distillation_trains_checkpoints_resumes_and_evaluates(tmp_path, train_c
         ("algo.teacher=/nowhere/teacher.pt", "/nowhere/teacher.pt"),
         ("algo.beta_decay=0", "algo.beta_decay=0.0: must be in (0, 1]"),
         ("algo.beta0=1.5", "algo.beta0=1.5: must be in [0, 1]"),
+        ("algo.ema_decay=1", "algo.ema_decay=1.0: must be in [0, 1)"),
         ("cameras=none", "env.camera=null: a camera policy needs a camera"),
         ("env.control_mode=ee_delta", "it reads 49 state values, this env's privileged state has 45"),
     ],

@@ -5,7 +5,10 @@ and labels it with its action; the student (``rlgrasp.vision.models``) sees only
 the images. Early on the teacher acts (``beta`` near 1) so the data shows what success looks like;
 ``beta`` decays each batch so that the student soon acts and the teacher labels the states the
 student itself visits (Ross et al. 2011). Every labelled frame is kept (up to ``algo.buffer_frames``)
-and the student is regressed onto the labels with TorchRL's ``BCLoss``.
+and the student is regressed onto the labels with TorchRL's ``BCLoss``. With ``algo.ema_decay`` the
+policy that acts, is evaluated and is saved as ``actor`` is a moving average of the trained weights:
+the last snapshot of a regressed student varies from update to update (one run's lifted 72% of 200
+episodes where its average lifted 84%, docs/benchmarks/cameras.md).
 """
 
 from __future__ import annotations
@@ -41,7 +44,7 @@ from rlgrasp.train.resume import prepare_run
 from rlgrasp.vision.augment import augment
 from rlgrasp.vision.auxiliary import ObjectFromImages
 from rlgrasp.vision.dagger import LABEL_KEY, DAggerPolicy, LabelledFrames, load_teacher, resolve_teacher
-from rlgrasp.vision.models import actor_norm, build_vision_actor
+from rlgrasp.vision.models import actor_norm, average_weights, build_vision_actor
 from rlgrasp.vision.spec import PRIVILEGED_KEY, vision_spec
 
 
@@ -63,7 +66,10 @@ class Distiller:
         self.spec = vision_spec(self.make_env)
         self.teacher, _ = load_teacher(resolve_teacher(a.teacher), self.spec, cfg.env)
         self.student = build_vision_actor(self.spec, cfg.model)
-        self.policy = DAggerPolicy(self.student, self.teacher, a.beta0)
+        # What acts, is evaluated and is exported: the student's weights averaged over its recent
+        # updates (algo.ema_decay; 0: the student itself).
+        self.deployed = copy.deepcopy(self.student) if a.ema_decay > 0 else self.student
+        self.policy = DAggerPolicy(self.deployed, self.teacher, a.beta0)
         self.loss = mse_bc_loss(self.student)
         self.aux = None
         if a.aux_coeff > 0:
@@ -87,7 +93,7 @@ class Distiller:
         self.evaluator = periodic_evaluator(self.make_env, cfg)
         # The student's periodic evaluations may run in the background (eval.background); its
         # teacher's, once per episode count and kept, run here.
-        self.background = background_evaluator(cfg, self.evaluator, self.student)
+        self.background = background_evaluator(cfg, self.evaluator, self.deployed)
         self._teacher_evals: dict[int, dict[str, float]] = {}
         self.signals = StopSignals()
 
@@ -219,6 +225,8 @@ class Distiller:
             self.optimizer.zero_grad()
             loss.backward()
             self.optimizer.step()
+            if self.deployed is not self.student:
+                average_weights(self.deployed, self.student, a.ema_decay)
         beta = self.policy.beta.item()
         self.batches_seen += 1
         self.policy.beta.fill_(a.beta0 * a.beta_decay**self.batches_seen)
@@ -234,9 +242,9 @@ class Distiller:
     def evaluate(self, episodes: int, final: bool = False) -> float:
         """The student (in this process) and its teacher on the same seeded episodes; returns the
         student's success."""
-        self.student.eval()
-        student = self.evaluator.run(self.student, episodes)
-        self.student.train()
+        self.deployed.eval()
+        student = self.evaluator.run(self.deployed, episodes)
+        self.deployed.train()
         return self.record_eval(student, self.frames, episodes, final)
 
     def record_eval(
@@ -279,7 +287,9 @@ class Distiller:
         return {
             "format": ckpt_lib.FORMAT,
             "kind": "vision",
-            "actor": self.student.state_dict(),
+            "actor": self.deployed.state_dict(),
+            # The weights being trained, when they differ from the deployed average (for a resume).
+            "student": self.student.state_dict() if self.deployed is not self.student else None,
             "aux": self.aux.state_dict() if self.aux is not None else None,
             "optimizer": self.optimizer.state_dict(),
             "frames": self.frames,
@@ -296,7 +306,8 @@ class Distiller:
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         try:
-            self.student.load_state_dict(state["actor"])
+            self.deployed.load_state_dict(state["actor"])
+            self.student.load_state_dict(state.get("student") or state["actor"])
         except (RuntimeError, KeyError) as exc:
             raise ConfigError(
                 f"checkpoint does not fit the camera student: {str(exc).splitlines()[0][:200]}"

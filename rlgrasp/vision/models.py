@@ -114,6 +114,17 @@ def actor_norm(actor: ProbabilisticActor) -> RunningNorm:
     return actor.module[0].module.norm
 
 
+@torch.no_grad()
+def average_weights(average: nn.Module, model: nn.Module, decay: float) -> None:
+    """One step of an exponential moving average of ``model``'s parameters into ``average``; buffers
+    (the state normalizer's statistics) are copied as they are. Hand-written: torch's
+    ``AveragedModel`` wraps the module and renames its state dict, which export and evaluation read."""
+    for avg, p in zip(average.parameters(), model.parameters()):
+        avg.lerp_(p, 1.0 - decay)
+    for avg, b in zip(average.buffers(), model.buffers()):
+        avg.copy_(b)
+
+
 def vision_policy(spec: Mapping[str, Any], model_cfg: Any, weights: Mapping[str, Any]) -> ProbabilisticActor:
     """The deterministic camera policy of a checkpoint's spec, model config and weights."""
     actor = build_vision_actor(spec, model_cfg, deterministic=True)
