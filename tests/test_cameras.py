@@ -42,6 +42,31 @@ def test_dict_observation_spaces_and_shapes(modality, keys, cam_env):
     assert obs["state"].shape == (7 + 7 + 1 + 3 + 3 + env.action_dim,)
 
 
+@pytest.mark.parametrize("modality", ["depth", "rgbd"])
+def test_stacked_frames_hold_the_last_images_oldest_first(modality, cam_env):
+    single = cam_env(camera={"mount": "wrist", "modality": modality}, visual="default")
+    stacked = cam_env(camera={"mount": "wrist", "modality": modality, "frames": 3}, visual="default")
+    first, _ = stacked.reset(seed=4)
+    one, _ = single.reset(seed=4)
+    assert stacked.observation_space.contains(first)
+    channels = {"depth": 1, "rgb": 3}
+    for key, c in channels.items():
+        if key in one:  # an episode starts with its first image repeated
+            assert first[key].shape == (3 * c, 64, 64)
+            np.testing.assert_array_equal(first[key], np.concatenate([one[key]] * 3))
+    rng = np.random.default_rng(0)
+    singles = [one]
+    for _ in range(3):
+        action = rng.uniform(-1, 1, single.action_dim)
+        singles.append(single.step(action)[0])
+        last = stacked.step(action)[0]
+    for key, c in channels.items():
+        if key in one:
+            np.testing.assert_array_equal(last[key], np.concatenate([s[key] for s in singles[1:]]))
+    again, _ = stacked.reset(seed=4)  # a new episode forgets the last one's images
+    np.testing.assert_array_equal(again["depth"], first["depth"])
+
+
 def test_camera_env_passes_gymnasiums_checker(cam_env):
     check_env(cam_env(camera=WRIST_DEPTH, visual="default"), skip_render_check=True)
 
@@ -141,6 +166,7 @@ def test_a_depth_cameras_computed_ground_matches_the_rendered_one(mount, cam_env
         ({"near": 0.5, "far": 0.5}, "need 0 < near < far"),
         ({"fov": 200}, "camera.fov=200"),
         ({"lens": 3}, "camera: unknown key 'lens'"),
+        ({"frames": 0}, "camera.frames=0: must be an integer from 1 to 8"),
     ],
 )
 def test_bad_camera_config_names_the_key(camera, match):

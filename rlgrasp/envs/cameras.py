@@ -9,6 +9,7 @@ has the figures.
 
 from __future__ import annotations
 
+import collections
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
@@ -22,6 +23,7 @@ from pybullet_utils.bullet_client import BulletClient
 MOUNTS = ("wrist", "fixed")
 MODALITIES = ("depth", "rgb", "rgbd")
 MAX_SIZE = 512
+MAX_FRAMES = 8
 #: Where each mount looks from by default: for ``wrist`` in the hand's frame (its z axis points
 #: along the fingers), for ``fixed`` in the world frame.
 MOUNT_DEFAULTS = {
@@ -45,6 +47,9 @@ class CameraSpec:
     eye: tuple[float, float, float] | None = None
     target: tuple[float, float, float] | None = None
     up: tuple[float, float, float] | None = None
+    # The last ``frames`` images, oldest first, stacked along the channels: with more than one the
+    # policy sees motion (a cube starting to tip or slip), which one image cannot show.
+    frames: int = 1
 
     @staticmethod
     def from_config(cfg: Mapping[str, Any]) -> CameraSpec:
@@ -68,6 +73,8 @@ class CameraSpec:
             value = getattr(self, key)
             if not (isinstance(value, int) and 1 <= value <= MAX_SIZE):
                 raise ValueError(f"camera.{key}={value!r}: must be an integer from 1 to {MAX_SIZE}")
+        if not (isinstance(self.frames, int) and 1 <= self.frames <= MAX_FRAMES):
+            raise ValueError(f"camera.frames={self.frames!r}: must be an integer from 1 to {MAX_FRAMES}")
         if not 0 < self.fov < 180:
             raise ValueError(f"camera.fov={self.fov!r}: must be between 0 and 180 degrees")
         if not 0 < self.near < self.far:
@@ -88,12 +95,34 @@ class CameraSpec:
 
     def spaces(self) -> dict[str, gym.spaces.Box]:
         """Channel-first image spaces: depth float32 metres in [near, far] (0: no reading, as depth
-        sensors report a missing pixel), RGB uint8."""
+        sensors report a missing pixel), RGB uint8; ``frames`` images stacked along the channels."""
         out = {}
         if "depth" in self.keys:
-            out["depth"] = gym.spaces.Box(0.0, self.far, (1, self.height, self.width), np.float32)
+            out["depth"] = gym.spaces.Box(0.0, self.far, (self.frames, self.height, self.width), np.float32)
         if "rgb" in self.keys:
-            out["rgb"] = gym.spaces.Box(0, 255, (3, self.height, self.width), np.uint8)
+            out["rgb"] = gym.spaces.Box(0, 255, (3 * self.frames, self.height, self.width), np.uint8)
+        return out
+
+
+class ImageHistory:
+    """The last ``frames`` images of each key, stacked oldest first along the channels; an episode
+    starts with its first image repeated. Hand-written: TorchRL's ``CatFrames`` would stack in the
+    collector, so a gymnasium user, evaluation and export would see other shapes than training."""
+
+    def __init__(self, frames: int):
+        self.frames = frames
+        self.history: dict[str, collections.deque] = {}
+
+    def push(self, images: dict[str, np.ndarray], first: bool) -> dict[str, np.ndarray]:
+        if self.frames == 1:
+            return images
+        out = {}
+        for key, image in images.items():
+            if first or key not in self.history:
+                self.history[key] = collections.deque([image] * self.frames, maxlen=self.frames)
+            else:
+                self.history[key].append(image)
+            out[key] = np.concatenate(self.history[key], axis=0)
         return out
 
 

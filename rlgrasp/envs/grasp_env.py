@@ -11,7 +11,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from rlgrasp.envs.cameras import Camera, CameraSpec
+from rlgrasp.envs.cameras import Camera, CameraSpec, ImageHistory
 from rlgrasp.envs.collision_model import COLLISION_MODELS
 from rlgrasp.envs.control import CONTROL_MODES, make_control
 from rlgrasp.envs.observation import PROPRIOCEPTION, ObservationLayout, full_parts
@@ -134,6 +134,7 @@ class GraspEnv(gym.Env):
             self.robot = make_robot(robot, self.client, robot_urdf, render, collision_model)
             self.visuals = VisualRandomizer(visual, self.client)
             self.camera = Camera(camera_spec, self.client) if camera_spec else None
+            self.image_history = ImageHistory(camera_spec.frames if camera_spec else 1)
         except BaseException:
             self.close()
             raise
@@ -186,7 +187,7 @@ class GraspEnv(gym.Env):
         self._prev_action = self._idle_action.copy()
         self._steps = 0
         self.episode = ep
-        obs, readings = self._observe()
+        obs, readings = self._observe(first=True)
         return obs, self._info(readings, success=False)
 
     def _check_camera_pose(self) -> None:
@@ -260,8 +261,9 @@ class GraspEnv(gym.Env):
         state = gym.spaces.Box(-np.inf, np.inf, (state_size,), np.float32)
         return gym.spaces.Dict({"state": state, **self.camera.spec.spaces(), "privileged": flat})
 
-    def _observe(self) -> tuple[Any, dict[str, Any]]:
-        """The observation (with this step's sensor noise) and the true readings it came from."""
+    def _observe(self, first: bool = False) -> tuple[Any, dict[str, Any]]:
+        """The observation (with this step's sensor noise) and the true readings it came from;
+        ``first``: an episode's first, which starts the image history."""
         vector, readings = self._state_vector()
         self._readings = readings
         if self.camera is None:
@@ -269,6 +271,7 @@ class GraspEnv(gym.Env):
         mount = self.robot.camera_mount() if self.camera.spec.mount == "wrist" else None
         images = self.camera.render(mount)
         self.visuals.corrupt(images, self._visual, self._visual_rng)
+        images = self.image_history.push(images, first)
         return {"state": self.layout.select(vector, PROPRIOCEPTION), **images, "privileged": vector}, readings
 
     def _state_vector(self) -> tuple[np.ndarray, dict[str, Any]]:

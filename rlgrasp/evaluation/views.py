@@ -38,15 +38,15 @@ def upscale(image: np.ndarray, height: int) -> np.ndarray:
 
 
 def camera_view(obs: Any, near: float, far: float) -> np.ndarray | None:
-    """The images of a camera env's observation side by side (``[h, w', 3]`` uint8: depth first,
-    then RGB), or ``None`` for an observation without images."""
+    """The newest images of a camera env's observation side by side (``[h, w', 3]`` uint8: depth
+    first, then RGB), or ``None`` for an observation without images."""
     if not isinstance(obs, Mapping):
         return None
     parts = []
     if "depth" in obs:
-        parts.append(depth_image(obs["depth"], near, far))
+        parts.append(depth_image(np.asarray(obs["depth"])[-1:], near, far))  # stacked frames: the last
     if "rgb" in obs:
-        parts.append(np.ascontiguousarray(np.asarray(obs["rgb"], np.uint8).transpose(1, 2, 0)))
+        parts.append(np.ascontiguousarray(np.asarray(obs["rgb"], np.uint8)[-3:].transpose(1, 2, 0)))
     return np.concatenate(parts, axis=1) if parts else None
 
 
