@@ -60,7 +60,7 @@ def test_stacked_frames_hold_the_last_images_oldest_first(modality, cam_env):
         action = rng.uniform(-1, 1, single.action_dim)
         singles.append(single.step(action)[0])
         last = stacked.step(action)[0]
-    for key, c in channels.items():
+    for key in channels:
         if key in one:
             np.testing.assert_array_equal(last[key], np.concatenate([s[key] for s in singles[1:]]))
     again, _ = stacked.reset(seed=4)  # a new episode forgets the last one's images
