@@ -16,7 +16,7 @@ POLICIES = Path(__file__).resolve().parents[1] / "policies"
 CASES = [
     ("grasp_objects_ppo.pt", "random_urdfs_test", 17, 14),
     ("grasp_ppo.pt", "cube", 17, 14),
-    ("grasp_vision_depth.pt", "cube", 15, 11),  # a wrist depth camera student of grasp_ppo.pt
+    ("grasp_vision_depth.pt", "cube", 17, 14),  # a wrist depth camera student of grasp_ppo.pt
 ]
 
 
