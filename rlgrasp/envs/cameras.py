@@ -106,8 +106,9 @@ class CameraSpec:
 
 class ImageHistory:
     """The last ``frames`` images of each key, stacked oldest first along the channels; an episode
-    starts with its first image repeated. Hand-written: TorchRL's ``CatFrames`` would stack in the
-    collector, so a gymnasium user, evaluation and export would see other shapes than training."""
+    starts with its first image repeated. Hand-written: TorchRL's ``CatFrames`` stacks in the
+    collector, so a gymnasium user, evaluation and export would see other shapes than training, and
+    gymnasium's ``FrameStackObservation`` stacks every entry (state, privileged) on a new axis."""
 
     def __init__(self, frames: int):
         self.frames = frames
