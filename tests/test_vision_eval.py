@@ -248,6 +248,10 @@ def test_depth_view_colours_and_upscaling() -> None:
     frame = beside(np.zeros((240, 320, 3), np.uint8), view)
     assert frame.shape == (240, 320 + 4 + 720, 3)
     assert camera_view(np.zeros(5), 0.02, 1.0) is None
+    # stacked frames (env.camera.frames=2): the view shows the newest image of each
+    stacked = camera_view({"depth": np.concatenate([np.full_like(depth, 0.9), depth]),
+                           "rgb": np.concatenate([np.full_like(rgb, 50), rgb])}, 0.02, 1.0)
+    np.testing.assert_array_equal(stacked, view)
 
 
 # --- export ---------------------------------------------------------------------------------------
