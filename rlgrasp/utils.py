@@ -50,18 +50,19 @@ def pyplot() -> Any:
 
 
 class _SpawnIgnoringCtrlC(SpawnProcess):
-    """A spawned process born with SIGINT ignored (see ``spawn_pool``). The parent ignores SIGINT for
-    the milliseconds of the launch: a Ctrl-C in them is lost, and the user presses it again."""
+    """A spawned process born with SIGINT blocked (see ``spawn_pool``). The parent blocks SIGINT for
+    the launch, and a Ctrl-C that arrives then is delivered to it when the launch is done: blocked,
+    not ignored, so that it is late rather than lost (a busy machine can take seconds to launch)."""
 
     @staticmethod
     def _Popen(process_obj: Any) -> Any:  # noqa: N802 (multiprocessing's name)
         if threading.current_thread() is not threading.main_thread():  # the pool replacing a worker
             return SpawnProcess._Popen(process_obj)
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         try:
             return SpawnProcess._Popen(process_obj)
         finally:
-            signal.signal(signal.SIGINT, previous)
+            signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 class SpawnContextIgnoringCtrlC(SpawnContext):
@@ -81,10 +82,10 @@ def spawn_pool(workers: int, initializer: Callable[..., None], initargs: tuple[A
 
     A Ctrl-C at a terminal reaches the whole process group. Ignoring SIGINT in a pool initializer
     is too late for a worker still importing torch (seconds on a busy machine): it prints a
-    KeyboardInterrupt traceback. An ignored signal stays ignored across exec, and Python then
-    installs no KeyboardInterrupt handler, so each worker is launched while this process ignores
-    SIGINT. ``initargs`` (a policy's weights) follow through a queue: passed at launch, they would
-    keep the launch, and the parent deaf to Ctrl-C, waiting until the worker had imported torch.
+    KeyboardInterrupt traceback. A blocked signal stays blocked across exec and is never delivered,
+    so each worker is launched while this process blocks SIGINT. ``initargs`` (a policy's weights)
+    follow through a queue: passed at launch, they would keep the launch, and the parent's Ctrl-C,
+    waiting until the worker had imported torch.
     """
     context = SpawnContextIgnoringCtrlC()
     handoff = context.Queue()
