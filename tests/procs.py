@@ -66,14 +66,23 @@ class Started:
         self.proc.wait()
 
 
+def _as_at_a_terminal() -> None:
+    """Ctrl-C's default action, as a command typed at a terminal has it. A shell script that starts
+    pytest with ``&`` (``nohup ... &``) makes SIGINT ignored for everything below it, and Python then
+    installs no KeyboardInterrupt handler: a SIGINT test would see the script ignore its signal."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def start_script(
     name: str, args: list[str], cwd: Path, out: Path, env: dict[str, str] | None = None
 ) -> Started:
-    """``python scripts/<name>.py *args`` in a new session (its own process group), output to ``out``."""
+    """``python scripts/<name>.py *args`` in a new session (its own process group), output to ``out``,
+    with SIGINT's default action whatever pytest inherited."""
     env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1", **(env or {})}
     with open(out, "ab") as f:
         proc = subprocess.Popen([sys.executable, str(ROOT / "scripts" / f"{name}.py"), *args], cwd=cwd,
-                                env=env, stdout=f, stderr=subprocess.STDOUT, start_new_session=True)
+                                env=env, stdout=f, stderr=subprocess.STDOUT, start_new_session=True,
+                                preexec_fn=_as_at_a_terminal)
     return Started(proc, out)
 
 
