@@ -16,6 +16,8 @@ POLICIES = Path(__file__).resolve().parents[1] / "policies"
 CASES = [
     ("grasp_objects_ppo.pt", "random_urdfs_test", 17, 14),
     ("grasp_ppo.pt", "cube", 17, 14),
+    ("grasp_ppo_kuka_iiwa.pt", "cube", 18, 15),  # the checkpoint rebuilds its arm
+    ("grasp_ppo_xarm6.pt", "cube", 17, 14),
     ("grasp_vision_depth.pt", "cube", 17, 14),  # a wrist depth camera student of grasp_ppo.pt
 ]
 
