@@ -66,7 +66,7 @@ class _SpawnIgnoringCtrlC(SpawnProcess):
 
 
 class SpawnContextIgnoringCtrlC(SpawnContext):
-    """multiprocessing's spawn context, its processes born with SIGINT ignored (see ``spawn_pool``);
+    """multiprocessing's spawn context, its processes born with SIGINT blocked (see ``spawn_pool``);
     hand them large arguments after the launch, as ``spawn_pool`` does."""
 
     Process = _SpawnIgnoringCtrlC
