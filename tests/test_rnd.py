@@ -69,6 +69,20 @@ def test_intrinsic_advantages_join_ppos_across_episode_ends() -> None:
     assert float(adv[0]) == pytest.approx(float(expected), rel=1e-4)
 
 
+def test_rewards_are_scaled_by_the_spread_of_returns_carried_across_batches() -> None:
+    rnd = _rnd(rnd_gamma=0.5)
+    first = rnd._running_returns(torch.ones(2, 4))
+    assert first[0].tolist() == [1.0, 1.5, 1.75, 1.875]
+    assert rnd._running_returns(torch.ones(2, 1))[:, 0].tolist() == [1.9375, 1.9375]  # carried over
+    rnd = _rnd(rnd_gamma=0.99)
+    batch = _batch(torch.randn(ENVS, STEPS, OBS_DIM), torch.randn(ENVS, STEPS, OBS_DIM))
+    rnd.start(batch, 0)
+    errors = rnd.novelty(batch["next", "observation"])
+    expected = errors / rnd.reward_rms.var.sqrt()
+    assert torch.allclose(batch[INTRINSIC_REWARD][..., 0], expected)
+    assert float(rnd.reward_rms.var) > 10 * float(errors.var())  # returns spread far wider
+
+
 def test_the_learner_trains_rnd_and_checkpoints_round_trip() -> None:
     torch.manual_seed(0)
     model = OmegaConf.structured(MLPConfig(hidden_sizes=[16, 16]))
@@ -88,6 +102,8 @@ def test_the_learner_trains_rnd_and_checkpoints_round_trip() -> None:
     restored.load_state_dict(rnd.state_dict())
     assert torch.equal(restored.novelty(obs), rnd.novelty(obs))
     assert torch.equal(restored.obs_rms.mean, rnd.obs_rms.mean) and restored.reward_rms.count > 1
+    assert restored.running_return.shape == (ENVS,)
+    assert torch.equal(restored.running_return, rnd.running_return)
 
 
 def test_a_run_with_rnd_logs_it_checkpoints_its_networks_and_resumes(tmp_path) -> None:

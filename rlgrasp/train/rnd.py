@@ -1,9 +1,13 @@
 """Random Network Distillation (Burda et al. 2018): curiosity as an intrinsic reward for PPO.
 
 The intrinsic reward of a transition is the error of a trained predictor against a fixed random
-network on its next observation (whitened by running statistics and clipped to [-5, 5]), divided by
-the running standard deviation of those rewards: large on states seldom seen, shrinking as the
-predictor learns them. It has its own value head and its own non-episodic returns (an episode's end
+network on its next observation (whitened by running statistics and clipped to [-5, 5]): large on
+states seldom seen, shrinking as the predictor learns them. As in the reference, it is divided by
+the running standard deviation of the intrinsic *returns* (each env's discounted sum of the errors,
+kept across batches and episode ends), not of the per-step errors: those vary far less than the
+returns, and dividing by their spread made the intrinsic value targets tens to hundreds of times
+larger than the extrinsic ones, so the intrinsic value loss ruled the shared gradient clip and the
+actor stopped learning. It has its own value head and its own non-episodic returns (an episode's end
 is no reason for novelty to stop paying), and ``algo.rnd_coeff`` times its advantage is added to
 PPO's. TorchRL provides the predictor's loss (``RNDLoss``) and the running statistics
 (``RunningMeanStd``); its ``RNDTransform`` computes the reward inside the env, which here runs in
@@ -43,7 +47,8 @@ class RND(nn.Module):
         self.target, self.predictor = _net(obs_dim, algo.rnd_features), _net(obs_dim, algo.rnd_features)
         self.target.requires_grad_(False)
         self.obs_rms = RunningMeanStd((obs_dim,))
-        self.reward_rms = RunningMeanStd(())
+        self.reward_rms = RunningMeanStd(())  # of the intrinsic returns
+        self.register_buffer("running_return", torch.zeros(0))  # per env; sized by the first batch
         self.value = _net(obs_dim, 1)  # reads PPO's normalized observation
         self.norm = [norm]  # a list: the normalizer is the actor's, not this module's state
         self.predictor_loss = RNDLoss(
@@ -66,10 +71,29 @@ class RND(nn.Module):
         next_obs = batch["next", OBS_KEY]
         self.obs_rms.update(next_obs)
         raw = self.novelty(next_obs)
-        self.reward_rms.update(raw)
+        self.reward_rms.update(self._running_returns(raw))
         reward = raw / self.reward_rms.var.clamp_min(1e-8).sqrt()
         batch[INTRINSIC_REWARD] = reward.unsqueeze(-1)
         return {"charts/intrinsic_reward": float(reward.mean()), "charts/intrinsic_error": float(raw.mean())}
+
+    def _running_returns(self, raw: torch.Tensor) -> torch.Tensor:
+        """Each env's discounted sum of errors at each step of a ``[envs, time]`` batch, carried
+        over from the last batch (CleanRL's ``RewardForwardFilter``; TorchRL has none)."""
+        if self.running_return.shape != raw.shape[:-1]:
+            self.running_return = raw.new_zeros(raw.shape[:-1])
+        returns = torch.empty_like(raw)
+        running = self.running_return
+        for t in range(raw.shape[-1]):
+            running = running * self.algo.rnd_gamma + raw[..., t]
+            returns[..., t] = running
+        self.running_return = running
+        return returns
+
+    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs) -> None:
+        key = prefix + "running_return"
+        # its size is the saving run's number of envs, unknown to a fresh module
+        self.running_return = state_dict.setdefault(key, torch.zeros(0)).clone()
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
 
     def _value(self, obs: torch.Tensor) -> torch.Tensor:
         return self.value(self.norm[0](obs))
