@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import signal
 import threading
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from multiprocessing.context import SpawnContext, SpawnProcess
-from multiprocessing.pool import Pool
 from typing import Any
 
 
@@ -50,7 +51,7 @@ def pyplot() -> Any:
 
 
 class _SpawnIgnoringCtrlC(SpawnProcess):
-    """A spawned process born with SIGINT blocked (see ``spawn_pool``). The parent blocks SIGINT for
+    """A spawned process born with SIGINT blocked (see ``SpawnPool``). The parent blocks SIGINT for
     the launch, and a Ctrl-C that arrives then is delivered to it when the launch is done: blocked,
     not ignored, so that it is late rather than lost (a busy machine can take seconds to launch)."""
 
@@ -66,8 +67,8 @@ class _SpawnIgnoringCtrlC(SpawnProcess):
 
 
 class SpawnContextIgnoringCtrlC(SpawnContext):
-    """multiprocessing's spawn context, its processes born with SIGINT blocked (see ``spawn_pool``);
-    hand them large arguments after the launch, as ``spawn_pool`` does."""
+    """multiprocessing's spawn context, its processes born with SIGINT blocked (see ``SpawnPool``);
+    hand them large arguments after the launch, as ``SpawnPool`` does."""
 
     Process = _SpawnIgnoringCtrlC
 
@@ -77,8 +78,13 @@ def _init_from_queue(handoff: Any) -> None:
     initializer(*initargs)
 
 
-def spawn_pool(workers: int, initializer: Callable[..., None], initargs: tuple[Any, ...]) -> Pool:
-    """A pool of spawned processes that leave Ctrl-C to the parent, from their first instruction.
+class WorkerDiedError(RuntimeError):
+    """A pool worker ended abruptly (killed, out of memory, or crashed inside PyBullet)."""
+
+
+class SpawnPool:
+    """Spawned worker processes that leave Ctrl-C to the parent, from their first instruction, and
+    whose death is an error rather than a wait.
 
     A Ctrl-C at a terminal reaches the whole process group. Ignoring SIGINT in a pool initializer
     is too late for a worker still importing torch (seconds on a busy machine): it prints a
@@ -86,11 +92,47 @@ def spawn_pool(workers: int, initializer: Callable[..., None], initargs: tuple[A
     so each worker is launched while this process blocks SIGINT. ``initargs`` (a policy's weights)
     follow through a queue: passed at launch, they would keep the launch, and the parent's Ctrl-C,
     waiting until the worker had imported torch.
+
+    Built on ``concurrent.futures.ProcessPoolExecutor`` rather than ``multiprocessing.Pool``: a Pool
+    replaces a worker that died and waits forever for the task it held; the executor raises
+    ``BrokenProcessPool``, turned here into ``WorkerDiedError``. Leaving the ``with`` block on an
+    exception (Ctrl-C included) terminates the workers instead of waiting for their tasks.
     """
-    context = SpawnContextIgnoringCtrlC()
-    handoff = context.Queue()
-    handoff.cancel_join_thread()  # a pool ended before its workers read their copies must not wait at exit
-    pool = Pool(workers, _init_from_queue, (handoff,), context=context)
-    for _ in range(workers):
-        handoff.put((initializer, initargs))
-    return pool
+
+    def __init__(self, workers: int, initializer: Callable[..., None], initargs: tuple[Any, ...]):
+        context = SpawnContextIgnoringCtrlC()
+        handoff = context.Queue()
+        handoff.cancel_join_thread()  # a pool ended before its workers read their copies must not wait
+        self._executor = ProcessPoolExecutor(workers, context, _init_from_queue, (handoff,))
+        for _ in range(workers):
+            handoff.put((initializer, initargs))
+
+    def imap_unordered(self, fn: Callable[[Any], Any], items: Sequence[Any]) -> Iterator[Any]:
+        """``fn(item)`` for every item, in the order they finish; all are submitted at once."""
+        return self._results([self._executor.submit(fn, item) for item in items])
+
+    @staticmethod
+    def _results(futures: list[Any]) -> Iterator[Any]:
+        for future in as_completed(futures):
+            try:
+                yield future.result()
+            except BrokenProcessPool:
+                raise WorkerDiedError(
+                    "a worker process died (killed, out of memory, or crashed in the physics engine)"
+                ) from None
+
+    def __enter__(self) -> SpawnPool:
+        return self
+
+    def __exit__(self, kind: Any, *_: Any) -> None:
+        if kind is None:
+            self._executor.shutdown(wait=True)
+            return
+        # The executor's own shutdown waits for running tasks; Python 3.11 has no public way to
+        # stop them (3.14 adds terminate_workers), so its process table is read directly.
+        processes = list(getattr(self._executor, "_processes", {}).values())
+        self._executor.shutdown(wait=False, cancel_futures=True)
+        for process in processes:
+            process.terminate()
+        for process in processes:
+            process.join(timeout=10)

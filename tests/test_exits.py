@@ -54,6 +54,20 @@ def test_eval_stopped_midway_exits_and_leaves_nothing(
     assert stopped.left() == []
 
 
+def test_eval_whose_worker_is_killed_exits_with_one_line_and_leaves_nothing(tmp_path: Path, script) -> None:
+    run = make_run(tmp_path)
+    hit = script("evaluate", f"ckpt={run}", "episodes=2000", "workers=2", "name=hit", *QUIET_EVAL)
+    workers = wait_for(lambda: w if len(w := in_group(hit.pid, "spawn_main")) == 2 else None, 180, hit)
+    wait_for(lambda: re.search(r"\d+/2000 episodes", hit.output()), 180, hit)  # mid-evaluation
+    os.kill(workers[0], signal.SIGKILL)  # as the out-of-memory killer or a crash in PyBullet would
+    assert hit.wait(timeout=60) == 1, hit.output()[-2000:]
+    out = hit.output()
+    assert "error: a worker process died" in out and "the evaluation was not written" in out
+    assert "Traceback" not in out, out[-3000:]
+    assert not (run / "eval").exists()
+    assert hit.left() == []
+
+
 def _trials(root: Path) -> list[optuna.trial.FrozenTrial]:
     storage = optuna.storages.JournalStorage(
         optuna.storages.journal.JournalFileBackend(str(root / "smoke" / "journal.log"))

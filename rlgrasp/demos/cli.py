@@ -22,6 +22,7 @@ from rlgrasp.envs.factory import env_factory
 from rlgrasp.evaluation.policies import PolicySource
 from rlgrasp.overrides import entry_point, unwritable
 from rlgrasp.train.checkpoint import CheckpointError, load_checkpoint
+from rlgrasp.utils import WorkerDiedError
 
 register_configs()
 log = logging.getLogger("rlgrasp.demos")
@@ -118,6 +119,9 @@ def main(cfg: DictConfig) -> None:
     except DemosInputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         sys.exit(2)
+    except WorkerDiedError as exc:
+        print(f"error: {exc}; nothing was written", file=sys.stderr)
+        sys.exit(1)
 
 
 if __name__ == "__main__":

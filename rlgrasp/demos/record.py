@@ -16,7 +16,7 @@ import torch
 from tensordict import TensorDict
 
 from rlgrasp.evaluation.policies import PolicySource, build_policy
-from rlgrasp.utils import spawn_pool
+from rlgrasp.utils import SpawnPool
 
 _WORKER: dict[str, Any] = {}
 
@@ -82,8 +82,8 @@ def record(
             _WORKER.pop("env").close()
             torch.set_num_threads(threads)
     else:
-        # Ctrl-C is the parent's to handle: spawn_pool starts the workers ignoring SIGINT.
-        with spawn_pool(min(workers, len(chunks)), _init, (source,)) as pool:
+        # Ctrl-C is the parent's to handle: SpawnPool starts the workers with SIGINT blocked.
+        with SpawnPool(min(workers, len(chunks)), _init, (source,)) as pool:
             for chunk_result in pool.imap_unordered(_chunk, chunks):
                 results.extend(chunk_result)
                 if progress:

@@ -38,6 +38,7 @@ from rlgrasp.evaluation.tb_log import log_to_tensorboard
 from rlgrasp.evaluation.teacher import prepare_teacher
 from rlgrasp.evaluation.video import video_format, write_video
 from rlgrasp.overrides import entry_point, unwritable
+from rlgrasp.utils import WorkerDiedError
 
 log = logging.getLogger("rlgrasp.eval")
 
@@ -291,7 +292,8 @@ def _sigterm_as_interrupt() -> Iterator[list[int]]:
 
 def run(cfg: DictConfig) -> float:
     """Evaluate; a bad input exits with code 2 and one clear line (no traceback); Ctrl-C or SIGTERM
-    with 128 + the signal's number and one line, leaving no worker and no partial output behind."""
+    with 128 + the signal's number and one line, a worker that died with 1 and one line, each
+    leaving no worker and no partial output behind."""
     with _sigterm_as_interrupt() as caught:
         try:
             return float(evaluate(cfg)["success_at_end"]["rate"])
@@ -302,6 +304,9 @@ def run(cfg: DictConfig) -> float:
             sig = signal.Signals(caught[0] if caught else signal.SIGINT)
             print(f"error: stopped by {sig.name}; the evaluation was not written", file=sys.stderr)
             sys.exit(128 + sig)
+        except WorkerDiedError as exc:
+            print(f"error: {exc}; the evaluation was not written", file=sys.stderr)
+            sys.exit(1)
 
 
 @entry_point("eval", open_env=True)

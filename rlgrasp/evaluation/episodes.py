@@ -25,7 +25,7 @@ import torch
 from rlgrasp.evaluation.outcomes import SUCCESS, failure_reason
 from rlgrasp.evaluation.policies import Actor, PolicySource, build_policy
 from rlgrasp.evaluation.views import render_frame
-from rlgrasp.utils import spawn_pool
+from rlgrasp.utils import SpawnPool
 
 
 @dataclass
@@ -160,8 +160,8 @@ def run_episodes(
             _close_worker()
             torch.set_num_threads(threads)
     else:
-        # The parent handles Ctrl-C and terminates the pool (spawn_pool starts it ignoring SIGINT).
-        with spawn_pool(workers, _init_worker, (source, deterministic, video_episodes)) as pool:
+        # The parent handles Ctrl-C and terminates the pool (SpawnPool starts it with SIGINT blocked).
+        with SpawnPool(workers, _init_worker, (source, deterministic, video_episodes)) as pool:
             for chunk_result in pool.imap_unordered(_run_chunk, chunks):
                 results.extend(chunk_result)
                 if progress:
