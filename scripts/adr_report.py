@@ -3,10 +3,13 @@
     python scripts/adr_report.py <adr run> <default-trained run> [scripted] \
         [--ranges <adr run>/adr_ranges.yaml] [--episodes 100] [--workers 2] [--out DIR]
 
-Each policy is a run directory (its best checkpoint), a checkpoint file, or ``scripted`` (the
-expert, for scale). ``--ranges`` defaults to the first run's ``adr_ranges.yaml``. Every policy meets
-the same seeded episodes per condition (rlgrasp.evaluation). Prints a markdown table; with ``--out``
-also writes it and ``adr_report.json`` there.
+Each policy is a run directory (its last checkpoint), a checkpoint file, or ``scripted`` (the
+expert, for scale). Not the best checkpoint: an ADR run's periodic evaluation plays its start
+ranges (nominal values), so its "best" is the first policy to lift the cube there, often from
+early in the run, before any range widened. ``--ranges`` defaults to the first run's
+``adr_ranges.yaml``. Every policy meets the same seeded episodes per condition
+(rlgrasp.evaluation). Prints a markdown table; with ``--out`` also writes it and
+``adr_report.json`` there.
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ from rlgrasp.utils import markdown_table  # noqa: E402
 def _source(policy: str, randomization: str) -> Any:
     if policy in ("scripted", "random"):
         return prepare(policy, randomization=randomization)
-    return prepare("checkpoint", policy, "best", randomization)
+    return prepare("checkpoint", policy, "last", randomization)
 
 
 def _conditions(policies: list[str], ranges: str | None) -> dict[str, str]:
