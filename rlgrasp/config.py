@@ -181,6 +181,7 @@ class DistillConfig:
     aux_parts: list[str] = field(default_factory=lambda: ["object_minus_grasp", "grasped"])
     # Training images recoloured per sample (rlgrasp/vision/augment.py): none | colour (RGB only).
     augment: str = "none"
+    augment_grey: float = 0.0  # with augment=colour: the share of training images made grey
     learner_threads: int | None = None  # null: every core (the learner, not the workers, is the bound)
     # The deployed student (what acts, is evaluated and exported) is an exponential moving average of
     # the trained weights with this decay per update; 0: the trained weights themselves.
@@ -572,6 +573,9 @@ def _distill_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
          "must be >= 1 or null"),
         ("algo.aux_coeff", a.aux_coeff, a.aux_coeff >= 0, "must be >= 0 (0: no auxiliary task)"),
         ("algo.augment", a.augment, a.augment in ("none", "colour"), "must be none or colour"),
+        ("algo.augment_grey", a.augment_grey,
+         0 <= a.augment_grey <= 1 and (a.augment_grey == 0 or a.augment == "colour"),
+         "must be in [0, 1], and 0 unless algo.augment=colour"),
         ("algo.ema_decay", a.ema_decay, 0 <= a.ema_decay < 1, "must be in [0, 1) (0: no averaging)"),
     ]
 

@@ -136,6 +136,18 @@ def test_recolouring_permutes_channels_and_scales_brightness():
     assert torch.allclose(dimmer.sum(1), torch.full((50, 4, 4), 155.0))  # half of 310, every image
 
 
+def test_recolouring_greys_the_share_asked_for():
+    rgb = torch.zeros(400, 3, 4, 4, dtype=torch.uint8)
+    rgb[:, 0], rgb[:, 1], rgb[:, 2] = 200, 100, 10
+    out = recolour(rgb, brightness=(1.0, 1.0), contrast=(1.0, 1.0), grey=0.5)
+    greyed = (out[:, 0] == out[:, 1]).all(-1).all(-1) & (out[:, 1] == out[:, 2]).all(-1).all(-1)
+    assert 0.35 < greyed.float().mean() < 0.65  # about half, drawn per image
+    luminance = 0.299 * 200 + 0.587 * 100 + 0.114 * 10
+    assert torch.allclose(out[greyed], torch.full_like(out[greyed], luminance))
+    kept = recolour(rgb, brightness=(1.0, 1.0), contrast=(1.0, 1.0))
+    assert (kept[:, 0] != kept[:, 1]).all()  # grey=0: every image keeps its hue
+
+
 @pytest.mark.parametrize("beta, teacher_share", [(1.0, 1.0), (0.0, 0.0)])
 def test_dagger_policy_labels_every_frame_and_mixes_by_beta(beta, teacher_share):
     student = build_vision_actor(SPEC, MODEL)
@@ -237,6 +249,7 @@ def test_distillation_trains_checkpoints_resumes_and_evaluates(tmp_path, train_c
         ("algo.beta_decay=0", "algo.beta_decay=0.0: must be in (0, 1]"),
         ("algo.beta0=1.5", "algo.beta0=1.5: must be in [0, 1]"),
         ("algo.ema_decay=1", "algo.ema_decay=1.0: must be in [0, 1)"),
+        ("algo.augment_grey=0.5", "algo.augment_grey=0.5: must be in [0, 1], and 0 unless algo.augment"),
         ("cameras=none", "env.camera=null: a camera policy needs a camera"),
         ("env.control_mode=ee_delta", "it reads 49 state values, this env's privileged state has 45"),
     ],

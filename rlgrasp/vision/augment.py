@@ -3,9 +3,12 @@
 Visual randomization varies hues, textures and light within its ranges, and a student learns
 exactly those ranges: one that keys on hue fails on hues it never saw (the held-out visual set's).
 So each RGB image of a minibatch is also recoloured before the student sees it: its channels
-permuted (hue moves by thirds of the circle and swaps), its brightness and contrast scaled. The
-labels stay: the teacher acts on the state, which no colour changes. Applied in the learner only;
-rollouts and evaluation see the camera's own images.
+permuted (hue moves by thirds of the circle and swaps), its brightness and contrast scaled, and,
+with probability ``grey``, its hue dropped altogether (luminance in all three channels): a student
+that must often find the object by brightness and texture alone loses less when object and ground
+share a hue it never saw (the held-out set draws both from one violet-pink range). The labels stay:
+the teacher acts on the state, which no colour changes. Applied in the learner only; rollouts and
+evaluation see the camera's own images.
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from tensordict import TensorDictBase
 
 AUGMENTATIONS = ("none", "colour")
 PERMUTATIONS = torch.tensor([[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]])
+LUMINANCE = torch.tensor([0.299, 0.587, 0.114])  # ITU-R BT.601 weights, as PIL's convert("L")
 
 
 def recolour(
@@ -22,15 +26,19 @@ def recolour(
     generator: torch.Generator | None = None,
     brightness: tuple[float, float] = (0.6, 1.3),
     contrast: tuple[float, float] = (0.7, 1.3),
+    grey: float = 0.0,
 ) -> torch.Tensor:
-    """``[..., 3, H, W]`` uint8 images, each with its channels permuted and its brightness and
-    contrast scaled by factors drawn per image; float out, in 0-255 (the encoder scales either)."""
+    """``[..., 3, H, W]`` uint8 images, each with its channels permuted (or, with probability
+    ``grey``, replaced by its luminance) and its brightness and contrast scaled by factors drawn per
+    image; float out, in 0-255 (the encoder scales either)."""
     shape = rgb.shape
     x = rgb.reshape(-1, 3, shape[-2] * shape[-1]).float()
     n = x.shape[0]
     # Each image's recolouring is affine, x' = s M x + (1 - s) mean(M x), with M a permutation times
     # the brightness gain and s the contrast: one batched product over the pixels does all of it.
     mix = torch.eye(3)[PERMUTATIONS[torch.randint(len(PERMUTATIONS), (n,), generator=generator)]]
+    greyed = torch.rand(n, generator=generator) < grey
+    mix[greyed] = LUMINANCE.expand(3, 3)
     mix *= torch.empty(n, 1, 1).uniform_(*brightness, generator=generator)
     spread = torch.empty(n, 1, 1).uniform_(*contrast, generator=generator)
     mean = torch.bmm(mix, x.mean(-1, keepdim=True)).mean(1, keepdim=True)
@@ -38,8 +46,8 @@ def recolour(
     return x.clamp_(0, 255).reshape(shape)
 
 
-def augment(sample: TensorDictBase, kind: str) -> TensorDictBase:
+def augment(sample: TensorDictBase, kind: str, grey: float = 0.0) -> TensorDictBase:
     """A minibatch with its RGB images recoloured (``kind="colour"``); depth is left as it is."""
     if kind == "colour" and "rgb" in sample.keys():
-        sample["rgb"] = recolour(sample["rgb"])
+        sample["rgb"] = recolour(sample["rgb"], grey=grey)
     return sample
