@@ -15,7 +15,7 @@ from tensordict import TensorDict
 from rlgrasp.compose import compose_config, compose_train
 from rlgrasp.config import MLPConfig, PPOConfig
 from rlgrasp.demos.bc import Imitation, demo_weight, pretrain
-from rlgrasp.demos.cli import record_demos
+from rlgrasp.demos.cli import _objects_line, record_demos
 from rlgrasp.demos.dataset import DemoError, demos_for, layout_of, load_demos, write_demos
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.train.loop import Trainer
@@ -81,6 +81,13 @@ def test_the_file_round_trips_with_its_summary(recorded: Path) -> None:
     assert float(demos.frames["action"].abs().max()) <= 1.0
     # load from the out directory too (the path rlgrasp-demos prints is the demos directory)
     assert load_demos(recorded.parent, _layout()).frames.numel() == n
+
+
+def test_the_console_names_each_object_only_for_a_few() -> None:
+    few = {f"primitives/{k}": {"success": 1, "episodes": 1} for k in ("box", "sphere")}
+    many = {f"random_urdfs/{i:03d}": {"success": 1, "episodes": 1} for i in range(200)}
+    assert "primitives/box" in _objects_line(few, "demos/x")
+    assert _objects_line(many, "demos/x") == "200 objects (success per object: demos/x/summary.json)"
 
 
 def test_returns_are_discounted_within_each_episode(recorded: Path) -> None:

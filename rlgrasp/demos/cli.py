@@ -104,11 +104,18 @@ def record_demos(cfg: DictConfig) -> dict[str, Any]:
             "env": OmegaConf.to_container(cfg.env, resolve=True), "summary": info}
     path = write_demos(Path(cfg.out), to_frames(kept), meta)
     (Path(cfg.out) / "summary.json").write_text(json.dumps(info, indent=1))
-    log.info("success %.3f over %d episodes; kept %d (%d frames); length mean %.1f [%d, %d]; objects %s",
+    log.info("success %.3f over %d episodes; kept %d (%d frames); length mean %.1f [%d, %d]; %s",
              info["success_rate"], info["episodes"], info["kept"], info["frames"], info["mean_length"],
-             info["min_length"], info["max_length"], json.dumps(info["objects"]))
+             info["min_length"], info["max_length"], _objects_line(info["objects"], cfg.out))
     log.info("wrote %s (train with algo.demos=%s)", path, path)
     return info
+
+
+def _objects_line(objects: dict[str, Any], out: str, most: int = 8) -> str:
+    """Success per object on the console, or, for a mesh set's hundreds, where to find it."""
+    if len(objects) <= most:
+        return "objects " + json.dumps(objects)
+    return f"{len(objects)} objects (success per object: {out}/summary.json)"
 
 
 @entry_point("demos")  # objects={paths:[...]} as in training; a refused command line in one line
