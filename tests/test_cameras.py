@@ -8,7 +8,7 @@ from gymnasium.utils.env_checker import check_env
 
 from rlgrasp.envs import GraspEnv
 from rlgrasp.envs.cameras import CameraSpec
-from rlgrasp.envs.visuals import TRAIN_TEXTURES, VISUAL_PRESETS
+from rlgrasp.envs.visuals import GENERATORS, TRAIN_TEXTURES, VISUAL_PRESETS
 
 WRIST_DEPTH = {"mount": "wrist", "modality": "depth"}
 
@@ -120,6 +120,14 @@ def test_visual_randomization_is_recorded_and_varies(cam_env):
 def test_no_visual_randomization_adds_nothing_to_info(cam_env):
     info = cam_env(camera=WRIST_DEPTH, visual="none").reset(seed=0)[1]
     assert not any(k.startswith("visual_") for k in info["randomization"])
+
+
+@pytest.mark.parametrize("kind", sorted(GENERATORS))
+def test_each_texture_generator_draws_a_pattern(kind):
+    masks = [GENERATORS[kind](np.random.default_rng(seed), 64) for seed in range(3)]
+    for mask in masks:
+        assert mask.shape == (64, 64) and 0 <= mask.min() and mask.max() <= 1 and mask.std() > 0.05
+    assert not np.array_equal(masks[0], masks[1])  # the generator's draws shape the pattern
 
 
 def test_heldout_visuals_are_disjoint_from_training():

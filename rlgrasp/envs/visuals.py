@@ -67,6 +67,42 @@ def _gradient(rng, n):
     return (ramp - ramp.min()) / max(np.ptp(ramp), 1e-9)
 
 
+def _dots(rng, n):
+    """A grid of discs, each nudged off its cell's centre."""
+    period = int(rng.choice([8, 16]))
+    i, j = np.indices((n, n))
+    di = (i % period) - period / 2 + rng.uniform(-1, 1)
+    dj = (j % period) - period / 2 + rng.uniform(-1, 1)
+    return (np.hypot(di, dj) < period * rng.uniform(0.2, 0.4)).astype(float)
+
+
+def _waves(rng, n):
+    """Two or three crossing sine waves, thresholded: curved bands and islands."""
+    i, j = np.indices((n, n))
+    field = sum(
+        np.sin((i * math.cos(a) + j * math.sin(a)) * 2 * math.pi / rng.uniform(8, 32) + rng.uniform(0, 6.3))
+        for a in rng.uniform(0, math.pi, int(rng.integers(2, 4)))
+    )
+    return (field > 0).astype(float)
+
+
+def _cells(rng, n):
+    """A patchwork: each pixel takes a shade from its nearest of a dozen random points."""
+    points = rng.uniform(0, n, (12, 2))
+    i, j = np.indices((n, n))
+    nearest = np.argmin(np.hypot(i[..., None] - points[:, 0], j[..., None] - points[:, 1]), axis=-1)
+    return rng.uniform(0, 1, 12)[nearest]
+
+
+def _blobs(rng, n):
+    """Smooth noise (coarse cells bilinearly interpolated), thresholded at its median."""
+    coarse = rng.uniform(0, 1, (5, 5))
+    x = np.linspace(0, 4, n)
+    rows = np.array([np.interp(x, np.arange(5), r) for r in coarse])  # 5 x n
+    field = np.array([np.interp(x, np.arange(5), c) for c in rows.T]).T  # n x n
+    return (field > np.median(field)).astype(float)
+
+
 def _rings(rng, n):
     """Held out: concentric rings around a random centre."""
     ci, cj, period = rng.uniform(0, n), rng.uniform(0, n), rng.uniform(5, 12)
@@ -75,7 +111,8 @@ def _rings(rng, n):
 
 
 GENERATORS: dict[str, Callable[[np.random.Generator, int], np.ndarray]] = {
-    "noise": _noise, "checker": _checker, "stripes": _stripes, "gradient": _gradient, "rings": _rings,
+    "noise": _noise, "checker": _checker, "stripes": _stripes, "gradient": _gradient,
+    "dots": _dots, "waves": _waves, "cells": _cells, "blobs": _blobs, "rings": _rings,
 }
 
 
@@ -112,9 +149,12 @@ class VisualPreset:
     recolour: bool = False  # false: the scene keeps its own colours (preset none)
 
 
-TRAIN_TEXTURES = ("noise", "checker", "stripes", "gradient")
+DEFAULT_TEXTURES = ("noise", "checker", "stripes", "gradient")
+# `wide` draws from twice the generators: a student that has seen many kinds of texture on the ground
+# is less likely to take a new kind (the held-out rings) for an edge of the object.
+TRAIN_TEXTURES = DEFAULT_TEXTURES + ("dots", "waves", "cells", "blobs")
 _DEFAULT = VisualPreset(
-    textures=TRAIN_TEXTURES, texture_prob=0.7, hues=Range(0.0, 0.7),
+    textures=DEFAULT_TEXTURES, texture_prob=0.7, hues=Range(0.0, 0.7),
     light_azimuth=Range(-math.pi, math.pi), light_elevation=Range(0.7, 1.45),
     light_ambient=Range(0.45, 0.75), light_diffuse=Range(0.2, 0.5), light_specular=Range(0.0, 0.1),
     light_warmth=Range(-0.3, 0.3), robot_grey=Range(0.3, 0.9),
