@@ -150,8 +150,9 @@ class VisualPreset:
 
 
 DEFAULT_TEXTURES = ("noise", "checker", "stripes", "gradient")
-# `wide` draws from twice the generators: a student that has seen many kinds of texture on the ground
-# is less likely to take a new kind (the held-out rings) for an edge of the object.
+# `wide` draws from twice the generators, curved and polygonal edges among them, so that the held-out
+# rings are not the only curved edge a student meets (in 15 minutes of RGB distillation it did not
+# yet help: docs/benchmarks/cameras.md).
 TRAIN_TEXTURES = DEFAULT_TEXTURES + ("dots", "waves", "cells", "blobs")
 _DEFAULT = VisualPreset(
     textures=DEFAULT_TEXTURES, texture_prob=0.7, hues=Range(0.0, 0.7),

@@ -4,9 +4,9 @@ Visual randomization varies hues, textures and light within its ranges, and a st
 exactly those ranges: one that keys on hue fails on hues it never saw (the held-out visual set's).
 So each RGB image of a minibatch is also recoloured before the student sees it: its channels
 permuted (hue moves by thirds of the circle and swaps), its brightness and contrast scaled, and,
-with probability ``grey``, its hue dropped altogether (luminance in all three channels): a student
-that must often find the object by brightness and texture alone loses less when object and ground
-share a hue it never saw (the held-out set draws both from one violet-pink range). The labels stay:
+with probability ``grey``, its hue dropped altogether (luminance in all three channels), so that
+the student also finds the object by brightness and texture (tried against the held-out set, which
+draws object and ground from one hue range: no gain; its loss is the rings on the ground). The labels stay:
 the teacher acts on the state, which no colour changes. Applied in the learner only; rollouts and
 evaluation see the camera's own images.
 """
