@@ -22,6 +22,7 @@ from hydra.utils import instantiate
 from omegaconf import MISSING, OmegaConf
 
 from rlgrasp.train.rundir import register_resolvers
+from rlgrasp.vision.augment import AUGMENTATIONS
 
 #: The Hydra config tree (``configs/`` next to the package in a source checkout).
 CONFIG_DIR = os.environ.get("RLGRASP_CONFIG_DIR", str(Path(__file__).resolve().parents[1] / "configs"))
@@ -572,7 +573,7 @@ def _distill_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
         ("algo.learner_threads", a.learner_threads, a.learner_threads is None or a.learner_threads >= 1,
          "must be >= 1 or null"),
         ("algo.aux_coeff", a.aux_coeff, a.aux_coeff >= 0, "must be >= 0 (0: no auxiliary task)"),
-        ("algo.augment", a.augment, a.augment in ("none", "colour"), "must be none or colour"),
+        ("algo.augment", a.augment, a.augment in AUGMENTATIONS, f"must be one of {', '.join(AUGMENTATIONS)}"),
         ("algo.augment_grey", a.augment_grey,
          0 <= a.augment_grey <= 1 and (a.augment_grey == 0 or a.augment == "colour"),
          "must be in [0, 1], and 0 unless algo.augment=colour"),
