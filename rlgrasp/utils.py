@@ -131,8 +131,14 @@ class SpawnPool:
         # The executor's own shutdown waits for running tasks; Python 3.11 has no public way to
         # stop them (3.14 adds terminate_workers), so its process table is read directly.
         processes = list(getattr(self._executor, "_processes", {}).values())
+        manager = getattr(self._executor, "_executor_manager_thread", None)
         self._executor.shutdown(wait=False, cancel_futures=True)
         for process in processes:
             process.terminate()
         for process in processes:
             process.join(timeout=10)
+        # The executor's thread closes its wake-up pipe when it sees the workers gone; if that races
+        # the interpreter's exit hook writing to the pipe, Python prints an OSError traceback.
+        # Waiting for the thread here leaves the pipe closed before the hook runs.
+        if manager is not None:
+            manager.join(timeout=10)
