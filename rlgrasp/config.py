@@ -183,6 +183,7 @@ class DistillConfig:
     # Training images recoloured per sample (rlgrasp/vision/augment.py): none | colour (RGB only).
     augment: str = "none"
     augment_grey: float = 0.0  # with augment=colour: the share of training images made grey
+    augment_shift: int = 0  # each training image moved by up to this many pixels (0: not moved)
     learner_threads: int | None = None  # null: every core (the learner, not the workers, is the bound)
     # The deployed student (what acts, is evaluated and exported) is an exponential moving average of
     # the trained weights with this decay per update; 0: the trained weights themselves.
@@ -577,6 +578,7 @@ def _distill_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
         ("algo.augment_grey", a.augment_grey,
          0 <= a.augment_grey <= 1 and (a.augment_grey == 0 or a.augment == "colour"),
          "must be in [0, 1], and 0 unless algo.augment=colour"),
+        ("algo.augment_shift", a.augment_shift, 0 <= a.augment_shift <= 16, "must be in [0, 16] pixels"),
         ("algo.ema_decay", a.ema_decay, 0 <= a.ema_decay < 1, "must be in [0, 1) (0: no averaging)"),
     ]
 

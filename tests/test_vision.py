@@ -11,7 +11,7 @@ from torchrl.objectives import BCLoss
 
 from rlgrasp.config import ConfigError
 from rlgrasp.train.checkpoint import CheckpointError
-from rlgrasp.vision.augment import recolour
+from rlgrasp.vision.augment import augment, random_shift, recolour
 from rlgrasp.vision.auxiliary import ObjectFromImages
 from rlgrasp.vision.dagger import LABEL_KEY, DAggerPolicy, LabelledFrames, PrivilegedTeacher, load_teacher
 from rlgrasp.vision.models import actor_norm, average_weights, build_vision_actor
@@ -148,6 +148,33 @@ def test_recolouring_greys_the_share_asked_for():
     assert (kept[:, 0] != kept[:, 1]).all()  # grey=0: every image keeps its hue
 
 
+def test_random_shift_moves_each_image_by_whole_pixels_and_repeats_the_border():
+    images = torch.arange(64 * 2 * 8 * 8, dtype=torch.int64).reshape(64, 2, 8, 8) % 251
+    moved = random_shift(images.to(torch.uint8), 2, torch.Generator().manual_seed(0)).long()
+    offsets = set()
+    for before, after in zip(images, moved):
+        # The offset that explains the middle 4x4 pixels must explain the whole image, border included.
+        found = [
+            (dy, dx) for dy in range(-2, 3) for dx in range(-2, 3)
+            if torch.equal(after[:, 2:6, 2:6], before[:, 2 + dy:6 + dy, 2 + dx:6 + dx])
+        ]
+        assert len(found) == 1
+        dy, dx = found[0]
+        rows, cols = (torch.arange(8) + dy).clamp(0, 7), (torch.arange(8) + dx).clamp(0, 7)
+        assert torch.equal(after, before[:, rows][:, :, cols])
+        offsets.add(found[0])
+    assert len(offsets) > 10  # drawn per image, not once per batch
+
+
+def test_augment_shifts_depth_and_rgb_and_recolours_rgb_only():
+    sample = frames(32)
+    depth, rgb = sample["depth"].clone(), sample["rgb"].clone()
+    out = augment(sample, "none", shift=2)
+    assert out["rgb"].dtype == torch.uint8 and not torch.equal(out["rgb"], rgb)
+    assert not torch.equal(out["depth"], depth) and torch.isin(out["depth"], depth).all()
+    assert augment(out.clone(), "none", shift=0)["rgb"].equal(out["rgb"])
+
+
 @pytest.mark.parametrize("beta, teacher_share", [(1.0, 1.0), (0.0, 0.0)])
 def test_dagger_policy_labels_every_frame_and_mixes_by_beta(beta, teacher_share):
     student = build_vision_actor(SPEC, MODEL)
@@ -250,6 +277,7 @@ def test_distillation_trains_checkpoints_resumes_and_evaluates(tmp_path, train_c
         ("algo.beta0=1.5", "algo.beta0=1.5: must be in [0, 1]"),
         ("algo.ema_decay=1", "algo.ema_decay=1.0: must be in [0, 1)"),
         ("algo.augment_grey=0.5", "algo.augment_grey=0.5: must be in [0, 1], and 0 unless algo.augment"),
+        ("algo.augment_shift=-1", "algo.augment_shift=-1: must be in [0, 16] pixels"),
         ("cameras=none", "env.camera=null: a camera policy needs a camera"),
         ("env.control_mode=ee_delta", "it reads 49 state values, this env's privileged state has 45"),
     ],

@@ -9,6 +9,11 @@ the student also finds the object by brightness and texture (tried against the h
 draws object and ground from one hue range: no gain; its loss is the rings on the ground). The labels stay:
 the teacher acts on the state, which no colour changes. Applied in the learner only; rollouts and
 evaluation see the camera's own images.
+
+``shift`` (any image, depth too) moves each training image by up to that many pixels each way, its
+border repeated: the random shift of DrQ (Kostrikov et al. 2020), which keeps an encoder from keying
+on where in the image an edge lies. Hand-written: TorchRL's image transforms crop every image of a
+batch alike, and a shift must be drawn per image.
 """
 
 from __future__ import annotations
@@ -46,8 +51,25 @@ def recolour(
     return x.clamp_(0, 255).reshape(shape)
 
 
-def augment(sample: TensorDictBase, kind: str, grey: float = 0.0) -> TensorDictBase:
-    """A minibatch with its RGB images recoloured (``kind="colour"``); depth is left as it is."""
+def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator | None = None) -> torch.Tensor:
+    """``[N, C, H, W]`` images (any dtype), each moved by whole pixels drawn in [-pad, pad] per axis
+    and per image; the pixels shifted in repeat the border."""
+    n, channels, height, width = images.shape
+    offsets = torch.randint(2 * pad + 1, (2, n), generator=generator) - pad
+    rows = (torch.arange(height) + offsets[0, :, None]).clamp_(0, height - 1)
+    cols = (torch.arange(width) + offsets[1, :, None]).clamp_(0, width - 1)
+    # One gather over flattened pixels: 5 ms for 512 RGB images, a seventh of padding then cropping.
+    source = (rows[:, :, None] * width + cols[:, None, :]).reshape(n, 1, -1).expand(n, channels, -1)
+    return images.reshape(n, channels, -1).gather(2, source).reshape(images.shape)
+
+
+def augment(sample: TensorDictBase, kind: str, grey: float = 0.0, shift: int = 0) -> TensorDictBase:
+    """A minibatch with its images shifted (``shift`` pixels; depth and RGB) and its RGB images
+    recoloured (``kind="colour"``)."""
+    if shift > 0:
+        for key in ("depth", "rgb"):
+            if key in sample.keys():
+                sample[key] = random_shift(sample[key], shift)
     if kind == "colour" and "rgb" in sample.keys():
         sample["rgb"] = recolour(sample["rgb"], grey=grey)
     return sample

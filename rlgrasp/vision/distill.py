@@ -213,7 +213,7 @@ class Distiller:
             group["lr"] = lr
         total, aux_total = 0.0, 0.0
         for _ in range(updates):
-            sample = augment(self.data.sample(), a.augment, a.augment_grey)
+            sample = augment(self.data.sample(), a.augment, a.augment_grey, a.augment_shift)
             sample["action"] = sample[LABEL_KEY]
             with set_exploration_type(ExplorationType.DETERMINISTIC):
                 loss = self.loss(sample)["loss_bc"]
