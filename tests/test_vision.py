@@ -166,7 +166,7 @@ def test_random_shift_moves_each_image_by_whole_pixels_and_repeats_the_border():
     assert len(offsets) > 10  # drawn per image, not once per batch
 
 
-def test_augment_shifts_depth_and_rgb_and_recolours_rgb_only():
+def test_augment_shifts_depth_and_rgb_images():
     sample = frames(32)
     depth, rgb = sample["depth"].clone(), sample["rgb"].clone()
     out = augment(sample, "none", shift=2)
