@@ -52,6 +52,7 @@ def _record(job: tuple[list[str], list[int]]) -> dict[str, torch.Tensor]:
     make_env = env_factory(cfg.env)
     teacher, _ = load_teacher(resolve_teacher(cfg.algo.teacher), vision_spec(make_env), cfg.env)
     env, rng = make_env(), np.random.default_rng(seeds[0])
+    low, high = env.action_space.low, env.action_space.high
     frames: dict[str, list] = {"state": [], IMAGE: [], "label": []}
     for seed in seeds:
         obs, _ = env.reset(seed=int(seed))
@@ -62,7 +63,7 @@ def _record(job: tuple[list[str], list[int]]) -> dict[str, torch.Tensor]:
                 label = teacher(TensorDict({"privileged": privileged}, [1]))["action"][0].numpy()
             for key, value in (("state", obs["state"]), (IMAGE, obs[IMAGE]), ("label", label)):
                 frames[key].append(value)
-            action = np.clip(label + rng.normal(0, noise, label.shape), -1.0, 1.0)  # the action box
+            action = np.clip(label + rng.normal(0, noise, label.shape), low, high)
             obs, _, terminated, truncated, _ = env.step(action.astype(np.float32))
             done = terminated or truncated
     env.close()
@@ -132,7 +133,8 @@ def main() -> None:
     parser.add_argument("--train-episodes", type=int, default=800)
     parser.add_argument("--val-episodes", type=int, default=100)
     parser.add_argument("--seconds", type=float, default=200.0)
-    parser.add_argument("--cache", type=Path, default=Path("outputs/bench_student_offline"))
+    parser.add_argument("--cache", type=Path, default=Path("outputs/bench_student_offline"),
+                        help="recorded frames, reused by set name and episode count (new teacher: delete)")
     parser.add_argument("--variant", action="append", metavar="NAME=[OVERRIDE ...]",
                         help="default: base= and shift=algo.augment_shift=4")
     args = parser.parse_args()
