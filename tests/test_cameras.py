@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
 from rlgrasp.envs import GraspEnv
 from rlgrasp.envs.cameras import CameraSpec
-from rlgrasp.envs.visuals import GENERATORS, TRAIN_TEXTURES, VISUAL_PRESETS
+from rlgrasp.envs.randomization import Range
+from rlgrasp.envs.visuals import GENERATORS, TRAIN_TEXTURES, VISUAL_PRESETS, repaint_patterns
 
 WRIST_DEPTH = {"mount": "wrist", "modality": "depth"}
 
@@ -93,10 +96,11 @@ def test_cameras_and_visuals_leave_the_physics_of_a_seed_alone(cam_env):
     assert np.array_equal(a, b["privileged"])
 
 
-def test_same_seed_same_images_and_visuals(cam_env):
+@pytest.mark.parametrize("visual", ["default", "repaint"])
+def test_same_seed_same_images_and_visuals(cam_env, visual):
     runs = []
     for _ in range(2):
-        env = cam_env(camera={"mount": "wrist", "modality": "rgbd"}, visual="default")
+        env = cam_env(camera={"mount": "wrist", "modality": "rgbd"}, visual=visual)
         obs, info = env.reset(seed=3)
         obs2 = env.step(np.zeros(env.action_dim))[0]
         runs.append((obs, obs2, info["randomization"]))
@@ -132,11 +136,33 @@ def test_each_texture_generator_draws_a_pattern(kind):
 
 def test_heldout_visuals_are_disjoint_from_training():
     held = VISUAL_PRESETS["heldout"]
-    for name in ("default", "wide"):
+    for name in ("default", "wide", "repaint"):
         train = VISUAL_PRESETS[name]
         assert set(train.textures) <= set(TRAIN_TEXTURES) and not set(held.textures) & set(train.textures)
         assert held.hues.low > train.hues.high
         assert held.light_elevation.high < train.light_elevation.low
+
+
+def test_repaint_replaces_the_grounds_pixels_and_nothing_else(cam_env, monkeypatch):
+    quiet = replace(VISUAL_PRESETS["default"], rgb_noise=Range(0.0, 0.0))  # no per-frame noise draws
+    monkeypatch.setitem(VISUAL_PRESETS, "quiet", quiet)
+    monkeypatch.setitem(VISUAL_PRESETS, "quiet_repaint", replace(quiet, ground_repaint=1.0))
+    camera = {"mount": "wrist", "modality": "rgb"}
+    plain, painted = cam_env(camera=camera, visual="quiet"), cam_env(camera=camera, visual="quiet_repaint")
+    seen, repainted = plain.reset(seed=2)[0]["rgb"], painted.reset(seed=2)[0]["rgb"]
+    ground = painted.camera.render(painted.robot.camera_mount())["mask"]
+    assert 0.3 < ground.mean() < 1.0  # the wrist camera sees the ground, and more than the ground
+    assert np.array_equal(seen[:, ~ground], repainted[:, ~ground])
+    assert (seen[:, ground] != repainted[:, ground]).any(axis=0).mean() > 0.5
+    action = np.zeros(painted.action_dim)
+    first, second = painted.step(action)[0]["rgb"], painted.step(action)[0]["rgb"]
+    assert not np.array_equal(first, second)  # a new pattern each frame
+
+
+def test_repaint_patterns_fit_any_image_shape():
+    patterns = repaint_patterns((48, 60), Range(0.0, 0.7), count=9)
+    assert patterns.shape == (9, 3, 48, 60) and patterns.dtype == np.uint8
+    assert all(p.std() > 5 for p in patterns)  # two colours each, not a flat fill
 
 
 def test_depth_is_in_metres_and_sees_the_ground(cam_env):

@@ -179,11 +179,14 @@ def ground_depth(rays: np.ndarray, eye: np.ndarray, target: np.ndarray, up: np.n
 class Camera:
     """Renders one ``CameraSpec`` in one client; ``render`` returns channel-first arrays by key.
     ``ground_height``: a depth-only camera whose scene shows no ground body computes the ground
-    plane at this height itself (``ground_depth``); None: the ground is a body TinyRenderer draws."""
+    plane at this height itself (``ground_depth``); None: the ground is a body TinyRenderer draws.
+    ``masked_body``: a body whose pixels ``render`` also returns, as the boolean ``mask`` (visual
+    randomization repaints the ground's pixels with it)."""
 
     def __init__(self, spec: CameraSpec, client: BulletClient):
         self.spec, self.client = spec, client
         self.ground_height: float | None = None
+        self.masked_body: int | None = None
         self.base_pose = spec.pose()
         self.fov = spec.fov
         self.offset = np.zeros(3)  # per-episode pose jitter (m), in the mount's frame
@@ -243,12 +246,15 @@ class Camera:
         eye, target, up = self.world_pose(mount_pose)
         view = self.client.computeViewMatrix(eye.tolist(), target.tolist(), up.tolist())
         projection = self.client.computeProjectionMatrixFOV(self.fov, s.width / s.height, s.near, s.far)
-        _, _, rgba, depth_buffer, _ = self.client.getCameraImage(
+        masked = self.masked_body is not None
+        _, _, rgba, depth_buffer, segmentation = self.client.getCameraImage(
             s.width, s.height, view, projection,
-            renderer=pybullet.ER_TINY_RENDERER, flags=pybullet.ER_NO_SEGMENTATION_MASK,
+            renderer=pybullet.ER_TINY_RENDERER, flags=0 if masked else pybullet.ER_NO_SEGMENTATION_MASK,
             **self.lighting.keywords(),
         )
         out = {}
+        if masked:  # without the link-index flag, each pixel holds its body's id (-1: no body)
+            out["mask"] = np.asarray(segmentation).reshape(s.height, s.width) == self.masked_body
         if "depth" in s.keys:
             z = np.asarray(depth_buffer, np.float32).reshape(1, s.height, s.width)
             metres = s.far * s.near / (s.far - (s.far - s.near) * z)  # OpenGL depth buffer -> distance

@@ -204,6 +204,8 @@ class GraspEnv(gym.Env):
         see (the robot is already its low-poly model)."""
         if "rgb" in self.camera.spec.keys:
             self.scene.use_compact_ground()
+            if self.visuals.preset.ground_repaint > 0:
+                self.camera.masked_body = self.scene.ground
         else:
             self.scene.hide_ground()
             self.camera.ground_height = 0.0
@@ -270,6 +272,9 @@ class GraspEnv(gym.Env):
             return vector, readings
         mount = self.robot.camera_mount() if self.camera.spec.mount == "wrist" else None
         images = self.camera.render(mount)
+        mask = images.pop("mask", None)
+        if mask is not None:
+            self.visuals.repaint_ground(images, mask, self._visual_rng)
         self.visuals.corrupt(images, self._visual, self._visual_rng)
         images = self.image_history.push(images, first)
         return {"state": self.layout.select(vector, PROPRIOCEPTION), **images, "privileged": vector}, readings

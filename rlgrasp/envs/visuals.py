@@ -124,6 +124,18 @@ def write_tga(path: str, rgb: np.ndarray) -> None:
         f.write(header + np.ascontiguousarray(rgb[:, :, ::-1]).tobytes())
 
 
+def repaint_patterns(shape: tuple[int, int], hues: Range, count: int = 64, seed: int = 0) -> np.ndarray:
+    """``count`` channel-first uint8 images of ``shape``, each from a training generator (never the
+    held-out rings) drawn at the image's own scale, in two colours from ``hues``."""
+    rng = np.random.default_rng(seed)
+    size = -(-max(shape) // 8) * 8  # the noise generator draws 8-pixel cells
+    out = np.empty((count, 3, *shape), np.uint8)
+    for i in range(count):
+        image = _blend(GENERATORS[TRAIN_TEXTURES[i % len(TRAIN_TEXTURES)]](rng, size), _palette(rng, hues))
+        out[i] = (image[: shape[0], : shape[1]] * 255).astype(np.uint8).transpose(2, 0, 1)
+    return out
+
+
 # --- presets ------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class VisualPreset:
@@ -146,6 +158,9 @@ class VisualPreset:
     depth_dropout: Range = Range(0.0, 0.0)  # probability of a missing (0) pixel at a depth edge
     depth_quantum: Range = Range(0.0, 0.0)  # m; 0 = none
     rgb_noise: Range = Range(0.0, 0.0)  # std, in 0-255 units
+    # Per RGB frame, the probability that the ground's pixels are replaced by a pattern drawn in the
+    # image itself (``VisualRandomizer.repaint_ground``): a training aid, not a look of the world.
+    ground_repaint: float = 0.0
     recolour: bool = False  # false: the scene keeps its own colours (preset none)
 
 
@@ -175,6 +190,12 @@ VISUAL_PRESETS: dict[str, VisualPreset] = {
         depth_noise=Range(0.0, 0.008), depth_dropout=Range(0.0, 0.35), depth_quantum=Range(0.0, 0.004),
         rgb_noise=Range(0.0, 8.0), recolour=True,
     ),
+    # `default`, with half the RGB frames' ground replaced by a random pattern at the image's own
+    # scale, a new one each frame: a wrist camera sees one or two cells of a ground texture, so
+    # `default` shows the student few ground edges, and the held-out rings' curved edge misled it.
+    # Repainted grounds put every training generator's edges (curved ones too; never rings) behind
+    # the object, so that the ground's look carries nothing the student could key on.
+    "repaint": replace(_DEFAULT, ground_repaint=0.5),
     # Never seen in training: the rings generator, hues 0.75-0.95 (violet to pink) and a low light;
     # everything else as `default`.
     "heldout": replace(
@@ -219,6 +240,23 @@ class VisualRandomizer:
         self.client = client
         p = self.preset
         self.pool = TexturePool(client, p.textures, p.hues) if p.textures else None
+        self._patterns: np.ndarray | None = None  # the repaint patterns, made at the first image
+
+    def repaint_ground(
+        self, images: dict[str, np.ndarray], mask: np.ndarray, rng: np.random.Generator
+    ) -> None:
+        """With the preset's probability, the RGB image's ground pixels (``mask``) take a pattern from
+        a bank, rolled and flipped at random: a fresh background each frame at the cost of a copy."""
+        if "rgb" not in images or rng.uniform() >= self.preset.ground_repaint:
+            return
+        rgb = images["rgb"]
+        if self._patterns is None or self._patterns.shape[-2:] != rgb.shape[-2:]:
+            self._patterns = repaint_patterns(rgb.shape[-2:], self.preset.hues)
+        pattern = self._patterns[rng.integers(len(self._patterns))]
+        pattern = np.roll(pattern, tuple(rng.integers(0, rgb.shape[-2:])), axis=(1, 2))
+        if rng.uniform() < 0.5:
+            pattern = pattern[:, ::-1]
+        images["rgb"] = np.where(mask, pattern, rgb)
 
     def sample(self, rng: np.random.Generator) -> dict[str, float]:
         """This episode's values (empty for ``none``), in a fixed order: same seed, same draws."""
