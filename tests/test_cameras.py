@@ -136,6 +136,7 @@ def test_each_texture_generator_draws_a_pattern(kind):
 
 def test_heldout_visuals_are_disjoint_from_training():
     held = VISUAL_PRESETS["heldout"]
+    assert not set(held.textures) & set(TRAIN_TEXTURES)  # repaint patterns draw from these
     for name in ("default", "wide", "repaint"):
         train = VISUAL_PRESETS[name]
         assert set(train.textures) <= set(TRAIN_TEXTURES) and not set(held.textures) & set(train.textures)

@@ -194,7 +194,8 @@ VISUAL_PRESETS: dict[str, VisualPreset] = {
     # scale, a new one each frame: a wrist camera sees one or two cells of a ground texture, so
     # `default` shows the student few ground edges, and the held-out rings' curved edge misled it.
     # Repainted grounds put every training generator's edges (curved ones too; never rings) behind
-    # the object, so that the ground's look carries nothing the student could key on.
+    # the object, so that the ground's look carries nothing the student could key on (measured on
+    # the RGB objects student: no gain in success, docs/benchmarks/cameras.md).
     "repaint": replace(_DEFAULT, ground_repaint=0.5),
     # Never seen in training: the rings generator, hues 0.75-0.95 (violet to pink) and a low light;
     # everything else as `default`.
