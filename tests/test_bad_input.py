@@ -211,7 +211,7 @@ EVAL = [
      "video_format=avi: must be auto, gif or mp4"),
     ("an unwritable output directory", ["out_dir={unwritable}"], "cannot write the evaluation to"),
     ("unknown visual option (a typo of heldout)", ["visual=heldoutt"],
-     "visual=heldoutt: no such option; visual is one of default, heldout, none, wide"),
+     "visual=heldoutt: no such option; visual is one of default, heldout, none, repaint, wide"),
     ("unknown cameras option", ["cameras=wrist"],
      "cameras=wrist: no such option; cameras is one of fixed_depth"),
     ("a camera policy in an env without a camera", ["ckpt={student}", "cameras=none"],
