@@ -190,12 +190,20 @@ class DistillConfig:
     ema_decay: float = 0.0
 
 
+POOLINGS = ("flat", "keypoints")  # how a CNN's last feature maps become features (CNNConfig.pooling)
+
+
 @dataclass
 class CNNConfig:
-    """A small CNN per image (8x8/4, 4x4/2, 3x3/1) joined with the normalized state in an MLP."""
+    """A small CNN per image (by default 8x8/4, 4x4/2, 3x3/1) joined with the normalized state in an MLP."""
 
     name: str = "cnn"
     channels: list[int] = field(default_factory=lambda: [16, 32, 32])
+    kernel_sizes: list[int] = field(default_factory=lambda: [8, 4, 3])
+    strides: list[int] = field(default_factory=lambda: [4, 2, 1])
+    # flat: the last feature map flattened into the projection; keypoints: each channel's expected
+    # image position (x, y) under a softmax over its pixels (rlgrasp/vision/models.py, SpatialSoftmax)
+    pooling: str = "flat"
     image_features: int = 256
     hidden_sizes: list[int] = field(default_factory=lambda: [256, 256])
     activation: str = "elu"  # tanh | relu | elu
@@ -521,10 +529,20 @@ def _model_camera_checks(m: Any, camera: Any, algo: str) -> list[tuple[str, Any,
     """A camera env needs a camera policy (model=cnn), a state env a state one (model=mlp); distill
     refuses a camera-less env itself, naming its student."""
     if camera:
-        return [("model", m.name, m.name == "cnn", "must be cnn with a camera (or cameras=none for mlp)")]
+        return [("model", m.name, m.name == "cnn", "must be cnn with a camera (or cameras=none for mlp)"),
+                *(_cnn_checks(m) if m.name == "cnn" else [])]
     if algo == "ppo":
         return [("model", m.name, m.name != "cnn", "needs a camera (e.g. cameras=wrist_depth) or model=mlp")]
     return []
+
+
+def _cnn_checks(m: Any) -> list[tuple[str, Any, bool, str]]:
+    layers = f"needs one entry per layer of model.channels={list(m.channels)}"
+    return [
+        ("model.pooling", m.pooling, m.pooling in POOLINGS, f"must be one of {', '.join(POOLINGS)}"),
+        ("model.kernel_sizes", list(m.kernel_sizes), len(m.kernel_sizes) == len(m.channels), layers),
+        ("model.strides", list(m.strides), len(m.strides) == len(m.channels), layers),
+    ]
 
 
 def _ppo_checks(a: Any, batch: int) -> list[tuple[str, Any, bool, str]]:

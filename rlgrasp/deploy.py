@@ -16,7 +16,7 @@ import torch
 from torch import nn
 
 from rlgrasp.train.checkpoint import policy_from_checkpoint
-from rlgrasp.vision.models import ImageEncoder, image_specs
+from rlgrasp.vision.models import ImageEncoder, SpatialSoftmax, image_specs
 
 
 class DeployPolicy(nn.Module):
@@ -65,8 +65,9 @@ class ImageFeatures(nn.Module):
     def __init__(self, encoder: ImageEncoder) -> None:
         super().__init__()
         self.divisor = 255.0 if encoder.key == "rgb" else float(encoder.far)
-        convs = [m for m in encoder.conv.children() if isinstance(m, (nn.Conv2d, nn.ELU))]
-        self.conv = nn.Sequential(*convs, nn.Flatten(1))
+        layers = (nn.Conv2d, nn.ELU, SpatialSoftmax)
+        convs = [m for m in encoder.conv.children() if isinstance(m, layers)]
+        self.conv = nn.Sequential(*convs, nn.Flatten(1))  # a no-op after the spatial softmax
         self.project = encoder.project
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:

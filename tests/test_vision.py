@@ -14,7 +14,7 @@ from rlgrasp.train.checkpoint import CheckpointError
 from rlgrasp.vision.augment import augment, random_shift, recolour
 from rlgrasp.vision.auxiliary import ObjectFromImages
 from rlgrasp.vision.dagger import LABEL_KEY, DAggerPolicy, LabelledFrames, PrivilegedTeacher, load_teacher
-from rlgrasp.vision.models import actor_norm, average_weights, build_vision_actor
+from rlgrasp.vision.models import SpatialSoftmax, actor_norm, average_weights, build_vision_actor
 
 MODEL = OmegaConf.create(
     dict(
@@ -28,6 +28,8 @@ MODEL = OmegaConf.create(
         obs_clip=10.0,
     )
 )
+# The keypoint encoder; MODEL above, without the keys, is how checkpoints before them read.
+KEYPOINTS = OmegaConf.merge(MODEL, {"strides": [2, 2, 1], "kernel_sizes": [8, 4, 3], "pooling": "keypoints"})
 SPEC = {
     "obs_dim": 5,
     "privileged_dim": 9,
@@ -77,9 +79,10 @@ def test_the_weight_average_moves_a_share_of_the_way_and_copies_the_normalizer()
         assert torch.equal(avg, buf)
 
 
-def test_bc_loss_lowers_on_a_fixed_batch():
+@pytest.mark.parametrize("model", [MODEL, KEYPOINTS], ids=["flat", "keypoints"])
+def test_bc_loss_lowers_on_a_fixed_batch(model):
     torch.manual_seed(0)
-    actor = build_vision_actor(SPEC, MODEL)
+    actor = build_vision_actor(SPEC, model)
     batch = frames(64)
     batch["action"] = torch.rand(64, 3) * 1.6 - 0.8
     loss, optimizer = BCLoss(actor, loss_function="mse"), torch.optim.Adam(actor.parameters(), 1e-3)
@@ -92,6 +95,35 @@ def test_bc_loss_lowers_on_a_fixed_batch():
         optimizer.step()
         values.append(float(value))
     assert values[-1] < 0.5 * values[0]
+
+
+def test_the_spatial_softmax_finds_each_channels_peak():
+    maps = torch.zeros(2, 3, 9, 11)
+    peaks = [[(0, 0), (4, 5), (8, 10)], [(2, 7), (8, 0), (0, 10)]]  # (row, column) per channel
+    for n, channels in enumerate(peaks):
+        for c, (row, col) in enumerate(channels):
+            maps[n, c, row, col] = 50.0
+    points = SpatialSoftmax(9, 11)(maps).reshape(2, 3, 2)
+    expected = torch.tensor([[[col / 5 - 1, row / 4 - 1] for row, col in channels] for channels in peaks])
+    torch.testing.assert_close(points, expected, atol=1e-3, rtol=0)
+
+
+def test_the_keypoint_encoder_has_fewer_weights_and_the_same_interface():
+    flat, keypoints = build_vision_actor(SPEC, MODEL), build_vision_actor(SPEC, KEYPOINTS)
+    assert sum(p.numel() for p in keypoints.parameters()) < sum(p.numel() for p in flat.parameters())
+    out = keypoints(frames(4))
+    assert out["action"].shape == (4, 3) and set(keypoints.in_keys) == set(flat.in_keys)
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [({"pooling": "max"}, "model.pooling='max': must be one of flat, keypoints"),
+     ({"strides": [2, 2]},
+      r"model.strides=\[2, 2\]: needs one entry per layer of model.channels=\[8, 16, 16\]")],
+)
+def test_a_bad_encoder_setting_is_refused_in_one_line(change, message):
+    with pytest.raises(ValueError, match=message):
+        build_vision_actor(SPEC, OmegaConf.merge(KEYPOINTS, change))
 
 
 def test_the_auxiliary_head_learns_the_object_from_the_images_alone():

@@ -45,11 +45,12 @@ MODEL = {
     "obs_norm": True,
     "obs_clip": 10.0,
 }
+KEYPOINTS = {**MODEL, "strides": [2, 2, 1], "pooling": "keypoints"}  # kernel sizes: the default 8, 4, 3
 
 
 def make_student(
     tmp: Path, modality: str = "depth", mount: str = "wrist", visual: str = "default", spread: bool = True,
-    name: str = "student.pt", teacher: str | None = str(TEACHER),
+    name: str = "student.pt", teacher: str | None = str(TEACHER), model: dict | None = None,
 ) -> Path:
     """A camera checkpoint laid out as ``Distiller.save`` writes it. ``spread``: weights that send
     the actions over the whole box (a fresh actor acts near zero, which would hide a wrong squashing
@@ -58,7 +59,8 @@ def make_student(
                "camera": {"mount": mount, "modality": modality}, "visual": visual}
     spec = vision_spec(env_factory(env_cfg))
     torch.manual_seed(0)
-    actor = build_vision_actor(spec, OmegaConf.create(MODEL))
+    model = model or MODEL
+    actor = build_vision_actor(spec, OmegaConf.create(model))
     actor_norm(actor).update(torch.randn(256, spec["obs_dim"]) * 0.5 + 0.1)
     if spread:  # unit-gain layers, the last one 8x: actions at the bounds on some entries
         gen = torch.Generator().manual_seed(1)
@@ -72,7 +74,7 @@ def make_student(
         "kind": "vision",
         "actor": actor.state_dict(),
         "spec": spec,
-        "config": {"env": env_cfg, "model": MODEL, "algo": {"name": "dagger", "teacher": teacher},
+        "config": {"env": env_cfg, "model": model, "algo": {"name": "dagger", "teacher": teacher},
                    "experiment_name": "student", "seed": 0},
         "frames": 1234,
         "last_eval": None,
@@ -260,12 +262,14 @@ def _export_cfg(*overrides: str):
     return compose_config("export", list(overrides))
 
 
-@pytest.mark.parametrize("modality", ["depth", "rgbd"])
-def test_export_a_camera_policy(tmp_path: Path, modality: str) -> None:
+@pytest.mark.parametrize(
+    "modality, model", [("depth", MODEL), ("rgbd", KEYPOINTS)], ids=["depth", "rgbd-keypoints"]
+)
+def test_export_a_camera_policy(tmp_path: Path, modality: str, model: dict) -> None:
     """Every format gives the checkpoint policy's actions on observations recorded from the camera
     env, and the JSON names each input with its shape and dtype (RGB uint8)."""
     pytest.importorskip("onnxruntime")
-    ckpt_path = make_student(tmp_path, modality=modality)
+    ckpt_path = make_student(tmp_path, modality=modality, model=model)
     results = export(_export_cfg(f"ckpt={ckpt_path}", "format=all", "verify_obs=300"))
     shapes = {"observation": ["batch", 29], "depth": ["batch", 1, 64, 64], "rgb": ["batch", 3, 64, 64]}
     dtypes = {"observation": "float32", "depth": "float32", "rgb": "uint8"}

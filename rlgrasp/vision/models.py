@@ -16,25 +16,57 @@ from tensordict.nn import AddStateIndependentNormalScale, InteractionType, Tenso
 from torch import nn
 from torchrl.modules import ConvNet, ProbabilisticActor, TanhNormal
 
+from rlgrasp.config import POOLINGS
 from rlgrasp.train.models import ACTIVATIONS, OBS_KEY, RunningNorm, _bound, _mlp
 
 IMAGE_KEYS = ("depth", "rgb")
+
+
+class SpatialSoftmax(nn.Module):
+    """Feature maps (N, C, H, W) -> (N, 2C): each channel's expected (x, y) in [-1, 1] under a softmax
+    over its pixels (Levine et al. 2016). Where a thing is, to a fraction of a pixel, from few weights:
+    what a grasp needs from an image. Hand-written: TorchRL and torch have no such layer."""
+
+    def __init__(self, height: int, width: int):
+        super().__init__()
+        ys, xs = torch.meshgrid(torch.linspace(-1, 1, height), torch.linspace(-1, 1, width), indexing="ij")
+        self.register_buffer("grid", torch.stack([xs.reshape(-1), ys.reshape(-1)], -1))
+        self.log_temperature = nn.Parameter(torch.zeros(()))  # learned: how sharp each channel's peak is
+
+    def forward(self, maps: torch.Tensor) -> torch.Tensor:
+        weights = torch.softmax(maps.flatten(2) / self.log_temperature.exp(), dim=-1)
+        return (weights @ self.grid).flatten(1)
 
 
 class ImageEncoder(nn.Module):
     """Image -> feature vector. Depth (metres) is scaled by ``far``; RGB arrives as uint8 and becomes
     float here, so batches and replay data keep images in their compact dtype until the network."""
 
-    def __init__(self, key: str, shape: Sequence[int], far: float, channels: Sequence[int], features: int):
+    def __init__(
+        self,
+        key: str,
+        shape: Sequence[int],
+        far: float,
+        channels: Sequence[int],
+        features: int,
+        kernel_sizes: Sequence[int] = (8, 4, 3),
+        strides: Sequence[int] = (4, 2, 1),
+        pooling: str = "flat",
+    ):
         super().__init__()
         self.key, self.far = key, float(far)
         self.conv = ConvNet(
             in_features=shape[0],
             num_cells=list(channels),
-            kernel_sizes=[8, 4, 3],
-            strides=[4, 2, 1],
+            kernel_sizes=list(kernel_sizes),
+            strides=list(strides),
             activation_class=nn.ELU,
         )
+        if pooling == "keypoints":  # ConvNet flattens its output: keep the maps for the softmax
+            self.conv = nn.Sequential(*list(self.conv)[:-1])
+            with torch.no_grad():
+                height, width = self.conv(torch.zeros(1, *shape)).shape[-2:]
+            self.conv.append(SpatialSoftmax(height, width))
         # A one-channel (depth) image goes through channels-last convolutions: on a CPU, PyTorch's
         # default layout took 7x longer for the first layer's weight gradient, and a student's
         # update 2x longer in all. With three channels (RGB) the default layout is the faster one.
@@ -91,8 +123,20 @@ def build_vision_actor(
         raise ValueError(
             f"model.activation={model_cfg.activation!r}: must be one of {', '.join(ACTIVATIONS)}"
         )
+    # Checkpoints written before kernel_sizes, strides and pooling existed hold the flat encoder.
+    conv = dict(
+        kernel_sizes=model_cfg.get("kernel_sizes", (8, 4, 3)),
+        strides=model_cfg.get("strides", (4, 2, 1)),
+        pooling=model_cfg.get("pooling", "flat"),
+    )
+    if conv["pooling"] not in POOLINGS:
+        raise ValueError(f"model.pooling={conv['pooling']!r}: must be one of {', '.join(POOLINGS)}")
+    for key in ("kernel_sizes", "strides"):
+        if len(conv[key]) != len(model_cfg.channels):
+            layers = f"one entry per layer of model.channels={list(model_cfg.channels)}"
+            raise ValueError(f"model.{key}={list(conv[key])}: needs {layers}")
     encoders = {
-        k: ImageEncoder(k, shape, spec.get("far", 1.0), model_cfg.channels, model_cfg.image_features)
+        k: ImageEncoder(k, shape, spec.get("far", 1.0), model_cfg.channels, model_cfg.image_features, **conv)
         for k, shape in images.items()
     }
     norm = RunningNorm(spec["obs_dim"], clip=model_cfg.obs_clip, enabled=model_cfg.obs_norm)
