@@ -30,7 +30,7 @@ def main(argv: list[str] | None = None) -> int:
     refuses, 2 for a bad value; 130 when a signal stopped the sweep)."""
     parser = OneLineParser(
         prog="rlgrasp-sweep",
-        description="Optuna hyperparameter sweep over rlgrasp training configs (docs/SCALING.md).",
+        description="Optuna hyperparameter sweep over rlgrasp training configs (docs/scaling.md).",
     )
     parser.add_argument("overrides", nargs="*", help="sweep=<name>, sweep.<key>=<v>, training key=value")
     parser.add_argument("--summary", action="store_true", help="only write the stored study's summary")
