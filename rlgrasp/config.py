@@ -119,6 +119,13 @@ class PPOConfig:
     bc_lr: float = 1e-3
     bc_minibatch_size: int = 64
     bc_only: bool = False
+    # Fine-tuning (rlgrasp/train/warm_start.py): a fresh run's actor starts from this checkpoint's policy
+    # (a distilled camera student, or any policy of this run's model and env), its std from
+    # model.init_log_std. null: a fresh actor.
+    init_from: str | None = None
+    # The first frames train the critic alone, the actor held still: a fresh critic's first advantages
+    # are noise, and would pull a trained actor away from what it does well.
+    critic_warmup_frames: int = 0
     # Random Network Distillation: rnd_coeff x the intrinsic advantage joins PPO's (0: off).
     rnd_coeff: float = 0.0
     rnd_gamma: float = 0.99  # intrinsic returns are non-episodic
@@ -556,6 +563,8 @@ def _ppo_checks(a: Any, batch: int) -> list[tuple[str, Any, bool, str]]:
         ("algo.max_grad_norm", a.max_grad_norm, a.max_grad_norm > 0, "must be > 0"),
         ("algo.anneal_lr_frames", a.anneal_lr_frames, a.anneal_lr_frames is None or a.anneal_lr_frames > 0,
          "must be > 0 or null (null: total_frames)"),
+        ("algo.critic_warmup_frames", a.critic_warmup_frames, a.critic_warmup_frames >= 0,
+         "must be >= 0 (0: the actor learns from the first update)"),
     ]
 
 

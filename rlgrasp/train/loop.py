@@ -41,6 +41,7 @@ from rlgrasp.train.preemption import StopSignals
 from rlgrasp.train.resume import prepare_run
 from rlgrasp.train.rnd import RND
 from rlgrasp.train.rundir import CHECKPOINTS, ENV_ERRORS
+from rlgrasp.train.warm_start import warm_start
 from rlgrasp.utils import flatten
 
 #: Called after each evaluation with (frames, metrics); see ``train``.
@@ -105,6 +106,8 @@ class Trainer:
         if resumed is not None:
             self.load_state_dict(resumed)
             log.info("resumed from %s at %s frames", cfg.resume, f"{self.frames:,}")
+        elif cfg.algo.get("init_from"):
+            log.info(warm_start(self.actor, cfg.algo.init_from, cfg.env, cfg.model))
 
         # The class logger._target_ names (rlgrasp.train.logger, .trackers), given the run's own arguments.
         self.logger = instantiate(cfg.logger, _partial_=True, _convert_="all")(
@@ -291,6 +294,7 @@ class Trainer:
         t1 = time.perf_counter()
         lr = self.learner.lr_at(self.frames, self.cfg.total_frames)
         self.learner.set_lr(lr)
+        self.learner.actor_frozen = self.frames <= self.cfg.algo.get("critic_warmup_frames", 0)
         losses = self.learner.update(batch, self.updates)
         self.updates += 1
         metrics = {k if "/" in k else f"losses/{k}": v for k, v in losses.items()}

@@ -80,6 +80,8 @@ class PPOLearner:
         self.extras = list(extras)
         self.params = [*self.loss.parameters(), *(p for x in self.extras for p in x.trainable())]
         self.optimizer = torch.optim.Adam(self.params, lr=algo_cfg.lr, eps=algo_cfg.adam_eps)
+        #: The actor's PPO terms are left out of the loss (``algo.critic_warmup_frames``).
+        self.actor_frozen = False
 
     def lr_at(self, frames: int, total_frames: int) -> float:
         """Linear annealing by frames (so a resumed run continues the same schedule), over
@@ -139,7 +141,9 @@ class PPOLearner:
         """One gradient step (PPO's losses and the extras' terms); adds its metrics to ``sums`` and
         returns the minibatch's KL estimate (for the early stop)."""
         losses = self.loss(minibatch)
-        total = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
+        total = losses["loss_critic"]
+        if not self.actor_frozen:
+            total = total + losses["loss_objective"] + losses["loss_entropy"]
         for extra in self.extras:
             term, values = extra.loss(minibatch)
             total = total + term

@@ -1,0 +1,55 @@
+"""PPO fine-tuning from a trained policy (``algo.init_from``, ``rlgrasp.train.warm_start``) and the
+critic's warm-up (``algo.critic_warmup_frames``): the actor starts as the checkpoint's, its std as the
+run's config says, and during the warm-up only the critic learns."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+
+from rlgrasp.train.checkpoint import load_checkpoint
+from rlgrasp.train.loop import Trainer, train
+from rlgrasp.train.warm_start import STD_KEY
+
+SMOKE = ["experiment=smoke", "logger=none"]
+STUDENT = Path(__file__).resolve().parents[1] / "policies" / "grasp_vision_depth.pt"
+
+
+def _params(state: dict[str, torch.Tensor], actor: torch.nn.Module) -> dict[str, torch.Tensor]:
+    """The actor's trained parameters in a state dict (not its normalizer's statistics)."""
+    names = {n for n, _ in actor.named_parameters()}
+    return {k: v for k, v in state.items() if k in names}
+
+
+def test_the_shipped_depth_student_starts_a_camera_ppo_run(tmp_path: Path, train_cfg) -> None:
+    cfg = train_cfg("experiment=grasp_vision_finetune", "logger=none")
+    trainer = Trainer(cfg)  # builds and warm-starts, starts no worker
+    shipped = load_checkpoint(STUDENT)["actor"]
+    here = trainer.actor.state_dict()
+    stds = [k for k in here if k.endswith(STD_KEY)]
+    assert len(stds) == 1
+    for key, value in shipped.items():
+        if key not in stds:
+            assert torch.equal(here[key], value), key
+    fresh = Trainer(train_cfg("experiment=grasp_vision_finetune", "logger=none", "algo.init_from=null"))
+    assert torch.equal(here[stds[0]], fresh.actor.state_dict()[stds[0]])  # the run's init_log_std
+    assert not torch.equal(here[stds[0]], shipped[stds[0]])  # not the student's
+    first_layer = "module.0.module.mlp.0.weight"
+    assert not torch.equal(fresh.actor.state_dict()[first_layer], shipped[first_layer])  # a real load
+
+
+def test_during_the_critic_warm_up_only_the_critic_learns(tmp_path: Path, train_cfg) -> None:
+    start = tmp_path / "start"
+    Trainer(train_cfg(*SMOKE, run_dir=start)).save()
+    before = load_checkpoint(start)
+    run = tmp_path / "warm"
+    train(train_cfg(*SMOKE, f"algo.init_from={start}", "algo.critic_warmup_frames=2048", run_dir=run))
+    after = load_checkpoint(run)
+    actor = Trainer(train_cfg(*SMOKE, run_dir=tmp_path / "probe")).actor
+    assert _params(after["actor"], actor).keys() == _params(before["actor"], actor).keys() != set()
+    for key, value in _params(before["actor"], actor).items():
+        assert torch.equal(after["actor"][key], value), f"{key} moved during the warm-up"
+    critic = before["critic"]
+    moved = [k for k, v in critic.items() if v.is_floating_point() and not torch.equal(after["critic"][k], v)]
+    assert any(k.endswith("weight") for k in moved), "the critic did not learn"
