@@ -28,8 +28,9 @@ from torchrl.envs import ExplorationType, set_exploration_type
 from rlgrasp.compose import compose_train
 from rlgrasp.demos.bc import mse_bc_loss
 from rlgrasp.envs.factory import env_factory
+from rlgrasp.train.checkpoint import resolve_policy_path
 from rlgrasp.vision.augment import augment
-from rlgrasp.vision.dagger import load_teacher, resolve_teacher
+from rlgrasp.vision.dagger import load_teacher
 from rlgrasp.vision.models import actor_norm, build_vision_actor
 from rlgrasp.vision.spec import vision_spec
 
@@ -52,7 +53,7 @@ def _record(job: tuple[list[str], list[int]]) -> dict[str, torch.Tensor]:
     torch.set_num_threads(1)
     cfg = compose_train([*BASE, *overrides])
     make_env = env_factory(cfg.env)
-    teacher, _ = load_teacher(resolve_teacher(cfg.algo.teacher), vision_spec(make_env), cfg.env)
+    teacher, _ = load_teacher(resolve_policy_path(cfg.algo.teacher), vision_spec(make_env), cfg.env)
     env, rng = make_env(), np.random.default_rng(seeds[0])
     low, high = env.action_space.low, env.action_space.high
     frames: dict[str, list] = {"state": [], IMAGE: [], "label": []}

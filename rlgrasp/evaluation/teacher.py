@@ -22,7 +22,7 @@ from rlgrasp.evaluation.source import (
     load_checked_checkpoint,
     resolve_checkpoint_path,
 )
-from rlgrasp.vision.dagger import resolve_teacher
+from rlgrasp.train.checkpoint import resolve_policy_path
 from rlgrasp.vision.models import image_specs
 
 #: Env keys a teacher must share with the student's env beyond the layout (same sizes, other meaning).
@@ -38,7 +38,7 @@ def teacher_path(value: str, source: PolicySource) -> Path | None:
         recorded = (source.info or {}).get("teacher") if is_student else None
         if not recorded:
             return None
-        recorded = resolve_teacher(str(recorded))
+        recorded = resolve_policy_path(str(recorded))
         if not Path(recorded).expanduser().exists():
             raise EvaluationError(
                 f"teacher=auto: the checkpoint's teacher {recorded} does not exist here; "
@@ -52,7 +52,7 @@ def teacher_path(value: str, source: PolicySource) -> Path | None:
             "use teacher=none"
         )
     try:  # a run directory: its last.pt, the checkpoint distillation loads from one
-        return resolve_checkpoint_path(resolve_teacher(value), "last")
+        return resolve_checkpoint_path(resolve_policy_path(value), "last")
     except EvaluationError as exc:
         raise EvaluationError(f"teacher={value}: {exc}") from exc
 

@@ -43,6 +43,7 @@ import torch
 from omegaconf import OmegaConf
 from tensordict.nn import TensorDictModuleBase
 
+from rlgrasp.config import CONFIG_DIR
 from rlgrasp.train.legacy import upgrade_config
 from rlgrasp.train.models import OBS_KEY, RunningNorm, build_actor
 from rlgrasp.train.rundir import CHECKPOINTS
@@ -133,6 +134,17 @@ def newest_readable(
             log.warning("resuming from %s instead (the newer file(s) could not be loaded)", path)
         return path, state
     raise CheckpointError(f"no readable checkpoint in {ckpt_dir}: " + "; ".join(errors))
+
+
+def resolve_policy_path(path: str) -> str:
+    """A checkpoint path as given, or, when relative and not found from the working directory, from
+    the repository root: the experiments name the shipped policies ``policies/<name>.pt``."""
+    candidate = Path(path).expanduser()
+    if not candidate.is_absolute() and not candidate.exists():
+        from_root = Path(CONFIG_DIR).parent / candidate
+        if from_root.exists():
+            return str(from_root)
+    return str(candidate)
 
 
 def load_checkpoint(path: str | os.PathLike, map_location: str | torch.device = "cpu") -> dict[str, Any]:

@@ -17,8 +17,7 @@ from omegaconf import DictConfig, ListConfig, OmegaConf
 from torch import nn
 
 from rlgrasp.envs.robot import robot_label
-from rlgrasp.train.checkpoint import CheckpointError, load_checkpoint
-from rlgrasp.vision.dagger import resolve_teacher
+from rlgrasp.train.checkpoint import CheckpointError, load_checkpoint, resolve_policy_path
 
 STD_KEY = "scale.state_independent_scale"  # the actor's state-independent std (TorchRL's module)
 
@@ -29,14 +28,16 @@ def warm_start(actor: nn.Module, path: str, env_cfg: Any, model_cfg: Any) -> str
     when the policy was trained for another arm, control mode or camera, or with another model."""
     where = f"algo.init_from={path}"
     try:
-        ckpt = load_checkpoint(resolve_teacher(path))
+        ckpt = load_checkpoint(resolve_policy_path(path))
     except CheckpointError as exc:
         raise CheckpointError(f"{where}: {exc}") from exc
     trained_env, trained_model = ckpt["config"]["env"], ckpt["config"]["model"]
     trained, here = robot_label(trained_env.get("robot", "panda")), robot_label(env_cfg.get("robot", "panda"))
     if trained != here:
         raise CheckpointError(f"{where}: its policy drives the robot {trained!r}, this env has {here!r}")
-    for key, theirs, ours in _env_differences(trained_env, _plain(env_cfg)):
+    differences = _env_differences(trained_env, _plain(env_cfg))
+    if differences:
+        key, theirs, ours = differences[0]
         raise CheckpointError(
             f"{where}: env.{key}={theirs!r} in the checkpoint, {ours!r} here (fine-tune in the env it was "
             "trained in)"

@@ -4,7 +4,6 @@ student acts, the teacher always labels), and the aggregated dataset of labelled
 from __future__ import annotations
 
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 import torch
@@ -14,24 +13,12 @@ from torchrl.data import LazyTensorStorage, ReplayBuffer
 from torchrl.data.replay_buffers import RandomSampler
 from torchrl.envs import ExplorationType, set_exploration_type
 
-from rlgrasp.config import CONFIG_DIR
 from rlgrasp.envs.robot import robot_label
 from rlgrasp.train.checkpoint import CheckpointError, load_checkpoint, policy_from_checkpoint
 from rlgrasp.train.models import OBS_KEY
 from rlgrasp.vision.spec import PRIVILEGED_KEY
 
 LABEL_KEY = "teacher_action"
-
-
-def resolve_teacher(path: str) -> str:
-    """A teacher path as given, or, when relative and not found from the working directory, from the
-    repository root: the experiments name the shipped policies ``policies/<name>.pt``."""
-    candidate = Path(path).expanduser()
-    if not candidate.is_absolute() and not candidate.exists():
-        from_root = Path(CONFIG_DIR).parent / candidate
-        if from_root.exists():
-            return str(from_root)
-    return str(candidate)
 
 
 class PrivilegedTeacher(TensorDictModuleBase):

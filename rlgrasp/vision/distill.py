@@ -43,7 +43,7 @@ from rlgrasp.train.preemption import StopSignals
 from rlgrasp.train.resume import prepare_run
 from rlgrasp.vision.augment import augment
 from rlgrasp.vision.auxiliary import ObjectFromImages
-from rlgrasp.vision.dagger import LABEL_KEY, DAggerPolicy, LabelledFrames, load_teacher, resolve_teacher
+from rlgrasp.vision.dagger import LABEL_KEY, DAggerPolicy, LabelledFrames, load_teacher
 from rlgrasp.vision.models import actor_norm, average_weights, build_vision_actor
 from rlgrasp.vision.spec import PRIVILEGED_KEY, vision_spec
 
@@ -64,7 +64,7 @@ class Distiller:
         seed_everything(cfg.seed)
         self.make_env = env_factory(cfg.env)
         self.spec = vision_spec(self.make_env)
-        self.teacher, _ = load_teacher(resolve_teacher(a.teacher), self.spec, cfg.env)
+        self.teacher, _ = load_teacher(ckpt_lib.resolve_policy_path(a.teacher), self.spec, cfg.env)
         self.student = build_vision_actor(self.spec, cfg.model)
         # What acts, is evaluated and is exported: the student's weights averaged over its recent
         # updates (algo.ema_decay; 0: the student itself).
