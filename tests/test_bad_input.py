@@ -4,7 +4,8 @@ The cases run the real entry points (Hydra and argparse included) in-process: sc
 scripts/evaluate.py (rlgrasp-eval), scripts/export.py, scripts/enjoy.py (without a display: the
 checks come before the display's), scripts/sweep.py, scripts/demos.py (rlgrasp-demos) and rlgrasp-demo.
 
-``python tests/test_bad_input.py`` prints the bad-input table of the docs from these cases.
+``python -m tests.test_bad_input`` (from the repository root) prints the bad-input table of the docs
+from these cases.
 """
 
 from __future__ import annotations
