@@ -30,8 +30,9 @@ TENSORBOARD = "tensorboard"
 ENV_ERRORS = "env_errors"
 TEXT_LOG = "train.log"
 
-#: Run directories this process chose that did not exist before (safe to remove on a start-up error).
-FRESH_RUN_DIRS: set[str] = set()
+#: Run directories this process chose that did not exist before (safe to remove on a start-up error),
+#: each with the outermost of its parents that did not exist either (a new experiment's folder).
+FRESH_RUN_DIRS: dict[str, Path] = {}
 _RUN_TOKEN = secrets.token_hex(3)  # one per process: every resolution of hydra.run.dir agrees
 #: ``hydra.output_subdir`` per run directory, chosen once per Hydra run (Hydra resolves it more than
 #: once, the last time after writing into it); ``RunDirCheck.on_run_start`` forgets earlier runs'.
@@ -55,8 +56,12 @@ def run_dir(resume: str | None, base: str, seed: int) -> str:
             chosen = str(path.parents[1])
     if chosen is None:
         chosen = f"{base}/{time.strftime('%Y-%m-%d_%H-%M-%S')}_s{seed}_{_RUN_TOKEN}"
-    if not Path(chosen).exists():
-        FRESH_RUN_DIRS.add(str(Path(chosen).resolve()))
+    path = Path(chosen).resolve()
+    if not path.exists():
+        outermost = path
+        while not outermost.parent.exists():
+            outermost = outermost.parent
+        FRESH_RUN_DIRS[str(path)] = outermost
     return chosen
 
 
@@ -89,14 +94,27 @@ def remove_refused_start(path: Path) -> None:
     Hydra's files and the log; in an existing run, the ``.hydra/resume_<n>`` Hydra just wrote."""
     if not path.is_dir():
         return
-    if str(path.resolve()) in FRESH_RUN_DIRS:
+    key = str(path.resolve())
+    if key in FRESH_RUN_DIRS:
         if {p.name for p in path.iterdir()} <= {".hydra", TEXT_LOG}:
             logging.shutdown()  # closes train.log before its directory goes
             shutil.rmtree(path, ignore_errors=True)
+            _remove_empty_parents(Path(key), FRESH_RUN_DIRS[key])
         return
     subdir = HydraConfig.get().output_subdir if HydraConfig.initialized() else None
     if subdir and subdir.startswith(".hydra/resume_"):
         shutil.rmtree(path / subdir, ignore_errors=True)
+
+
+def _remove_empty_parents(run: Path, outermost: Path) -> None:
+    """The folders this process created above a removed run directory, while they are empty."""
+    folder = run.parent
+    while outermost != run and (folder == outermost or outermost in folder.parents):
+        try:
+            folder.rmdir()  # only an empty folder: a run started beside it in the meantime stays
+        except OSError:
+            return
+        folder = folder.parent
 
 
 class RunDirCheck(Callback):
