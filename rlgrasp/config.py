@@ -126,6 +126,12 @@ class PPOConfig:
     # The first frames train the critic alone, the actor held still: a fresh critic's first advantages
     # are noise, and would pull a trained actor away from what it does well.
     critic_warmup_frames: int = 0
+    # A camera run's state teacher (a checkpoint or run; rlgrasp/vision/teacher_term.py): each minibatch's
+    # loss gains teacher_coeff * teacher_decay**k x the squared error between the actor's action and
+    # the teacher's on the same states (their privileged entry) at update k. null: none.
+    teacher: str | None = None
+    teacher_coeff: float = 1.0
+    teacher_decay: float = 1.0
     # Random Network Distillation: rnd_coeff x the intrinsic advantage joins PPO's (0: off).
     rnd_coeff: float = 0.0
     rnd_gamma: float = 0.99  # intrinsic returns are non-episodic
@@ -512,7 +518,7 @@ def _train_problems(cfg: Any, batch: int) -> list[str]:
         ("collector.torch_threads", c.torch_threads, c.torch_threads >= 1, "must be >= 1"),
         ("algo.epochs", a.epochs, a.epochs >= 1, "must be >= 1"),
         ("algo.lr", a.lr, a.lr > 0, "must be > 0"),
-        *(_ppo_checks(a, batch) + _sparse_checks(a, cfg.env.get("camera")) if a.name == "ppo"
+        *(_ppo_checks(a, batch) + _extra_term_checks(a, cfg.env.get("camera")) if a.name == "ppo"
           else _distill_checks(a)),
         ("model.hidden_sizes", list(m.hidden_sizes), len(m.hidden_sizes) > 0 and all(
             _positive(h) for h in m.hidden_sizes), "must be a non-empty list of positive sizes"),
@@ -565,11 +571,14 @@ def _ppo_checks(a: Any, batch: int) -> list[tuple[str, Any, bool, str]]:
          "must be > 0 or null (null: total_frames)"),
         ("algo.critic_warmup_frames", a.critic_warmup_frames, a.critic_warmup_frames >= 0,
          "must be >= 0 (0: the actor learns from the first update)"),
+        ("algo.teacher_coeff", a.teacher_coeff, a.teacher_coeff >= 0, "must be >= 0 (0: no imitation term)"),
+        ("algo.teacher_decay", a.teacher_decay, 0 < a.teacher_decay <= 1, "must be in (0, 1]"),
     ]
 
 
-def _sparse_checks(a: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
-    """Demonstrations and curiosity (``rlgrasp.demos``, ``rlgrasp.train.rnd``): state policies only."""
+def _extra_term_checks(a: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
+    """The PPO update's auxiliary terms: demonstrations and curiosity (``rlgrasp.demos``,
+    ``rlgrasp.train.rnd``) for state policies only, a teacher for camera policies only."""
     state = not camera
     return [
         ("algo.demo_coeff", a.demo_coeff, a.demo_coeff >= 0, "must be >= 0 (0: no imitation term)"),
@@ -581,6 +590,8 @@ def _sparse_checks(a: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
         ("algo.bc_epochs", a.bc_epochs, not a.bc_epochs or a.demos, "needs algo.demos=<demonstrations>"),
         ("algo.bc_only", a.bc_only, not a.bc_only or a.bc_epochs > 0, "needs algo.bc_epochs > 0"),
         ("algo.demos", a.demos, not a.demos or state, "needs a state policy (cameras=none)"),
+        ("algo.teacher", a.teacher, not a.teacher or not state,
+         "labels a camera run's privileged state: needs a camera (e.g. cameras=wrist_depth)"),
         ("algo.rnd_coeff", a.rnd_coeff, a.rnd_coeff >= 0, "must be >= 0 (0: no curiosity)"),
         ("algo.rnd_coeff", a.rnd_coeff, not a.rnd_coeff or state, "needs a state policy (cameras=none)"),
         ("algo.rnd_gamma", a.rnd_gamma, 0 < a.rnd_gamma <= 1, "must be in (0, 1]"),

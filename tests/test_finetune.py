@@ -1,16 +1,20 @@
-"""PPO fine-tuning from a trained policy (``algo.init_from``, ``rlgrasp.train.warm_start``) and the
-critic's warm-up (``algo.critic_warmup_frames``): the actor starts as the checkpoint's, its std as the
-run's config says, and during the warm-up only the critic learns."""
+"""PPO fine-tuning from a trained policy (``algo.init_from``, ``rlgrasp.train.warm_start``), the
+critic's warm-up (``algo.critic_warmup_frames``) and the teacher's term (``algo.teacher``): the actor
+starts as the checkpoint's, its std as the run's config says, during the warm-up only the critic
+learns, and the teacher's term pulls the actor towards the teacher."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import torch
+from tensordict import TensorDict
+from torchrl.envs import ExplorationType, set_exploration_type
 
 from rlgrasp.train.checkpoint import load_checkpoint
 from rlgrasp.train.loop import Trainer, train
 from rlgrasp.train.warm_start import STD_KEY
+from rlgrasp.vision.teacher_term import TeacherImitation
 
 SMOKE = ["experiment=smoke", "logger=none"]
 STUDENT = Path(__file__).resolve().parents[1] / "policies" / "grasp_vision_depth.pt"
@@ -53,3 +57,36 @@ def test_during_the_critic_warm_up_only_the_critic_learns(tmp_path: Path, train_
     critic = before["critic"]
     moved = [k for k, v in critic.items() if v.is_floating_point() and not torch.equal(after["critic"][k], v)]
     assert any(k.endswith("weight") for k in moved), "the critic did not learn"
+
+
+TEACHER = Path(__file__).resolve().parents[1] / "policies" / "grasp_ppo.pt"
+
+
+def test_the_teacher_term_pulls_the_student_towards_its_teacher(train_cfg) -> None:
+    """``algo.teacher``: each minibatch's loss gains the squared error to the teacher's action on the
+    minibatch's privileged state, weighted coeff * decay**k; its gradient moves the actor alone."""
+    cfg = train_cfg("experiment=grasp_vision_finetune", "logger=none", f"algo.teacher={TEACHER}",
+                    "algo.teacher_coeff=2.0", "algo.teacher_decay=0.5")
+    trainer = Trainer(cfg)  # starts no worker
+    (term,) = [x for x in trainer.learner.extras if isinstance(x, TeacherImitation)]
+    assert term.start(TensorDict(), updates=3) == {"charts/teacher_weight": 2.0 * 0.5**3}
+    spec, g = trainer.parts.spec, torch.Generator().manual_seed(0)
+    minibatch = TensorDict({
+        "observation": torch.randn(64, spec["obs_dim"], generator=g),
+        "depth": torch.rand(64, 1, 64, 64, generator=g),
+        "privileged": torch.randn(64, spec["privileged_dim"], generator=g),
+    }, [64])
+    teacher_before = {k: v.clone() for k, v in term.teacher.state_dict().items()}
+    loss, logged = term.loss(minibatch)
+    with set_exploration_type(ExplorationType.DETERMINISTIC):
+        student = trainer.actor(minibatch.clone())["action"]
+    label = term.teacher(minibatch.clone())["action"]
+    assert torch.allclose(loss, 0.25 * ((student - label) ** 2).mean(), rtol=1e-4)
+    assert logged["teacher_mse"] > 0
+    optimizer = torch.optim.Adam(trainer.actor.parameters(), lr=1e-3)
+    for _ in range(20):
+        optimizer.zero_grad()
+        term.loss(minibatch)[0].backward()
+        optimizer.step()
+    assert term.loss(minibatch)[1]["teacher_mse"] < 0.5 * logged["teacher_mse"]
+    assert all(torch.equal(v, teacher_before[k]) for k, v in term.teacher.state_dict().items())

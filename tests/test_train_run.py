@@ -201,7 +201,8 @@ algo: {name: ppo, gamma: 0.9, gae_lambda: 0.9, epochs: 2, minibatch_size: 256, l
        normalize_advantage: true, max_grad_norm: 0.5, target_kl: 0.05, adam_eps: 1.0e-05,
        gae_every_epoch: true, demos: null, demo_coeff: 0.1, demo_decay: 0.95, demo_minibatch_size: 256,
        bc_epochs: 0, bc_lr: 0.001, bc_minibatch_size: 64, bc_only: false, init_from: null,
-       critic_warmup_frames: 0, rnd_coeff: 0.0, rnd_gamma: 0.99,
+       critic_warmup_frames: 0, teacher: null, teacher_coeff: 1.0, teacher_decay: 1.0, rnd_coeff: 0.0,
+       rnd_gamma: 0.99,
        rnd_features: 64, rnd_update_fraction: 0.25}
 model: {name: mlp, hidden_sizes: [64, 64], activation: tanh, init_log_std: -0.5, min_std: 0.05,
         obs_norm: true, obs_clip: 10.0}

@@ -43,6 +43,8 @@ from rlgrasp.train.rnd import RND
 from rlgrasp.train.rundir import CHECKPOINTS, ENV_ERRORS
 from rlgrasp.train.warm_start import warm_start
 from rlgrasp.utils import flatten
+from rlgrasp.vision.dagger import load_teacher
+from rlgrasp.vision.teacher_term import TeacherImitation
 
 #: Called after each evaluation with (frames, metrics); see ``train``.
 EvalCallback = Callable[[int, dict[str, float]], None]
@@ -121,11 +123,16 @@ class Trainer:
 
     def _extras(self) -> list[Any]:
         """The PPO update's auxiliary terms: DAPG's imitation of ``algo.demos`` (the file is read,
-        and refused, here: before any worker) and RND's curiosity (``algo.rnd_coeff`` > 0)."""
+        and refused, here: before any worker), a camera student's imitation of ``algo.teacher`` and
+        RND's curiosity (``algo.rnd_coeff`` > 0)."""
         a, extras = self.cfg.algo, []
         self.demos = demos_for(a.demos, self.parts.make_env, self.cfg.env) if a.get("demos") else None
         if self.demos is not None and a.demo_coeff > 0:
             extras.append(Imitation(self.actor, self.demos, a, self.device))
+        if a.get("teacher"):
+            path = ckpt_lib.resolve_policy_path(a.teacher)
+            teacher, _ = load_teacher(path, self.parts.spec, self.cfg.env)
+            extras.append(TeacherImitation(self.actor, teacher.to(self.device), a))
         self.rnd = None
         if a.get("rnd_coeff"):
             self.rnd = RND(self.parts.spec["obs_dim"], self.parts.norm, a).to(self.device)

@@ -1,0 +1,58 @@
+"""The teacher's imitation term inside PPO: fine-tuning a camera student without forgetting.
+
+PPO fine-tuning of a distilled student (``algo.init_from``) starts with a fresh critic, and its first
+advantages pull the student away from what it learned by imitation faster than reward teaches it
+anything (docs/benchmarks/cameras.md). With ``algo.teacher`` set, the state teacher labels every PPO
+minibatch's states (it reads their ``privileged`` entry, recorded for the critic anyway), and the
+loss gains ``teacher_coeff * teacher_decay**k`` x the squared error between the student's
+deterministic action and the teacher's at update ``k``: DAgger goes on under PPO's updates, the
+anchor of DAPG (``rlgrasp.demos.bc``) with a teacher that labels any state instead of a fixed set of
+demonstrations.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import torch
+from tensordict import TensorDictBase
+from torch import nn
+from torchrl.envs import ExplorationType, set_exploration_type
+
+from rlgrasp.demos.bc import mse_bc_loss
+from rlgrasp.vision.dagger import PrivilegedTeacher
+from rlgrasp.vision.spec import PRIVILEGED_KEY
+
+
+def teacher_weight(algo: Any, updates: int) -> float:
+    """``teacher_coeff * teacher_decay ** k``."""
+    return float(algo.teacher_coeff * algo.teacher_decay**updates)
+
+
+class TeacherImitation:
+    """An auxiliary term for ``PPOLearner``: the student's action regressed onto its teacher's on the
+    PPO minibatch itself (the states the student visits now)."""
+
+    def __init__(self, actor: nn.Module, teacher: PrivilegedTeacher, algo: Any):
+        self.actor_keys = list(actor.in_keys)
+        self.teacher = teacher
+        self.loss_fn = mse_bc_loss(actor)
+        self.algo = algo
+        self.weight = teacher_weight(algo, 0)
+
+    def trainable(self) -> list[nn.Parameter]:
+        return []  # the actor's, which the PPO optimizer already holds; the teacher stays as it is
+
+    def start(self, batch: TensorDictBase, updates: int) -> dict[str, float]:
+        self.weight = teacher_weight(self.algo, updates)
+        return {"charts/teacher_weight": self.weight}
+
+    def after_gae(self, batch: TensorDictBase) -> None:
+        pass
+
+    def loss(self, minibatch: TensorDictBase) -> tuple[torch.Tensor, dict[str, float]]:
+        labelled = minibatch.select(*self.actor_keys, PRIVILEGED_KEY)
+        self.teacher(labelled)  # writes the teacher's "action" (no gradient)
+        with set_exploration_type(ExplorationType.DETERMINISTIC):
+            mse = self.loss_fn(labelled)["loss_bc"]
+        return self.weight * mse, {"teacher_mse": float(mse.detach())}
