@@ -24,7 +24,7 @@ from rlgrasp.evaluation.source import EvaluationError, load_checked_checkpoint
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.loop import Trainer
 from rlgrasp.train.resume import command_line_keys, merged_config, prepare_run
-from rlgrasp.train.rundir import run_dir
+from rlgrasp.train.rundir import remove_refused_start, run_dir
 from tests.procs import wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -181,6 +181,16 @@ def test_run_dirs_are_unique_per_process_and_name_the_seed(tmp_path: Path) -> No
                             check=True).stdout.strip() for _ in range(2)}
     assert len(names) == 2
     assert all(n.startswith("base/") and "_s7_" in n for n in names)
+
+
+def test_a_refused_start_removes_the_folders_it_created_and_nothing_else(tmp_path: Path) -> None:
+    (tmp_path / "outputs" / "train" / "other").mkdir(parents=True)  # another experiment's runs
+    for base, gone, kept in (("outputs/train/new", "outputs/train/new", "outputs/train/other"),
+                             ("fresh/train/new", "fresh", "outputs")):
+        chosen = Path(run_dir(None, str(tmp_path / base), 0))
+        (chosen / ".hydra").mkdir(parents=True)  # what Hydra writes before the start is refused
+        remove_refused_start(chosen)
+        assert not (tmp_path / gone).exists() and (tmp_path / kept).is_dir()
 
 
 def test_resume_auto_picks_the_newest_run_of_the_seed(tmp_path: Path, run: Path) -> None:
