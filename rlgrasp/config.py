@@ -128,7 +128,8 @@ class PPOConfig:
     critic_warmup_frames: int = 0
     # A camera run's state teacher (a checkpoint or run; rlgrasp/vision/teacher_term.py): each minibatch's
     # loss gains teacher_coeff * teacher_decay**k x the squared error between the actor's action and
-    # the teacher's on the same states (their privileged entry) at update k. null: none.
+    # the teacher's on the same states (their privileged entry) at update k; during the critic's
+    # warm-up too, so there the actor goes on imitating while the critic learns. null: none.
     teacher: str | None = None
     teacher_coeff: float = 1.0
     teacher_decay: float = 1.0
