@@ -120,6 +120,9 @@ def unmatched(cfg: Any) -> list[str]:
     ]
     if cfg.algo.gae_every_epoch:
         notes.append("algo.gae_every_epoch=true: SB3 computes advantages once per rollout")
+    if cfg.algo.get("desired_kl") is not None:
+        notes.append(f"algo.desired_kl={cfg.algo.desired_kl}: SB3 has no KL-adaptive learning rate; it gets "
+                     "algo.lr on the linear schedule")
     return notes
 
 

@@ -102,6 +102,10 @@ class PPOConfig:
     max_grad_norm: float = 0.5
     # Stop the epochs of one update once the approximate KL exceeds this (null disables).
     target_kl: float | None = 0.05
+    # KL-adaptive learning rate (rsl_rl's "adaptive" schedule): after each minibatch the rate is divided
+    # by 1.5 when the KL estimate is above 2 x desired_kl and multiplied by 1.5 below desired_kl / 2,
+    # within [1e-5, 1e-2]. It starts at lr and replaces the linear annealing. null: off.
+    desired_kl: float | None = None
     adam_eps: float = 1e-5
     # Recompute advantages with the current critic each epoch (TorchRL's sota PPO); false: once per
     # update (CleanRL), cheaper.
@@ -568,6 +572,8 @@ def _ppo_checks(a: Any, batch: int) -> list[tuple[str, Any, bool, str]]:
         ("algo.gae_lambda", a.gae_lambda, 0 <= a.gae_lambda <= 1, "must be in [0, 1]"),
         ("algo.clip_epsilon", a.clip_epsilon, a.clip_epsilon > 0, "must be > 0"),
         ("algo.max_grad_norm", a.max_grad_norm, a.max_grad_norm > 0, "must be > 0"),
+        ("algo.desired_kl", a.desired_kl, a.desired_kl is None or a.desired_kl > 0,
+         "must be > 0 or null (null: the learning rate anneals linearly)"),
         ("algo.anneal_lr_frames", a.anneal_lr_frames, a.anneal_lr_frames is None or a.anneal_lr_frames > 0,
          "must be > 0 or null (null: total_frames)"),
         ("algo.critic_warmup_frames", a.critic_warmup_frames, a.critic_warmup_frames >= 0,

@@ -124,6 +124,8 @@ TRAIN = [
     ("no epochs", ["algo.epochs=0"], "algo.epochs=0: must be >= 1"),
     ("zero learning rate", ["algo.lr=0"], "algo.lr=0.0: must be > 0"),
     ("negative learning rate", ["algo.lr=-0.001"], "algo.lr=-0.001: must be > 0"),
+    ("a zero KL target for the adaptive rate", ["algo.desired_kl=0"],
+     "algo.desired_kl=0.0: must be > 0 or null"),
     ("no substeps", ["env.substeps=0"], "env: substeps must be a positive integer, got 0"),
     ("unknown control mode", ["env.control_mode=fly"], "env: unknown control_mode 'fly'; valid modes"),
     ("no hidden layers", ["model.hidden_sizes=[]"], "model.hidden_sizes=[]: must be a non-empty list"),

@@ -84,3 +84,38 @@ def test_update_moves_the_policy_towards_higher_reward(every_epoch: bool) -> Non
         learner.update(_batch(actor))
     loc_after = actor(probe.clone())["loc"].mean(0)
     assert ((loc_after - 0.5).abs() < (loc_before - 0.5).abs()).all(), (loc_before, loc_after)
+
+
+def test_the_adaptive_rate_follows_the_kl(monkeypatch) -> None:
+    """``algo.desired_kl``: the rate grows by 1.5 after a minibatch whose KL is below half the target,
+    shrinks by 1.5 above twice the target, stays in [1e-5, 1e-2], and is what ``lr_at`` reports
+    whatever the frames (the linear annealing is off)."""
+    learner, actor = _learner(epochs=1, lr=1e-3, desired_kl=0.01)  # 128 frames: 4 minibatches
+    kls = iter([0.001, 0.05, 0.01, 0.001])
+    monkeypatch.setattr(learner, "_minibatch_step", lambda minibatch, sums: next(kls))
+    metrics = learner.update(_batch(actor))
+    assert learner.optimizer.param_groups[0]["lr"] == pytest.approx(1e-3 * 1.5 / 1.5 * 1.5)
+    # Logged: the rate the four minibatches stepped at, on average (1, 1.5, 1 and 1 x 1e-3).
+    assert metrics["charts/learning_rate"] == pytest.approx(1.125e-3)
+    assert learner.lr_at(frames=10**6, total_frames=10**6) == pytest.approx(1.5e-3)
+    learner.set_lr(9e-3)
+    learner.adapt_lr(0.0)
+    assert learner.optimizer.param_groups[0]["lr"] == 1e-2
+    learner.actor_frozen = True  # the critic's warm-up: the actor is still, its KL says nothing
+    kls = iter([0.0] * 4)
+    learner.update(_batch(actor))
+    assert learner.optimizer.param_groups[0]["lr"] == 1e-2
+
+
+def test_without_a_desired_kl_the_rate_anneals() -> None:
+    learner, _ = _learner(lr=1e-3)
+    assert learner.lr_at(frames=500, total_frames=1000) == pytest.approx(5e-4)
+
+
+def test_the_adaptive_rate_resumes_with_adams_state() -> None:
+    """A resumed run continues from the rate the KL left: it travels in the optimizer's state dict."""
+    learner, _ = _learner(desired_kl=0.01)
+    learner.set_lr(2.5e-4)
+    resumed, _ = _learner(desired_kl=0.01)
+    resumed.optimizer.load_state_dict(learner.optimizer.state_dict())
+    assert resumed.lr_at(frames=0, total_frames=1000) == pytest.approx(2.5e-4)

@@ -198,7 +198,7 @@ SMOKE_CONFIG = """
 algo: {name: ppo, gamma: 0.9, gae_lambda: 0.9, epochs: 2, minibatch_size: 256, lr: 0.0003, anneal_lr: true,
        min_lr_frac: 0.0, anneal_lr_frames: null, clip_epsilon: 0.2, entropy_coeff: 0.0, critic_coeff: 0.5,
        loss_critic_type: l2,
-       normalize_advantage: true, max_grad_norm: 0.5, target_kl: 0.05, adam_eps: 1.0e-05,
+       normalize_advantage: true, max_grad_norm: 0.5, target_kl: 0.05, desired_kl: null, adam_eps: 1.0e-05,
        gae_every_epoch: true, demos: null, demo_coeff: 0.1, demo_decay: 0.95, demo_minibatch_size: 256,
        bc_epochs: 0, bc_lr: 0.001, bc_minibatch_size: 64, bc_only: false, init_from: null,
        critic_warmup_frames: 0, teacher: null, teacher_coeff: 1.0, teacher_decay: 1.0, rnd_coeff: 0.0,

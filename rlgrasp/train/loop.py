@@ -305,7 +305,7 @@ class Trainer:
         losses = self.learner.update(batch, self.updates)
         self.updates += 1
         metrics = {k if "/" in k else f"losses/{k}": v for k, v in losses.items()}
-        metrics["charts/learning_rate"] = lr
+        metrics.setdefault("charts/learning_rate", lr)  # the learner's: its minibatches' mean rate
         metrics["time/train_s"] = time.perf_counter() - t1
         return metrics
 

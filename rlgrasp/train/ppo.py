@@ -1,9 +1,9 @@
 """The PPO update: GAE (each epoch by default), clipped loss over shuffled minibatches.
 
 TorchRL provides the pieces (``GAE``, ``ClipPPOLoss``, ``SamplerWithoutReplacement``); this module
-only adds what it lacks: the learning-rate schedule, the target-KL stop, finiteness checks, the
-per-update metrics, the refreshed log-probs of stale batches, and auxiliary terms (``extras``: the
-imitation term of ``rlgrasp.demos.bc``, the curiosity of ``rlgrasp.train.rnd``).
+only adds what it lacks: the learning-rate schedule (linear, or KL-adaptive), the target-KL stop,
+finiteness checks, the per-update metrics, the refreshed log-probs of stale batches, and auxiliary
+terms (``extras``: the imitation term of ``rlgrasp.demos.bc``, the curiosity of ``rlgrasp.train.rnd``).
 
 Stale batches (collected with the weights of one update before, ``collector.overlap``): their
 log-probs are recomputed with the learner's weights before the epochs, so the clip and the
@@ -28,6 +28,9 @@ from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
 from rlgrasp.train.models import OBS_KEY, RunningNorm
+
+#: Bounds of the KL-adaptive learning rate (``algo.desired_kl``), rsl_rl's.
+ADAPTIVE_LR_RANGE = (1e-5, 1e-2)
 
 
 class NonFiniteError(RuntimeError):
@@ -85,7 +88,10 @@ class PPOLearner:
 
     def lr_at(self, frames: int, total_frames: int) -> float:
         """Linear annealing by frames (so a resumed run continues the same schedule), over
-        ``algo.anneal_lr_frames`` when set, else ``total_frames``."""
+        ``algo.anneal_lr_frames`` when set, else ``total_frames``; with ``algo.desired_kl``, the rate
+        the KL left (kept in Adam's state, so a resumed run continues from it too)."""
+        if self.cfg.get("desired_kl") is not None:
+            return self.optimizer.param_groups[0]["lr"]
         horizon = self.cfg.get("anneal_lr_frames") or total_frames
         if not self.cfg.anneal_lr or horizon <= 0:
             return self.cfg.lr
@@ -95,6 +101,15 @@ class PPOLearner:
     def set_lr(self, lr: float) -> None:
         for group in self.optimizer.param_groups:
             group["lr"] = lr
+
+    def adapt_lr(self, kl: float) -> None:
+        """rsl_rl's adaptive schedule, one minibatch's KL at a time (torch's and TorchRL's schedulers
+        follow steps or a metric's plateau, none a KL target)."""
+        target, lr = self.cfg.desired_kl, self.optimizer.param_groups[0]["lr"]
+        if kl > 2.0 * target:
+            self.set_lr(max(ADAPTIVE_LR_RANGE[0], lr / 1.5))
+        elif kl < 0.5 * target:
+            self.set_lr(min(ADAPTIVE_LR_RANGE[1], lr * 1.5))
 
     def update(self, batch: TensorDictBase, updates: int = 0) -> dict[str, float]:
         """One PPO round on a ``[envs, time]`` batch (``updates``: how many came before); returns
@@ -119,8 +134,11 @@ class PPOLearner:
                 buffer.empty()
                 buffer.extend(batch.reshape(-1))
             for _ in range(n // mb):
+                sums["lr"] = sums.get("lr", 0.0) + self.optimizer.param_groups[0]["lr"]
                 kl = self._minibatch_step(buffer.sample(), sums)
                 count += 1
+                if cfg.get("desired_kl") is not None and not self.actor_frozen:  # frozen: no KL to follow
+                    self.adapt_lr(kl)
                 if cfg.target_kl is not None and kl > cfg.target_kl:
                     stopped_early = True
                     break
@@ -132,6 +150,8 @@ class PPOLearner:
         for key, norm in self.norms.items():
             norm.update(batch[key])
         metrics = {**started, **{k: v / max(count, 1) for k, v in sums.items()}}
+        # The rate the minibatches stepped at, on average: the KL-adaptive one moves within an update.
+        metrics["charts/learning_rate"] = metrics.pop("lr", self.optimizer.param_groups[0]["lr"])
         metrics["explained_variance"] = explained_variance(batch)
         metrics["epochs"] = float(epoch + 1)
         metrics["minibatches"] = float(count)
