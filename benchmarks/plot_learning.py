@@ -4,10 +4,11 @@
     python benchmarks/plot_learning.py outputs/bench_learning/grasp_ppo.csv \
         outputs/bench_learning/grasp_ppo_fast.csv --out docs/img/grasp_ppo_vs_fast.png
 
-Each variant (a CSV's ``tag``) is drawn as the mean eval success over its seeds with the band from
-the lowest to the highest seed, against env frames (comparable across machines) and against
-minutes from launch (only within one machine's session). Seeds are aligned on the frames of their
-periodic evaluations; a run cut early by its budget stops counting where its last evaluation is.
+Each variant (a CSV's ``tag``) is drawn as ``rlgrasp-report`` draws a group of runs
+(``rlgrasp.evaluation.report.band``: the mean over the seeds on a common grid that stops at the
+shortest seed, with a bootstrap 95% band), against env frames (comparable across machines) and
+against minutes from launch (only within one machine's session). The CSVs serve where the report's
+TensorBoard runs do not exist (the SB3 side of ``bench_peer.py``) or the minutes matter.
 """
 
 from __future__ import annotations
@@ -19,6 +20,9 @@ from collections import defaultdict
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout, uninstalled
+import numpy as np
+
+from rlgrasp.evaluation.report import band
 from rlgrasp.utils import pyplot
 
 
@@ -33,23 +37,10 @@ def read_curves(paths: list[Path]) -> dict[str, dict[int, list[tuple[float, int,
     return curves
 
 
-def band(seeds: dict[int, list[tuple[float, int, float]]], axis: int) -> tuple[list, list, list, list]:
-    """x, mean, low, high over the seeds at the x values every seed has reached (axis 0: minutes,
-    1: frames); minutes differ per seed, so there each seed's value is its last evaluation at or
-    before x."""
-    if axis == 1:
-        xs = sorted(set.intersection(*({p[1] for p in pts} for pts in seeds.values())))
-    else:  # from the time every seed has been evaluated once to the time the first seed stopped
-        start = max(pts[0][0] for pts in seeds.values())
-        stop = min(pts[-1][0] for pts in seeds.values())
-        xs = sorted({p[0] for pts in seeds.values() for p in pts if start <= p[0] <= stop})
-    mean, low, high = [], [], []
-    for x in xs:
-        values = [max((p for p in pts if p[axis] <= x), key=lambda p: p[axis])[2] for pts in seeds.values()]
-        mean.append(sum(values) / len(values))
-        low.append(min(values))
-        high.append(max(values))
-    return xs, mean, low, high
+def along(seeds: dict[int, list[tuple[float, int, float]]], axis: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Each seed's (x, success) arrays, x = minutes (axis 0) or frames (axis 1), for ``report.band``."""
+    return [(np.array([p[axis] for p in pts], float), np.array([p[2] for p in pts], float))
+            for pts in seeds.values()]
 
 
 def main() -> None:
@@ -58,16 +49,17 @@ def main() -> None:
     )
     parser.add_argument("csvs", type=Path, nargs="+", help="bench_learning.py CSVs (any number of tags)")
     parser.add_argument("--out", type=Path, required=True, help="the PNG to write")
-    parser.add_argument("--title", default="eval success: mean over seeds, band = lowest to highest seed")
+    parser.add_argument("--title", default=(
+        "eval success: mean over seeds, band: bootstrap 95% interval of the mean"))
     args = parser.parse_args()
 
     plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
     for tag, seeds in read_curves(args.csvs).items():
         for ax, axis in zip(axes, (1, 0)):
-            xs, mean, low, high = band(seeds, axis)
-            line = ax.plot(xs, mean, marker=".", label=f"{tag} ({len(seeds)} seeds)")[0]
-            ax.fill_between(xs, low, high, color=line.get_color(), alpha=0.15)
+            b = band(along(seeds, axis))
+            line = ax.plot(b["x"], b["mean"], label=f"{tag} ({len(seeds)} seeds)")[0]
+            ax.fill_between(b["x"], b["low"], b["high"], color=line.get_color(), alpha=0.2)
     for ax, xlabel in zip(axes, ("env frames", "wall-clock minutes (from launch)")):
         ax.set_xlabel(xlabel)
         ax.set_ylabel("eval success rate")
