@@ -219,6 +219,23 @@ def test_sparse_reward_and_terminate_on_success(make_env):
     assert terminated and info["is_success"] and steps < 50
 
 
+@pytest.mark.parametrize("terminate_on_success", [False, True])
+def test_episode_info_comes_at_reset_and_at_the_last_step_only(terminate_on_success, make_env):
+    env = make_env(randomization="default", max_episode_steps=40, terminate_on_success=terminate_on_success)
+    expert = ScriptedExpert(env.obs_slices)
+    episode_keys = {"object", "object_extents", "randomization"}
+    obs, first = env.reset(seed=2)
+    infos, done = [], False
+    while not done:
+        obs, _, terminated, truncated, info = env.step(expert(obs))
+        infos.append(info)
+        done = terminated or truncated
+    assert episode_keys <= set(first) and episode_keys <= set(infos[-1])
+    assert infos[-1]["randomization"] == first["randomization"] and infos[-1]["object"] == first["object"]
+    assert all(not episode_keys & set(i) for i in infos[:-1]) and len(infos) > 1
+    assert all({"is_success", "grasped", "lift_height", "object_tilt"} <= set(i) for i in infos)
+
+
 def test_scripted_expert_lifts_under_default_randomization(make_env):
     env = make_env(randomization="default")
     expert = ScriptedExpert(env.obs_slices)

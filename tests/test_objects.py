@@ -44,14 +44,15 @@ def test_each_set_builds_and_rests_where_it_is_placed(objects, make_env):
     prefixes = {g.removesuffix("_train").removesuffix("_test") for g in group_names}
     for seed in range(3):
         obs, info = env.reset(seed=seed)
-        assert isinstance(info["object"], str)
+        name = info["object"]
+        assert isinstance(name, str)
         assert info["object"].split("/")[0] in prefixes
         extents = obs[env.obs_slices["object_extents"]]
         np.testing.assert_allclose(extents, info["object_extents"], atol=0.01)  # sensing noise
         assert 0.005 < min(extents[:2]) < 0.075 and np.all(extents > 0.003)
         for _ in range(5):  # fingers open, arm far above: the object must not fall or sink
             obs, _, _, _, info = env.step(np.array([0, 0, 0, 1], np.float32))
-        assert abs(float(info["lift_height"])) < 0.006, info["object"]
+        assert abs(float(info["lift_height"])) < 0.006, name
 
 
 @pytest.mark.parametrize("objects", ["primitives", "random_urdfs_test", "toys"])

@@ -188,7 +188,7 @@ class GraspEnv(gym.Env):
         self._steps = 0
         self.episode = ep
         obs, readings = self._observe(first=True)
-        return obs, self._info(readings, success=False)
+        return obs, self._info(readings, success=False, episode=True)
 
     def _check_camera_pose(self) -> None:
         mount = self.robot.camera_mount() if self.camera.spec.mount == "wrist" else None
@@ -242,7 +242,7 @@ class GraspEnv(gym.Env):
         reward, success = self.task.evaluate(readings, readings["grasp_pos"])
         terminated = bool(success and self.terminate_on_success)
         truncated = self._steps >= self.max_episode_steps
-        return obs, reward, terminated, truncated, self._info(readings, success)
+        return obs, reward, terminated, truncated, self._info(readings, success, terminated or truncated)
 
     def render(self):
         if self.render_mode != "rgb_array":
@@ -292,11 +292,16 @@ class GraspEnv(gym.Env):
             self.layout.add_noise(obs, self._obs_offset + step_noise)
         return obs, readings
 
-    def _info(self, readings: dict[str, Any], success: bool) -> dict[str, Any]:
-        return {
-            **self.task.info(readings, success), **self.randomizer.info(),
-            "randomization": {**self.episode, **self._visual},
-        }
+    def _info(self, readings: dict[str, Any], success: bool, episode: bool) -> dict[str, Any]:
+        """Every step's readings; the episode's object and draws only at its first and last step.
+
+        A vector env stacks every key of every env's info at each step: the 20-odd draws every step
+        cost the training workers several percent of their time, for values that never change.
+        """
+        info = {**self.task.info(readings, success), **self.randomizer.info()}
+        if episode:
+            info.update(self.task.episode_info(), randomization={**self.episode, **self._visual})
+        return info
 
     def set_randomization_ranges(self, ranges: Mapping[str, Any], boundary_prob: float) -> None:
         """ADR's current ranges, from the learner between batches (``rlgrasp.train.adr_sync``)."""

@@ -167,12 +167,15 @@ class LiftTask:
         return total / (w.reach + w.grasp + w.lift + w.success), success
 
     def info(self, readings: dict[str, Any], success: bool) -> dict[str, Any]:
+        """What changes every step."""
         # numpy scalars, not Python ones: TorchRL's info reader needs a dtype.
         return {
             "is_success": np.bool_(success),
             "grasped": np.bool_(readings["grasped"][0] > 0.5),
             "lift_height": np.float32(readings["object_pos"][2] - self.rest_z),
-            "object": self.object_name,
-            "object_extents": self.object_extents.copy(),
             "object_tilt": np.float32(tilt(readings["object_quat"])),
         }
+
+    def episode_info(self) -> dict[str, Any]:
+        """What the episode fixed when it began."""
+        return {"object": self.object_name, "object_extents": self.object_extents.copy()}
