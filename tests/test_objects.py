@@ -46,7 +46,7 @@ def test_each_set_builds_and_rests_where_it_is_placed(objects, make_env):
         obs, info = env.reset(seed=seed)
         name = info["object"]
         assert isinstance(name, str)
-        assert info["object"].split("/")[0] in prefixes
+        assert name.split("/")[0] in prefixes
         extents = obs[env.obs_slices["object_extents"]]
         np.testing.assert_allclose(extents, info["object_extents"], atol=0.01)  # sensing noise
         assert 0.005 < min(extents[:2]) < 0.075 and np.all(extents > 0.003)

@@ -300,7 +300,7 @@ def test_several_seeds_per_trial_mean_and_first_seed_pruning(tmp_path: Path) -> 
     assert {p.name for p in (study_dir / "trials" / "0001").iterdir()} == {"seed_3"}
 
 
-def test_the_refine_sweep_starts_from_grasp_ppo_fast_inside_its_space() -> None:
+def test_the_refine_sweep_starts_from_grasp_ppo_fast_on_every_searched_key() -> None:
     cfg = compose(["sweep=grasp_ppo_refine"], ROOT / "configs")
     space = parse_space(OmegaConf.to_container(cfg.params))
     (first,) = cfg.enqueue
