@@ -284,7 +284,7 @@ ENJOY = [
 ]
 SWEEP = [
     ("unknown sweep", ["sweep=bogus"],
-     "sweep=bogus: no such option; sweep is one of grasp_ppo, grasp_ppo_speed, smoke"),
+     "sweep=bogus: no such option; sweep is one of grasp_ppo, grasp_ppo_refine, grasp_ppo_speed, smoke"),
     ("unknown sweep key", ["sweep.n_trial=3"], "sweep.n_trial=3: unknown key 'n_trial'; sweep has"),
     ("no trials", ["sweep.n_trials=0"], "sweep.n_trials=0: must be >= 1"),
     ("a metric training does not report", ["sweep.metric=accuracy"],
