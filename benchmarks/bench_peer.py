@@ -111,13 +111,14 @@ def unmatched(cfg: Any) -> list[str]:
     notes = [
         f"layout: {n_envs(cfg)} env processes (SubprocVecEnv steps one env per process); rlgrasp "
         f"{c.num_workers} workers x {c.envs_per_worker} envs",
-        "policy: SB3 samples a Gaussian and clips actions to the bounds; rlgrasp's TanhNormal squashes "
-        "them (SB3 squashes only with gSDE)",
         f"std floor model.min_std={cfg.model.min_std}: SB3 has none",
         "target_kl: SB3 estimates KL as mean((r - 1) - log r) and stops before the step, rlgrasp as "
         "mean(-log r) and after it",
         "observation statistics: VecNormalize updates them every step, rlgrasp after each update",
     ]
+    if cfg.model.get("distribution", "tanh_normal") == "tanh_normal":
+        notes.append("policy: SB3 samples a Gaussian and clips actions to the bounds; rlgrasp's TanhNormal "
+                     "squashes them (SB3 squashes only with gSDE; model.distribution=normal is SB3's)")
     if cfg.algo.gae_every_epoch:
         notes.append("algo.gae_every_epoch=true: SB3 computes advantages once per rollout")
     if cfg.algo.get("desired_kl") is not None:

@@ -156,6 +156,9 @@ class MLPConfig:
     min_std: float = 0.05
     obs_norm: bool = True
     obs_clip: float = 10.0
+    # tanh_normal: a Gaussian squashed into the action bounds; normal: the Gaussian, the env clipping
+    # what it executes (Stable-Baselines3's and CleanRL's policy). docs/benchmarks/learning.md.
+    distribution: str = "tanh_normal"
 
 
 @dataclass
@@ -529,6 +532,8 @@ def _train_problems(cfg: Any, batch: int) -> list[str]:
             _positive(h) for h in m.hidden_sizes), "must be a non-empty list of positive sizes"),
         ("model.activation", m.activation, m.activation in ("tanh", "relu", "elu"),
          "must be tanh, relu or elu"),
+        ("model.distribution", m.get("distribution", "tanh_normal"),
+         m.get("distribution", "tanh_normal") in ("tanh_normal", "normal"), "must be tanh_normal or normal"),
         *_model_camera_checks(m, cfg.env.get("camera"), a.name),
         ("eval.episodes", e.episodes, e.episodes >= 1, "must be >= 1"),
         ("eval.final_episodes", e.final_episodes, e.final_episodes is None or e.final_episodes >= 1,

@@ -3,7 +3,8 @@
 The checkpoint's actor is a TorchRL ``ProbabilisticActor`` reading and writing tensordicts, which no
 deployment runtime understands. ``DeployPolicy`` is the same computation (running-mean/std
 normalizer -> MLP -> loc -> the TanhNormal's deterministic sample, i.e. a clamped tanh affinely
-scaled to the action bounds), built from the very modules the actor holds, so that TorchScript, ONNX
+scaled to the action bounds; or, for a ``model.distribution=normal`` policy, the loc clamped to the
+bounds, as the env clips it), built from the very modules the actor holds, so that TorchScript, ONNX
 and ``torch.export`` can all serialize it. A camera policy's modules add the image encoders; one
 class per modality, because a TorchScript or ONNX signature cannot have optional inputs.
 """
@@ -16,6 +17,7 @@ import torch
 from torch import nn
 
 from rlgrasp.train.checkpoint import policy_from_checkpoint
+from rlgrasp.train.models import squashes
 from rlgrasp.vision.models import ImageEncoder, SpatialSoftmax, image_specs
 
 
@@ -24,10 +26,12 @@ class DeployPolicy(nn.Module):
 
     Matches ``TanhNormal.deterministic_sample`` of the training actor exactly: tanh of the MLP's
     loc clamped to +-(1 - float32 resolution) (TorchRL's safe tanh), then scaled to the bounds.
+    ``squash=False`` (a Gaussian policy): the loc clamped to the bounds, the action the env executes.
     """
 
-    def __init__(self, net: nn.Module, low: torch.Tensor, high: torch.Tensor) -> None:
+    def __init__(self, net: nn.Module, low: torch.Tensor, high: torch.Tensor, squash: bool = True) -> None:
         super().__init__()
+        self.squash = squash
         norm = net.norm
         self.normalize = bool(norm.enabled)
         self.clip, self.eps = float(norm.clip), float(norm.eps)
@@ -37,6 +41,8 @@ class DeployPolicy(nn.Module):
         self.mlp = nn.Sequential(*[m for m in net.mlp.children()])
         low, high = torch.as_tensor(low, dtype=torch.float32), torch.as_tensor(high, dtype=torch.float32)
         self.rescale = bool((low != -1).any() or (high != 1).any())
+        self.register_buffer("low", low)
+        self.register_buffer("high", high)
         self.register_buffer("mid", (high + low) / 2)
         self.register_buffer("half_range", (high - low) / 2)
         self.lim = 1.0 - float(torch.finfo(torch.float32).resolution)
@@ -49,6 +55,8 @@ class DeployPolicy(nn.Module):
 
     def act(self, x: torch.Tensor) -> torch.Tensor:
         """MLP input -> the deterministic action."""
+        if not self.squash:
+            return torch.minimum(torch.maximum(self.mlp(x), self.low), self.high)
         y = torch.tanh(self.mlp(x)).clamp(-self.lim, self.lim)
         if self.rescale:
             y = self.mid + self.half_range * y
@@ -77,8 +85,8 @@ class ImageFeatures(nn.Module):
 class _VisionDeploy(DeployPolicy):
     """State (normalized) and image features joined, then the state policy's head."""
 
-    def __init__(self, net: nn.Module, low: torch.Tensor, high: torch.Tensor) -> None:
-        super().__init__(net, low, high)
+    def __init__(self, net: nn.Module, low: torch.Tensor, high: torch.Tensor, squash: bool = True) -> None:
+        super().__init__(net, low, high, squash)
         self.encoders = nn.ModuleDict({k: ImageFeatures(e) for k, e in net.encoders.items()})
 
 
@@ -120,4 +128,4 @@ def deploy_module(ckpt: dict[str, Any]) -> DeployPolicy:
     low, high = torch.as_tensor(spec["action_low"]), torch.as_tensor(spec["action_high"])
     images = tuple(image_specs(spec))
     cls = VISION_DEPLOY[images] if images else DeployPolicy
-    return cls(net, low, high).eval()
+    return cls(net, low, high, squashes(ckpt["config"]["model"])).eval()

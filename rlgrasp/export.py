@@ -46,6 +46,7 @@ from rlgrasp.evaluation.source import (
 )
 from rlgrasp.overrides import entry_point, unwritable
 from rlgrasp.train.checkpoint import package_versions
+from rlgrasp.train.models import squashes
 from rlgrasp.vision.models import image_specs
 
 log = logging.getLogger("rlgrasp.export")
@@ -289,7 +290,8 @@ def describe(ckpt: dict[str, Any], ckpt_path: Path, env: Any) -> dict[str, Any]:
         "control_mode": env_cfg.get("control_mode"),
         "control_hz": round(1.0 / (env_cfg.get("time_step", 1 / 240) * env_cfg.get("substeps", 12))),
         "normalization": normalization if model.get("obs_norm", True) else "none",
-        "deterministic": "tanh of the Gaussian's mean, scaled to the action bounds",
+        "deterministic": ("tanh of the Gaussian's mean, scaled to the action bounds" if squashes(model)
+                          else "the Gaussian's mean, clipped to the action bounds"),
         "env_id": ENV_ID,
         "env_kwargs": env_kwargs,
         "checkpoint": {

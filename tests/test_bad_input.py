@@ -129,6 +129,8 @@ TRAIN = [
     ("no substeps", ["env.substeps=0"], "env: substeps must be a positive integer, got 0"),
     ("unknown control mode", ["env.control_mode=fly"], "env: unknown control_mode 'fly'; valid modes"),
     ("no hidden layers", ["model.hidden_sizes=[]"], "model.hidden_sizes=[]: must be a non-empty list"),
+    ("unknown action distribution", ["model.distribution=beta"],
+     "model.distribution='beta': must be tanh_normal or normal"),
     ("a camera policy without a camera", ["model=cnn"], "model='cnn': needs a camera (e.g. cameras="),
     ("a state policy with a camera", ["cameras=wrist_depth"], "model='mlp': must be cnn with a camera"),
     ("fine-tuning from nowhere", ["algo.init_from={root}/nowhere.pt"],

@@ -98,6 +98,28 @@ def test_bounds_other_than_unit_box_match_tanh_normal() -> None:
     torch.testing.assert_close(got, want, atol=1e-6, rtol=0)
 
 
+def test_a_gaussian_policy_exports_its_mean_clipped_to_the_bounds() -> None:
+    """``model.distribution=normal``: the exported action is what the env executes, the actor's
+    deterministic action (the mean, which may leave the bounds) clipped to them."""
+    from tensordict import TensorDict
+    from torchrl.envs import ExplorationType, set_exploration_type
+
+    from rlgrasp.train.models import RunningNorm, build_actor
+
+    model = OmegaConf.create({"hidden_sizes": [8], "activation": "tanh", "min_std": 0.05,
+                              "init_log_std": -0.5, "distribution": "normal"})
+    low, high = torch.tensor([-2.0, 0.0, -0.5]), torch.tensor([2.0, 1.0, 3.0])
+    actor = build_actor(RunningNorm(5), 5, low, high, model, deterministic=True)
+    for p in actor.parameters():
+        p.data.normal_(0, 2)
+    obs = torch.randn(300, 5) * 4
+    with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
+        mean = actor(TensorDict({"observation": obs}, [300]))["action"]
+    assert ((mean < low) | (mean > high)).any()  # the clipping is exercised
+    got = DeployPolicy(actor.module[0].module, low, high, squash=False)(obs).detach()
+    torch.testing.assert_close(got, mean.clamp(low, high), atol=1e-6, rtol=0)
+
+
 def test_bad_input_says_what(tmp_path: Path) -> None:
     with pytest.raises(ExportError, match="ckpt=.*required"):
         export(_cfg())

@@ -32,9 +32,11 @@ def _batch(actor) -> TensorDict:
     return td
 
 
-def _learner(stale_batches: bool = False, **algo) -> tuple[PPOLearner, object]:
+def _learner(
+    stale_batches: bool = False, distribution: str = "tanh_normal", **algo
+) -> tuple[PPOLearner, object]:
     torch.manual_seed(0)
-    model_cfg = OmegaConf.structured(MLPConfig(hidden_sizes=[16, 16]))
+    model_cfg = OmegaConf.structured(MLPConfig(hidden_sizes=[16, 16], distribution=distribution))
     algo_cfg = OmegaConf.structured(PPOConfig(minibatch_size=32, target_kl=None, **algo))
     actor, critic, norm = build_models(OBS_DIM, -torch.ones(ACT_DIM), torch.ones(ACT_DIM), model_cfg)
     learner = PPOLearner(actor, critic, norm, algo_cfg, torch.device("cpu"), stale_batches)
@@ -74,9 +76,10 @@ def test_gae_runs_once_or_every_epoch(every_epoch: bool, expected_calls: int, mo
     assert metrics["epochs"] == 3.0
 
 
-@pytest.mark.parametrize("every_epoch", [True, False])
-def test_update_moves_the_policy_towards_higher_reward(every_epoch: bool) -> None:
-    learner, actor = _learner(epochs=10, lr=1e-2, gae_every_epoch=every_epoch)
+@pytest.mark.parametrize("every_epoch, distribution", [(True, "tanh_normal"), (False, "tanh_normal"),
+                                                       (False, "normal")])
+def test_update_moves_the_policy_towards_higher_reward(every_epoch: bool, distribution: str) -> None:
+    learner, actor = _learner(distribution=distribution, epochs=10, lr=1e-2, gae_every_epoch=every_epoch)
     batch = _batch(actor)
     probe = TensorDict({"observation": batch["observation"].reshape(-1, OBS_DIM)}, [ENVS * STEPS])
     loc_before = actor(probe.clone())["loc"].mean(0)
@@ -84,6 +87,20 @@ def test_update_moves_the_policy_towards_higher_reward(every_epoch: bool) -> Non
         learner.update(_batch(actor))
     loc_after = actor(probe.clone())["loc"].mean(0)
     assert ((loc_after - 0.5).abs() < (loc_before - 0.5).abs()).all(), (loc_before, loc_after)
+
+
+def test_a_gaussian_policy_keeps_the_unclipped_sample_and_its_own_log_prob() -> None:
+    """``model.distribution=normal`` (SB3's policy): actions may leave the bounds (the env clips them),
+    and the log-prob is the plain Gaussian's of the sample as drawn."""
+    _, actor = _learner(distribution="normal")
+    with torch.no_grad():
+        # a std of e: many samples beyond +-1
+        actor.module[0].module.scale.state_independent_scale.fill_(1.0)
+        td = actor(TensorDict({"observation": torch.randn(512, OBS_DIM)}, [512]))
+    assert (td["action"].abs() > 1).any()
+    gaussian = torch.distributions.Normal(td["loc"], td["scale"])
+    expected = gaussian.log_prob(td["action"]).sum(-1)
+    torch.testing.assert_close(td["action_log_prob"], expected)
 
 
 def test_the_adaptive_rate_follows_the_kl(monkeypatch) -> None:

@@ -205,7 +205,7 @@ algo: {name: ppo, gamma: 0.9, gae_lambda: 0.9, epochs: 2, minibatch_size: 256, l
        rnd_gamma: 0.99,
        rnd_features: 64, rnd_update_fraction: 0.25}
 model: {name: mlp, hidden_sizes: [64, 64], activation: tanh, init_log_std: -0.5, min_std: 0.05,
-        obs_norm: true, obs_clip: 10.0}
+        obs_norm: true, obs_clip: 10.0, distribution: tanh_normal}
 collector: {_target_: rlgrasp.train.collectors.ProcessCollector, num_workers: 2, envs_per_worker: 2,
             steps_per_env: 256, torch_threads: 1, overlap: true, stagger_starts: false}
 logger: {_target_: rlgrasp.train.logger.TensorBoardLogger, console_interval_s: 0.0}

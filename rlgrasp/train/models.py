@@ -11,9 +11,12 @@ from tensordict.nn import (
     TensorDictModule,
 )
 from torch import nn
-from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
+from torchrl.modules import MLP, IndependentNormal, ProbabilisticActor, TanhNormal, ValueOperator
 
 OBS_KEY = "observation"
+
+#: ``model.distribution`` choices: the actor's action distribution.
+DISTRIBUTIONS = ("tanh_normal", "normal")
 
 #: ``model.activation`` -> its torch module class.
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU}
@@ -115,24 +118,36 @@ def build_actor(
     model_cfg,
     deterministic: bool = False,
 ) -> ProbabilisticActor:
-    """A TanhNormal policy squashed into the action bounds (no clipping bias in the log-probs).
+    """The policy of ``model.distribution``: ``tanh_normal`` squashes a Gaussian into the action
+    bounds (no clipping bias in the log-probs); ``normal`` is the Gaussian itself, as Stable-Baselines3
+    and CleanRL use it: the env clips the action it executes, the log-prob is the unclipped sample's.
 
     ``deterministic=True`` makes the mode of the distribution the default action outside any
     ``set_exploration_type`` context (for evaluation from a checkpoint).
     """
     act_dim = int(action_low.numel())
-    low, high = _bound(action_low), _bound(action_high)
     net = TensorDictModule(
         ActorNet(norm, obs_dim, act_dim, model_cfg), in_keys=[OBS_KEY], out_keys=["loc", "scale"]
     )
+    if squashes(model_cfg):
+        low, high = _bound(action_low), _bound(action_high)
+        distribution, kwargs = TanhNormal, {"low": low, "high": high, "tanh_loc": False}
+    else:
+        distribution, kwargs = IndependentNormal, {}
     return ProbabilisticActor(
         net,
         in_keys=["loc", "scale"],
-        distribution_class=TanhNormal,
-        distribution_kwargs={"low": low, "high": high, "tanh_loc": False},
+        distribution_class=distribution,
+        distribution_kwargs=kwargs,
         return_log_prob=True,
         default_interaction_type=(InteractionType.DETERMINISTIC if deterministic else InteractionType.RANDOM),
     )
+
+
+def squashes(model_cfg) -> bool:
+    """Whether the actor's actions are squashed into the bounds (a model config without the key, as
+    in checkpoints written before it existed: yes)."""
+    return model_cfg.get("distribution", "tanh_normal") == "tanh_normal"
 
 
 def _bound(b: torch.Tensor) -> float | torch.Tensor:
