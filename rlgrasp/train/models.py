@@ -15,9 +15,6 @@ from torchrl.modules import MLP, IndependentNormal, ProbabilisticActor, TanhNorm
 
 OBS_KEY = "observation"
 
-#: ``model.distribution`` choices: the actor's action distribution.
-DISTRIBUTIONS = ("tanh_normal", "normal")
-
 #: ``model.activation`` -> its torch module class.
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU}
 
