@@ -516,6 +516,7 @@ def _train_problems(cfg: Any, batch: int) -> list[str]:
     """Each bad value of a composed training config as ``key=value: what is allowed``; ``batch``: the
     collector's frames per batch."""
     c, a, m, e, k = cfg.collector, cfg.algo, cfg.model, cfg.eval, cfg.checkpoint
+    distribution = m.get("distribution", "tanh_normal")  # a camera model has no such key
     checks = [
         ("total_frames", cfg.total_frames, cfg.total_frames > 0, "must be > 0"),
         ("time_budget_min", cfg.time_budget_min, cfg.time_budget_min is None or cfg.time_budget_min > 0,
@@ -532,8 +533,8 @@ def _train_problems(cfg: Any, batch: int) -> list[str]:
             _positive(h) for h in m.hidden_sizes), "must be a non-empty list of positive sizes"),
         ("model.activation", m.activation, m.activation in ("tanh", "relu", "elu"),
          "must be tanh, relu or elu"),
-        ("model.distribution", m.get("distribution", "tanh_normal"),
-         m.get("distribution", "tanh_normal") in ("tanh_normal", "normal"), "must be tanh_normal or normal"),
+        ("model.distribution", distribution, distribution in ("tanh_normal", "normal"),
+         "must be tanh_normal or normal"),
         *_model_camera_checks(m, cfg.env.get("camera"), a.name),
         ("eval.episodes", e.episodes, e.episodes >= 1, "must be >= 1"),
         ("eval.final_episodes", e.final_episodes, e.final_episodes is None or e.final_episodes >= 1,
