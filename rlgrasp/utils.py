@@ -10,6 +10,14 @@ from concurrent.futures.process import BrokenProcessPool
 from multiprocessing.context import SpawnContext, SpawnProcess
 from typing import Any
 
+from omegaconf import OmegaConf
+
+
+def plain(value: Any) -> Any:
+    """A config node as plain containers (resolved), anything else as it is: what env factories,
+    checkpoints and comparisons with a checkpoint's dict take."""
+    return OmegaConf.to_container(value, resolve=True) if OmegaConf.is_config(value) else value
+
 
 def flatten(
     node: Mapping[str, Any], prefix: str = "", leaf: Callable[[Any], bool] | None = None

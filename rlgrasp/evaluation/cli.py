@@ -38,15 +38,11 @@ from rlgrasp.evaluation.tb_log import log_to_tensorboard
 from rlgrasp.evaluation.teacher import prepare_teacher
 from rlgrasp.evaluation.video import video_format, write_video
 from rlgrasp.overrides import entry_point, unwritable
-from rlgrasp.utils import WorkerDiedError
+from rlgrasp.utils import WorkerDiedError, plain
 
 log = logging.getLogger("rlgrasp.eval")
 
 register_configs()
-
-
-def _plain(value: Any) -> Any:
-    return OmegaConf.to_container(value, resolve=True) if OmegaConf.is_config(value) else value
 
 
 def output_dir(cfg: DictConfig, source: Any) -> Path:
@@ -138,7 +134,7 @@ def _validate(cfg: DictConfig) -> tuple[PolicySource, PolicySource | None, str |
             fmt = video_format(cfg.video_format)
         except ValueError as exc:
             raise EvaluationError(str(exc)) from exc
-    source = prepare(cfg.policy, cfg.ckpt, cfg.ckpt_kind, _plain(cfg.randomization), _plain(cfg.env))
+    source = prepare(cfg.policy, cfg.ckpt, cfg.ckpt_kind, plain(cfg.randomization), plain(cfg.env))
     teacher = prepare_teacher(cfg.teacher, source)
     out = output_dir(cfg, source)
     if (out / "metrics.json").exists():

@@ -20,7 +20,6 @@ import hydra
 import numpy as np
 import pybullet
 from hydra.core.config_store import ConfigStore
-from omegaconf import OmegaConf
 
 from rlgrasp.config import CONFIG_DIR, register_configs
 from rlgrasp.envs.factory import env_factory
@@ -28,6 +27,7 @@ from rlgrasp.evaluation.episodes import run_episode
 from rlgrasp.evaluation.policies import Actor, PolicySource, build_policy
 from rlgrasp.evaluation.source import EvaluationError, prepare
 from rlgrasp.overrides import entry_point
+from rlgrasp.utils import plain
 
 
 @dataclass
@@ -148,7 +148,6 @@ def check(cfg: Any) -> PolicySource:
     for key, minimum in (("episodes", 1), ("seed", 0), ("speed", 0)):
         if not cfg[key] >= minimum:
             raise EvaluationError(f"{key}={cfg[key]}: must be at least {minimum}")
-    plain = lambda v: OmegaConf.to_container(v) if OmegaConf.is_config(v) else v  # noqa: E731
     return prepare(cfg.policy, cfg.ckpt, cfg.ckpt_kind, plain(cfg.randomization), plain(cfg.env))
 
 

@@ -13,11 +13,11 @@ from __future__ import annotations
 
 from typing import Any
 
-from omegaconf import DictConfig, ListConfig, OmegaConf
 from torch import nn
 
 from rlgrasp.envs.robot import robot_label
 from rlgrasp.train.checkpoint import CheckpointError, load_checkpoint, resolve_policy_path
+from rlgrasp.utils import plain
 
 STD_KEY = "scale.state_independent_scale"  # the actor's state-independent std (TorchRL's module)
 
@@ -35,7 +35,7 @@ def warm_start(actor: nn.Module, path: str, env_cfg: Any, model_cfg: Any) -> str
     trained, here = robot_label(trained_env.get("robot", "panda")), robot_label(env_cfg.get("robot", "panda"))
     if trained != here:
         raise CheckpointError(f"{where}: its policy drives the robot {trained!r}, this env has {here!r}")
-    differences = _env_differences(trained_env, _plain(env_cfg))
+    differences = _env_differences(trained_env, plain(env_cfg))
     if differences:
         key, theirs, ours = differences[0]
         raise CheckpointError(
@@ -73,11 +73,6 @@ def _env_differences(trained: dict[str, Any], here: dict[str, Any]) -> list[tupl
     ]
 
 
-def _plain(value: Any) -> Any:
-    """A config node as plain containers, so a checkpoint's dict and a DictConfig compare equal."""
-    if isinstance(value, (DictConfig, ListConfig)):
-        return OmegaConf.to_container(value, resolve=True)
-    return value
 
 
 def _model_keys(model: dict[str, Any]) -> str:
