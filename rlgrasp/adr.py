@@ -25,7 +25,7 @@ NOT_BOUNDARY = -1
 #: 0 and log(0) is -inf.
 MIN_WIDTH = 1e-6
 _SETTINGS = {"params", "start", "boundary_prob", "buffer_size", "low_threshold", "high_threshold"}
-_PARAM_KEYS = {"nominal", "limits", "step", "integer"}
+_PARAM_KEYS = {"nominal", "limits", "step", "integer", "log"}
 
 
 @dataclass(frozen=True)
@@ -38,6 +38,7 @@ class AdrParam:
     high_limit: float
     step: float
     integer: bool = False
+    log: bool = False  # episodes draw log-uniformly within the range (as a preset's mass does)
 
 
 @dataclass(frozen=True)
@@ -73,7 +74,7 @@ def _param(name: str, node: Any) -> AdrParam:
     missing, unknown = {"nominal", "limits", "step"} - set(node), set(node) - _PARAM_KEYS
     if missing or unknown:
         what = f"needs {sorted(missing)}" if missing else f"unknown keys {sorted(unknown)}"
-        raise ValueError(f"{where}: {what}; keys are nominal, limits: [low, high], step (and integer)")
+        raise ValueError(f"{where}: {what}; keys are nominal, limits: [low, high], step (and integer, log)")
     nominal, limits = _number(f"{where}: nominal", node["nominal"]), node["limits"]
     if isinstance(limits, str) or not isinstance(limits, Sequence) or len(limits) != 2:
         raise ValueError(f"{where}: limits must be [low, high], got {limits!r}")
@@ -83,7 +84,10 @@ def _param(name: str, node: Any) -> AdrParam:
     step = _number(f"{where}: step", node["step"])
     if step <= 0:
         raise ValueError(f"{where}: step must be > 0, got {step}")
-    return AdrParam(name, nominal, low, high, step, bool(node.get("integer", False)))
+    log = bool(node.get("log", False))
+    if log and low <= 0:
+        raise ValueError(f"{where}: a log-uniform range needs limits above 0, got [{low}, {high}]")
+    return AdrParam(name, nominal, low, high, step, bool(node.get("integer", False)), log)
 
 
 def parse_settings(node: Mapping[str, Any]) -> AdrSettings:

@@ -21,7 +21,9 @@ from hydra.core.config_store import ConfigStore
 from hydra.utils import instantiate
 from omegaconf import MISSING, OmegaConf
 
+from rlgrasp.envs.randomization import Randomizer
 from rlgrasp.train.rundir import register_resolvers
+from rlgrasp.utils import plain
 from rlgrasp.vision.augment import AUGMENTATIONS
 
 #: The Hydra config tree (``configs/`` next to the package in a source checkout).
@@ -307,6 +309,10 @@ class PeriodicEvalConfig:
     # next one is due (so a sweep's pruner hears of it one interval later). false: in the learner's
     # process, training waits. The final evaluation always runs in the learner's process.
     background: bool = False
+    # null: the training env's randomization. A preset, a ranges file or ranges over a preset, as
+    # rlgrasp-eval's `randomization` (e.g. eval.randomization=default): a run whose training ranges
+    # move (ADR, a curriculum) is judged, and its best checkpoint chosen, on the ranges it aims at.
+    randomization: Any = None
 
 
 @dataclass
@@ -546,7 +552,18 @@ def _train_problems(cfg: Any, batch: int) -> list[str]:
     ]
     return [f"{key}={value!r}: {allowed}" for key, value, ok, allowed in checks if not ok] + _device_problems(
         cfg.device
-    )
+    ) + _eval_randomization_problems(e.get("randomization"))
+
+
+def _eval_randomization_problems(spec: Any) -> list[str]:
+    """A bad ``eval.randomization`` now, not at the first evaluation minutes into the run."""
+    if spec is None:
+        return []
+    try:
+        Randomizer(plain(spec))
+    except (ValueError, OSError) as exc:
+        return [f"eval.randomization={plain(spec)!r}: {exc}"]
+    return []
 
 
 def _model_camera_checks(m: Any, camera: Any, algo: str) -> list[tuple[str, Any, bool, str]]:

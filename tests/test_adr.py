@@ -15,10 +15,12 @@ import yaml
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from rlgrasp.adr import NOT_BOUNDARY, AdrState, draw_boundary, parse_settings
-from rlgrasp.envs.randomization import PARAMS, Randomizer
+from rlgrasp.envs.factory import env_factory
+from rlgrasp.envs.randomization import PARAMS, Randomizer, Range
 from rlgrasp.train.adr_sync import RANGES_FILE, AdrSync
 from rlgrasp.train.checkpoint import load_checkpoint
 from rlgrasp.train.collectors import shut_down
+from rlgrasp.train.evaluate import periodic_evaluator
 from rlgrasp.train.loop import train
 from rlgrasp.train.parts import build_parts
 from tests.test_scale import ray_cluster  # noqa: F401 - the fixture: two Ray nodes on loopback
@@ -50,6 +52,23 @@ def test_the_shipped_preset_parses_with_every_non_task_parameter() -> None:
         r = randomizer.ranges[name]
         assert r.low == r.high == PARAMS[name].nominal, name
     assert randomizer.ranges["object_yaw"].high > 0  # the task's own pose keeps its range
+
+
+def test_the_periodic_evaluation_plays_eval_randomization_when_set(train_cfg) -> None:
+    """An ADR run's evaluation env samples ADR's start ranges; with ``eval.randomization=default``
+    it plays the preset the run aims at, and training's env factory is left as it was."""
+    cfg = train_cfg("experiment=smoke", "randomization=adr")
+    make_env = env_factory(cfg.env)
+    aimed = train_cfg("experiment=smoke", "randomization=adr", "eval.randomization=default")
+    for config, expected_mass in ((cfg, (0.1, 0.1)), (aimed, (0.05, 0.5))):
+        env = periodic_evaluator(make_env, config).make_env()
+        try:
+            mass = env.randomizer.ranges["object_mass"]
+            assert (mass.low, mass.high) == expected_mass
+            assert (env.randomizer.adr is None) == (config is aimed)
+        finally:
+            env.close()
+    assert make_env.keywords["randomization"]["adr"]  # training still draws ADR's ranges
 
 
 def test_a_full_buffer_widens_above_the_high_threshold_and_narrows_below_the_low() -> None:
@@ -162,6 +181,28 @@ def test_the_ranges_file_loads_as_a_randomization(tmp_path: Path) -> None:
     assert 0.05 <= values["object_mass"] <= 0.7 and values["action_delay"] in (0, 1, 2)
     with pytest.raises(ValueError, match="randomization file .*nowhere.yaml"):
         Randomizer(str(tmp_path / "nowhere.yaml"))
+
+
+def test_the_ranges_file_keeps_the_base_preset_and_log_uniform_draws(tmp_path: Path) -> None:
+    """A curriculum over a preset (``randomization=adr_objects``): the file holds the preset's other
+    ranges, and a log-uniform ADR parameter stays log-uniform in the env and in the file."""
+    spec = yaml.safe_load((ROOT / "configs/randomization/adr_objects.yaml").read_text())["randomization"]
+    randomizer = Randomizer(spec)
+    assert randomizer.ranges["object_mass"].log and not randomizer.ranges["object_size_scale"].log
+    assert randomizer.ranges["finger_friction"] == Randomizer("default").ranges["finger_friction"]
+    randomizer.set_ranges({"object_mass": (0.05, 0.5)}, boundary_prob=0.0)
+    assert randomizer.ranges["object_mass"] == Randomizer("default").ranges["object_mass"]
+
+    sync = AdrSync(Randomizer(spec))
+    sync.state.ranges["object_mass"] = [0.05, 0.3]
+    loaded = Randomizer(sync.write_ranges(tmp_path).as_posix())
+    assert loaded.ranges["object_mass"] == Range(0.05, 0.3, log=True)
+    others = set(PARAMS) - {"object_mass", "object_size_scale"}
+    default = Randomizer("default").ranges
+    assert {k: loaded.ranges.get(k) for k in others} == {k: default.get(k) for k in others}
+    with pytest.raises(ValueError, match="a log-uniform range needs limits above 0"):
+        parse_settings({"params": {"joint_damping": {"nominal": 0.0, "limits": [0.0, 1.0], "step": 0.1,
+                                                     "log": True}}})
 
 
 @pytest.mark.parametrize(("change", "message"), [

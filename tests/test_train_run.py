@@ -210,7 +210,7 @@ collector: {_target_: rlgrasp.train.collectors.ProcessCollector, num_workers: 2,
             steps_per_env: 256, torch_threads: 1, overlap: true, stagger_starts: false}
 logger: {_target_: rlgrasp.train.logger.TensorBoardLogger, console_interval_s: 0.0}
 eval: {interval_frames: 1024, episodes: 4, final_episodes: 8, num_envs: 4, seed_offset: 1000000,
-       background: false}
+       background: false, randomization: null}
 checkpoint: {interval_frames: 1024, keep_last: 2}
 paths: {root_dir: .}
 experiment_name: smoke

@@ -210,7 +210,8 @@ class Randomizer:
                 ranges[name] = _as_range(name, value)
             if adr_node is not None:
                 adr = _adr_settings(adr_node)
-                ranges.update({k: Range(*v) for k, v in _adr_start(adr).items()})
+                log = {p.name: p.log for p in adr.params}
+                ranges.update({k: Range(*v, log=log[k]) for k, v in _adr_start(adr).items()})
         else:
             raise ValueError(
                 f"randomization must be a preset name ({', '.join(PRESETS)}), a .yaml file or a mapping "
@@ -227,7 +228,7 @@ class Randomizer:
         for name, (low, high) in ranges.items():
             if name not in self.adr.names:
                 raise ValueError(f"randomization parameter {name!r} is not one of ADR's: {self.adr.names}")
-            self.ranges[name] = Range(float(low), float(high))
+            self.ranges[name] = Range(float(low), float(high), self.ranges[name].log)
         self._boundary_prob = float(boundary_prob)
 
     def sample(self, rng: np.random.Generator) -> dict[str, float]:

@@ -40,6 +40,9 @@ class AdrSync:
         names = self.settings.names
         start = {name: (r.low, r.high) for name, r in randomizer.ranges.items() if name in names}
         self.state = AdrState(self.settings, start)
+        #: The ranges ADR leaves alone (its base preset's and the spec's own), for the ranges file.
+        self.fixed = {name: r for name, r in randomizer.ranges.items() if name not in names}
+        self.log = {p.name: p.log for p in self.settings.params}
         self.full_length = full_length
 
     @classmethod
@@ -83,9 +86,13 @@ class AdrSync:
         return out
 
     def write_ranges(self, run_dir: Path) -> Path:
-        """The current ranges as a file ``randomization=`` loads (the other parameters: ``none``)."""
+        """Every range of the run as it is now, ADR's and the others, as a file ``randomization=``
+        loads: the episodes it gives are drawn as the run's own are."""
+        ranges = {name: (r.low, r.high, r.log) for name, r in self.fixed.items()}
+        ranges.update({name: (*r, self.log[name]) for name, r in self.state.ranges.items()})
         spec = {"preset": "none", **{
-            name: {"low": float(low), "high": float(high)} for name, (low, high) in self.state.ranges.items()
+            name: {"low": float(low), "high": float(high), **({"log": True} if log else {})}
+            for name, (low, high, log) in ranges.items()
         }}
         path = Path(run_dir) / RANGES_FILE
         header = "# The ADR ranges this run reached: rlgrasp-eval ... +env.randomization=<this file>\n"

@@ -13,7 +13,9 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
 
+from rlgrasp.envs.factory import env_factory
 from rlgrasp.train.collect import EnvFactory, make_batched_env
+from rlgrasp.utils import plain
 
 
 def episode_stats(td: TensorDictBase) -> dict[str, torch.Tensor]:
@@ -89,7 +91,10 @@ class Evaluator:
 
 def periodic_evaluator(make_env: EnvFactory, cfg: Any) -> Evaluator:
     """Training's periodic evaluator for a training config: its episodes, envs and seeds (apart from
-    every collector worker's), so anything evaluating "as training does" gets the same episodes."""
+    every collector worker's), so anything evaluating "as training does" gets the same episodes; on
+    ``eval.randomization`` when set, else on ``make_env``'s."""
     e = cfg.eval
+    if e.get("randomization") is not None:
+        make_env = env_factory({**plain(cfg.env), "randomization": plain(e.randomization)})
     seed = cfg.seed * 1_000_003 + e.seed_offset
     return Evaluator(make_env, cfg.env.get("max_episode_steps", 50), e.episodes, e.num_envs, seed)
