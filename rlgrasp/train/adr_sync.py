@@ -42,7 +42,6 @@ class AdrSync:
         self.state = AdrState(self.settings, start)
         #: The ranges ADR leaves alone (its base preset's and the spec's own), for the ranges file.
         self.fixed = {name: r for name, r in randomizer.ranges.items() if name not in names}
-        self.log = {p.name: p.log for p in self.settings.params}
         self.full_length = full_length
 
     @classmethod
@@ -88,8 +87,9 @@ class AdrSync:
     def write_ranges(self, run_dir: Path) -> Path:
         """Every range of the run as it is now, ADR's and the others, as a file ``randomization=``
         loads: the episodes it gives are drawn as the run's own are."""
+        log = {p.name: p.log for p in self.settings.params}
         ranges = {name: (r.low, r.high, r.log) for name, r in self.fixed.items()}
-        ranges.update({name: (*r, self.log[name]) for name, r in self.state.ranges.items()})
+        ranges.update({name: (*r, log[name]) for name, r in self.state.ranges.items()})
         spec = {"preset": "none", **{
             name: {"low": float(low), "high": float(high), **({"log": True} if log else {})}
             for name, (low, high, log) in ranges.items()
