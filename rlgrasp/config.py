@@ -376,7 +376,8 @@ class EvalConfig:
     ckpt_kind: str = "best"  # best | last, when ckpt is a run directory
     episodes: int = 100
     seed: int = 0  # episode i is reset with seed + i
-    # null: the randomization the policy was trained with (baselines: the env's default, `default`).
+    # null: the randomization the policy was trained with, or its run's eval.randomization when the run
+    # set one (baselines: the env's default, `default`).
     # A preset (none | default | wide) or explicit ranges over a base preset, e.g.
     #   'randomization={preset:default,object_mass:[0.5,1.0],finger_force:[5,10]}'
     # (randomization=wide alone selects the training config group, which sets env.randomization.)

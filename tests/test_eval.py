@@ -29,11 +29,14 @@ def _cfg(*overrides: str):
     return compose_eval(list(overrides))
 
 
-def make_run(tmp: Path, frames: int = 4096, obs_dim: int | None = None) -> Path:
+def make_run(
+    tmp: Path, frames: int = 4096, obs_dim: int | None = None, overrides: tuple[str, ...] = ()
+) -> Path:
     """A run directory whose checkpoints the training code wrote (random weights, fitted normalizer,
-    ``frames`` frames); ``obs_dim`` replaces the recorded observation size (a mismatched checkpoint)."""
+    ``frames`` frames); ``obs_dim`` replaces the recorded observation size (a mismatched checkpoint),
+    ``overrides`` are the training config's."""
     run = tmp / "run"
-    over = ["model.hidden_sizes=[16,16]", "logger=none", "experiment_name=unit", "seed=3"]
+    over = ["model.hidden_sizes=[16,16]", "logger=none", "experiment_name=unit", "seed=3", *overrides]
     cfg = compose_train([f"paths.output_dir={run}", *over])
     trainer = Trainer(cfg)
     trainer.parts.norm.update(torch.randn(64, trainer.parts.spec["obs_dim"]) * 0.3)
@@ -43,6 +46,17 @@ def make_run(tmp: Path, frames: int = 4096, obs_dim: int | None = None) -> Path:
     trainer.save(is_best=True)
     trainer.logger.close()
     return run
+
+
+def test_a_run_judged_on_other_ranges_is_evaluated_on_them(tmp_path: Path) -> None:
+    """A curriculum run judged on `default` (``eval.randomization``): evaluating its checkpoint plays
+    `default` too, unless told otherwise; a run that did not choose plays its training ranges."""
+    curriculum = ("randomization=adr_objects", "eval.randomization=default")
+    run = make_run(tmp_path, overrides=curriculum)
+    assert prepare("checkpoint", str(run)).env_cfg["randomization"] == "default"
+    assert prepare("checkpoint", str(run), randomization="wide").env_cfg["randomization"] == "wide"
+    own = prepare("checkpoint", str(make_run(tmp_path / "b", overrides=curriculum[:1])))
+    assert own.env_cfg["randomization"]["adr"]["params"].keys() == {"object_size_scale", "object_mass"}
 
 
 def test_checkpoint_evaluation_writes_every_artefact(tmp_path: Path) -> None:

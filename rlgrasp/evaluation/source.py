@@ -217,6 +217,8 @@ def prepare(
         if not env_cfg:
             raise EvaluationError(f"corrupt checkpoint: {path} has no config['env'] to rebuild the env from")
         trimmed = {k: full[k] for k in POLICY_KEYS if k in full}
+        if randomization is None:  # what the run's own evaluations played, if it chose (eval.randomization)
+            randomization = (full["config"].get("eval") or {}).get("randomization")
         info = {
             "path": str(path.resolve()),
             "kind": ckpt_kind if Path(ckpt).is_dir() else "file",
