@@ -196,6 +196,29 @@ def _action_problems(spec: dict[str, Any], act_space: Any) -> list[str]:
     return []
 
 
+def _checkpoint_info(full: dict[str, Any], path: Path, kind: str) -> dict[str, Any]:
+    """What an evaluation reports of the checkpoint: where it is, how far it trained, on what."""
+    env_cfg = full["config"].get("env") or {}
+    return {
+        "path": str(path.resolve()),
+        "kind": kind,
+        "frames": full.get("frames"),
+        "updates": full.get("updates"),
+        "best_eval_success": full.get("best_eval_success"),
+        "last_eval": full.get("last_eval"),
+        "run_dir": full.get("run_dir"),
+        "versions": full.get("versions"),
+        "experiment_name": full["config"].get("experiment_name"),
+        "train_seed": full["config"].get("seed"),
+        # What it was trained on: an evaluation elsewhere says so (rlgrasp.evaluation.cli.conditions).
+        "train_objects": env_cfg.get("objects", "cube"),
+        "train_randomization": env_cfg.get("randomization", "default"),
+        "train_visual": env_cfg.get("visual", "none"),
+        "train_camera": env_cfg.get("camera"),
+        "teacher": (full["config"].get("algo") or {}).get("teacher"),
+    }
+
+
 def prepare(
     policy: str,
     ckpt: str | None = None,
@@ -219,24 +242,7 @@ def prepare(
         trimmed = {k: full[k] for k in POLICY_KEYS if k in full}
         if randomization is None:  # what the run's own evaluations played, if it chose (eval.randomization)
             randomization = (full["config"].get("eval") or {}).get("randomization")
-        info = {
-            "path": str(path.resolve()),
-            "kind": ckpt_kind if Path(ckpt).is_dir() else "file",
-            "frames": full.get("frames"),
-            "updates": full.get("updates"),
-            "best_eval_success": full.get("best_eval_success"),
-            "last_eval": full.get("last_eval"),
-            "run_dir": full.get("run_dir"),
-            "versions": full.get("versions"),
-            "experiment_name": full["config"].get("experiment_name"),
-            "train_seed": full["config"].get("seed"),
-            # What it was trained on: an evaluation elsewhere says so (rlgrasp.evaluation.cli.conditions).
-            "train_objects": env_cfg.get("objects", "cube"),
-            "train_randomization": env_cfg.get("randomization", "default"),
-            "train_visual": env_cfg.get("visual", "none"),
-            "train_camera": env_cfg.get("camera"),
-            "teacher": (full["config"].get("algo") or {}).get("teacher"),
-        }
+        info = _checkpoint_info(full, path, ckpt_kind if Path(ckpt).is_dir() else "file")
         # The run this checkpoint belongs to: checkpoints/<file>.pt sits in <run dir>/checkpoints.
         run_dir = path.resolve().parent.parent if path.parent.name == "checkpoints" else None
     else:
