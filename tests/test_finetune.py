@@ -68,7 +68,7 @@ def test_the_teacher_term_pulls_the_student_towards_its_teacher(train_cfg) -> No
     cfg = train_cfg("experiment=grasp_vision_finetune", "logger=none", f"algo.teacher={TEACHER}",
                     "algo.teacher_coeff=2.0", "algo.teacher_decay=0.5")
     trainer = Trainer(cfg)  # starts no worker
-    (term,) = [x for x in trainer.learner.extras if isinstance(x, TeacherImitation)]
+    (term,) = [x for x in trainer.algo.learner.extras if isinstance(x, TeacherImitation)]
     assert term.start(TensorDict(), updates=3) == {"charts/teacher_weight": 2.0 * 0.5**3}
     spec, g = trainer.parts.spec, torch.Generator().manual_seed(0)
     minibatch = TensorDict({

@@ -21,23 +21,21 @@ from rlgrasp.train.checkpoint import CheckpointError
 from rlgrasp.train.loop import TrainingError, train
 from rlgrasp.train.resume import command_line_keys
 from rlgrasp.train.rundir import remove_refused_start
-from rlgrasp.vision.distill import distill
 
 register_configs()
 log = logging.getLogger("rlgrasp.train")
 
 
 def run(cfg: DictConfig) -> float:
-    """Train (PPO, or with ``algo=distill`` a camera student from a state teacher) and return the final
-    evaluation success rate (what a Hydra sweeper optimizes).
+    """Train with the configured algorithm (``algo=ppo``, ``sac``, or ``distill``: a camera student from
+    a state teacher) and return the final evaluation success rate (what a Hydra sweeper optimizes).
 
     Bad input (a bad value, a resume that cannot be done) ends the process with exit code 2 and one
     line, and removes the run directory this command created; a fault (env crash, NaN) with exit
     code 1 and its message. Neither prints a traceback.
     """
     try:
-        learn = distill if cfg.algo.name == "distill" else train
-        return learn(cfg, changed=_command_line_keys(cfg))
+        return train(cfg, changed=_command_line_keys(cfg))
     except (ConfigError, CheckpointError) as exc:
         # As every entry point refuses bad input: one line on stderr (the run's log goes with its dir)
         print(f"error: {exc}", file=sys.stderr)

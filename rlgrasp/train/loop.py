@@ -1,4 +1,5 @@
-"""The training loop: a ``Trainer`` whose steps are collect, update, log, evaluate, checkpoint, finish.
+"""The training core: a ``Trainer`` whose steps are collect, update, log, evaluate, checkpoint, finish,
+the same for every algorithm (``rlgrasp.train.algorithm``: PPO, SAC, DAgger).
 
 ``train(cfg)`` is the entry point. The Trainer's ``state_dict()`` is the checkpoint and
 ``load_state_dict()`` resumes from one, so tests and tools build checkpoints through this code.
@@ -23,11 +24,10 @@ from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDictBase
 
 from rlgrasp.config import ConfigError
-from rlgrasp.demos.bc import Imitation, pretrain
-from rlgrasp.demos.dataset import demos_for
 from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.adr_sync import AdrSync
+from rlgrasp.train.algorithm import Algorithm, NonFiniteError, algorithm_class
 from rlgrasp.train.batches import Batches
 from rlgrasp.train.collect import read_env_errors
 from rlgrasp.train.collectors import shut_down
@@ -36,15 +36,11 @@ from rlgrasp.train.evaluate import periodic_evaluator
 from rlgrasp.train.logger import log, progress_line, setup_text_log
 from rlgrasp.train.metrics import Due, Throughput, finished_episodes
 from rlgrasp.train.parts import build_parts
-from rlgrasp.train.ppo import NonFiniteError, PPOLearner
 from rlgrasp.train.preemption import StopSignals
 from rlgrasp.train.resume import prepare_run
-from rlgrasp.train.rnd import RND
 from rlgrasp.train.rundir import CHECKPOINTS, ENV_ERRORS
 from rlgrasp.train.warm_start import warm_start
 from rlgrasp.utils import flatten
-from rlgrasp.vision.dagger import load_teacher
-from rlgrasp.vision.teacher_term import TeacherImitation
 
 #: Called after each evaluation with (frames, metrics); see ``train``.
 EvalCallback = Callable[[int, dict[str, float]], None]
@@ -56,6 +52,15 @@ class TrainingError(RuntimeError):
 
 class _Stopped(Exception):
     """A stop signal arrived: save and leave the loop."""
+
+
+class _CallbackStop(Exception):
+    """Carries what ``on_eval`` raised (a sweep's pruner) past the fault handler, to be re-raised
+    unchanged by ``train``."""
+
+    def __init__(self, raised: BaseException) -> None:
+        super().__init__(repr(raised))
+        self.raised = raised
 
 
 def resolve_device(device: str) -> torch.device:
@@ -72,7 +77,8 @@ def seed_everything(seed: int) -> None:
 
 class Trainer:
     """One training run. ``run()`` reads straight down: collect, update, log, evaluate, checkpoint,
-    until the frame or time budget is spent; then the final evaluation and checkpoint."""
+    until the frame or time budget is spent; then the final evaluation and checkpoint. What learns
+    from the batches is ``self.algo`` (``algo._target_``)."""
 
     def __init__(
         self, cfg: DictConfig, on_eval: EvalCallback | None = None, resumed: dict[str, Any] | None = None
@@ -94,16 +100,14 @@ class Trainer:
             self.parts = build_parts(cfg, self.device)
         except (ValueError, TypeError, OSError) as exc:  # the env refuses its keywords or object files
             raise ConfigError(f"env: {exc}".splitlines()[0]) from exc
-        self.actor = self.parts.actor
         full_length = cfg.env.get("max_episode_steps") if self.parts.collector.stagger_starts else None
         self.adr = AdrSync.from_env_cfg(self.config["env"], full_length)
-        self.learner = PPOLearner(
-            self.actor, self.parts.critic, self.parts.norms, cfg.algo, self.device,
-            stale_batches=self.parts.collector.collects_ahead, extras=self._extras(),
-        )
+        self.algo: Algorithm = algorithm_class(cfg.algo)(cfg, self.parts, self.device)
+        self.actor = self.algo.actor
+        torch.set_num_threads(self.algo.learner_threads)
 
         # --- counters, possibly resumed
-        self.frames, self.updates, self.generation = 0, 0, 0
+        self.frames, self.generation = 0, 0
         self.best_success, self.last_eval = -math.inf, None
         if resumed is not None:
             self.load_state_dict(resumed)
@@ -121,33 +125,20 @@ class Trainer:
         self.background = background_evaluator(cfg, self.evaluator, self.actor)  # None: in this process
         self.final_episodes = cfg.eval.final_episodes or cfg.eval.episodes
 
-    def _extras(self) -> list[Any]:
-        """The PPO update's auxiliary terms: DAPG's imitation of ``algo.demos`` (the file is read,
-        and refused, here: before any worker), a camera student's imitation of ``algo.teacher`` and
-        RND's curiosity (``algo.rnd_coeff`` > 0)."""
-        a, extras = self.cfg.algo, []
-        self.demos = demos_for(a.demos, self.parts.make_env, self.cfg.env) if a.get("demos") else None
-        if self.demos is not None and a.demo_coeff > 0:
-            extras.append(Imitation(self.actor, self.demos, a, self.device))
-        if a.get("teacher"):
-            path = ckpt_lib.resolve_policy_path(a.teacher)
-            teacher, _ = load_teacher(path, self.parts.spec, self.cfg.env)
-            extras.append(TeacherImitation(self.actor, teacher.to(self.device), a))
-        self.rnd = None
-        if a.get("rnd_coeff"):
-            self.rnd = RND(self.parts.spec["obs_dim"], self.parts.norm, a).to(self.device)
-        return extras + ([self.rnd] if self.rnd is not None else [])
+    @property
+    def updates(self) -> int:
+        return self.algo.updates
 
     # --- checkpoint state ---------------------------------------------------------------------
     def state_dict(self) -> dict[str, Any]:
-        """The checkpoint (its layout is documented in ``rlgrasp.train.checkpoint``)."""
+        """The checkpoint (its layout is documented in ``rlgrasp.train.checkpoint``): the core's
+        entries and the algorithm's own."""
         state = {
             "format": ckpt_lib.FORMAT,
             "actor": self.actor.state_dict(),
-            "critic": self.parts.critic.state_dict(),
-            "optimizer": self.learner.optimizer.state_dict(),
+            **self.algo.state_dict(),
             "frames": self.frames,
-            "updates": self.updates,
+            "updates": self.algo.updates,
             "generation": self.generation,
             "best_eval_success": self.best_success,
             "last_eval": self.last_eval,
@@ -159,26 +150,29 @@ class Trainer:
         }
         if self.parts.kind == "vision":  # how evaluation and export rebuild the policy
             state["kind"] = "vision"
-        if self.rnd is not None:
-            state["rnd"] = self.rnd.state_dict()
         if self.adr is not None:
             state["adr"] = self.adr.state.state_dict()
         return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Continue from a checkpoint: weights, optimizer, RNG, counters; the generation moves on."""
+        """Continue from a checkpoint: weights, the algorithm's state, RNG, counters; the generation
+        moves on."""
+        saved = (state.get("config") or {}).get("algo", {}).get("name", "ppo")
+        if saved != self.algo.name:
+            raise ConfigError(
+                f"algo: the checkpoint was trained with algo={saved}, not algo={self.algo.name}; "
+                f"resume it with algo={saved}, or start a new run (algo.init_from=<checkpoint> to warm start)"
+            )
         try:
             self.actor.load_state_dict(state["actor"])
-            self.parts.critic.load_state_dict(state["critic"])
-        except RuntimeError as exc:
+            self.algo.updates = state["updates"]
+            self.algo.load_state_dict(state)
+        except (RuntimeError, KeyError) as exc:
             raise ConfigError(
                 f"checkpoint does not fit the model: {str(exc).splitlines()[-1].strip()[:200]}"
             ) from exc
-        if self.rnd is not None:
-            self.rnd.load_state_dict(state["rnd"])
-        self.learner.optimizer.load_state_dict(state["optimizer"])
         ckpt_lib.set_rng_state(state["rng"])
-        self.frames, self.updates = state["frames"], state["updates"]
+        self.frames = state["frames"]
         self.generation = state.get("generation", 0) + 1
         self.best_success = state.get("best_eval_success", -math.inf)
         self.last_eval = state.get("last_eval")
@@ -189,6 +183,7 @@ class Trainer:
         path = ckpt_lib.write_checkpoints(
             self.ckpt_dir, self.state_dict(), self.cfg.checkpoint.keep_last, is_best
         )
+        self.algo.save_extra(self.run_dir)
         log.info("checkpoint %s", path)
         if self.adr is not None:  # the ranges reached so far, for rlgrasp-eval
             self.adr.write_ranges(self.run_dir)
@@ -202,8 +197,9 @@ class Trainer:
             if self.background is not None:
                 cleanup.callback(self.background.close)
             log.info(
-                "run dir %s | device %s | %d frames per batch (%s) | %s",
+                "run dir %s | %s | device %s | %d frames per batch (%s) | %s",
                 self.run_dir,
+                self.algo.name,
                 self.device,
                 self.parts.frames_per_batch,
                 type(self.parts.collector).__name__,
@@ -211,14 +207,15 @@ class Trainer:
             )
             self.start = time.monotonic()  # the time budget includes the workers' start-up
             cleanup.enter_context(self.signals)
-            if self.demos is not None and self.cfg.algo.bc_epochs and self.updates == 0 and self.frames == 0:
-                self.logger.scalars(pretrain(self.actor, self.parts.critic, self.parts.norm, self.demos,
-                                             self.cfg.algo), 0)
+            if self.updates == 0 and self.frames == 0:
+                self.algo.start(self.logger.scalars)
+            self.frames_at_start = self.frames
             try:
-                # a finished run, or behaviour cloning alone (algo.bc_only), starts no workers
-                if self.frames < self.cfg.total_frames and not self.cfg.algo.get("bc_only"):
+                # a finished run, or an algorithm that learns without env frames (bc_only), starts no workers
+                if self.frames < self.cfg.total_frames and getattr(self.algo, "collects", True):
                     with self._collector() as batches:
                         self._loop(batches)
+                return self.finish()
             except (KeyboardInterrupt, _Stopped):
                 stopped_by = self.signals.received
                 why = signal.Signals(stopped_by).name if stopped_by else "interrupted"
@@ -230,7 +227,27 @@ class Trainer:
                     f"{exc} at {self.frames:,} frames; stopped without saving, the last good checkpoint "
                     f"is {self.ckpt_dir / 'last.pt'}"
                 ) from exc
-            return self.finish()
+            except _CallbackStop as stop:
+                raise stop.raised from None
+            except (TrainingError, ConfigError):
+                raise
+            except Exception as exc:  # noqa: BLE001 - any other fault: keep the work, say what happened
+                self._fault(exc)
+
+    def _fault(self, exc: Exception) -> NoReturn:
+        """An unexpected exception in the loop (a tracker that stopped answering, a full disk, a bug):
+        save what can be saved, then ``TrainingError`` in one line naming the cause and where to
+        resume from. Nothing new is saved before the first batch (there is nothing to lose)."""
+        cause = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"[:300]
+        if self.frames == self.frames_at_start:
+            raise TrainingError(f"{cause} at {self.frames:,} frames (before the first update)") from exc
+        try:
+            self.save()
+            kept = f"checkpoint saved; resume with resume={self.run_dir}"
+        except Exception as save_exc:  # noqa: BLE001 - e.g. the same full disk
+            kept = (f"the checkpoint could not be saved ({type(save_exc).__name__}); "
+                    f"the last good one is in {self.ckpt_dir}")
+        raise TrainingError(f"{cause} at {self.frames:,} frames; {kept}") from exc
 
     def _check_stop(self) -> None:
         if self.signals.received is not None:
@@ -240,9 +257,11 @@ class Trainer:
     def _collector(self) -> Iterator[Iterator[TensorDictBase]]:
         """The collector's batches (``rlgrasp.train.batches``); its workers are shut down however the
         loop ends."""
-        behaviour = copy.deepcopy(self.actor)
+        behaviour = copy.deepcopy(self.algo.behaviour)
         collector = self.parts.make_collector(self.generation, str(self.error_dir), behaviour)
-        batches = Batches(collector, self.actor, behaviour, self.parts.collector.collects_ahead, self.adr)
+        batches = Batches(
+            collector, self.algo.behaviour, behaviour, self.parts.collector.collects_ahead, self.adr
+        )
         try:
             yield batches
         finally:
@@ -297,17 +316,11 @@ class Trainer:
         return batch.reshape(-1, batch.shape[-1])
 
     def update(self, batch: TensorDictBase) -> dict[str, float]:
-        """One PPO update at the scheduled learning rate (the workers get the weights from ``Batches``)."""
-        t1 = time.perf_counter()
-        lr = self.learner.lr_at(self.frames, self.cfg.total_frames)
-        self.learner.set_lr(lr)
-        self.learner.actor_frozen = self.frames <= self.cfg.algo.get("critic_warmup_frames", 0)
-        losses = self.learner.update(batch, self.updates)
-        self.updates += 1
-        metrics = {k if "/" in k else f"losses/{k}": v for k, v in losses.items()}
-        metrics.setdefault("charts/learning_rate", lr)  # the learner's: its minibatches' mean rate
-        metrics["time/train_s"] = time.perf_counter() - t1
-        return metrics
+        """The algorithm's update on a counted batch (the workers get the weights from ``Batches``);
+        a non-finite parameter stops the run before it reaches a checkpoint."""
+        metrics = self.algo.update(batch, self.frames)
+        self.algo.check_finite()
+        return {k if "/" in k else f"losses/{k}": v for k, v in metrics.items()}
 
     def episode_metrics(self, batch: TensorDictBase) -> dict[str, float]:
         """Return, length and success of the episodes that ended in this batch (for the console too)."""
@@ -396,6 +409,7 @@ class Trainer:
     ) -> bool:
         """Log an evaluation of the weights of ``frames`` at ``frames``; keep it as ``last_eval``;
         returns whether it is the best so far."""
+        result = {**result, **self.algo.eval_extras(result, self.evaluator.run, episodes)}
         self.last_eval = {**result, "frames": frames, "episodes": episodes}
         self.logger.scalars({f"eval/{k}": v for k, v in result.items()}, frames)
         self.logger.scalars({"time/eval_s": seconds}, frames)
@@ -419,6 +433,8 @@ class Trainer:
         except BaseException as exc:
             log.warning("stopped by the eval callback at %s frames: %r", f"{self.frames:,}", exc)
             save()
+            if isinstance(exc, Exception):  # past the fault handler, unchanged (``run`` unwraps it)
+                raise _CallbackStop(exc) from exc
             raise
 
     def finish(self) -> float:

@@ -27,14 +27,13 @@ from torchrl.data import LazyTensorStorage, ReplayBuffer, SamplerWithoutReplacem
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
+from rlgrasp.train.algorithm import NonFiniteError
 from rlgrasp.train.models import OBS_KEY, RunningNorm
+
+__all__ = ["NonFiniteError", "PPOLearner", "explained_variance"]
 
 #: Bounds of the KL-adaptive learning rate (``algo.desired_kl``), rsl_rl's.
 ADAPTIVE_LR_RANGE = (1e-5, 1e-2)
-
-
-class NonFiniteError(RuntimeError):
-    """A NaN or inf appeared in the loss, the gradients or the parameters."""
 
 
 class Extra(Protocol):
