@@ -10,6 +10,7 @@ command line.
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -85,6 +86,7 @@ class EnvConfig:
 class PPOConfig:
     """PPO hyperparameters (names follow TorchRL's ``ClipPPOLoss``/``GAE`` keywords)."""
 
+    _target_: str = "rlgrasp.algos.ppo.PPO"  # the Algorithm class (rlgrasp.train.algorithm)
     name: str = "ppo"
     gamma: float = 0.9
     gae_lambda: float = 0.9
@@ -147,6 +149,39 @@ class PPOConfig:
 
 
 @dataclass
+class SACConfig:
+    """Soft actor-critic (``rlgrasp.algos.sac``; names follow TorchRL's ``SACLoss``), and with
+    ``demos`` RLPD: demonstrations sampled beside online data in every minibatch."""
+
+    _target_: str = "rlgrasp.algos.sac.SAC"  # the Algorithm class (rlgrasp.train.algorithm)
+    name: str = "sac"
+    gamma: float = 0.95
+    # Gradient steps per env frame, kept across batches (0.25: one step per four frames).
+    utd_ratio: float = 0.25
+    batch_size: int = 256
+    buffer_frames: int = 300_000  # transitions kept (the oldest go first)
+    learning_starts: int = 5_000  # frames in the buffer before the first gradient step
+    actor_lr: float = 3e-4
+    critic_lr: float = 3e-4
+    alpha_lr: float = 3e-4
+    alpha_init: float = 0.1  # the entropy temperature's start (rewards here are at most 1 a step)
+    target_entropy: float | None = None  # null: -(action size)
+    tau: float = 0.005  # the target critics' soft-update rate
+    actor_every: int = 1  # the actor and temperature step every this many critic steps
+    num_critics: int = 2  # the target is the minimum over them (RLPD: an ensemble, e.g. 10)
+    critic_hidden_sizes: list[int] = field(default_factory=lambda: [256, 256])
+    critic_activation: str = "relu"  # tanh | relu | elu
+    critic_layer_norm: bool = True  # LayerNorm after each hidden layer (RLPD)
+    # A demonstrations directory (rlgrasp-demos): this share of each minibatch is drawn from it.
+    demos: str | None = None
+    demo_ratio: float = 0.5
+    # The replay buffer is written beside the checkpoints (replay.pt), so a resumed run continues
+    # with it; false: a resumed run starts with an empty one.
+    save_replay: bool = True
+    init_from: str | None = None  # a state checkpoint whose actor starts this run (warm start)
+
+
+@dataclass
 class MLPConfig:
     """Actor and critic MLPs; the observation normalizer sits inside both."""
 
@@ -187,6 +222,7 @@ class CollectorConfig:
 class DistillConfig:
     """DAgger distillation of a state teacher into a camera student (``rlgrasp.vision.distill``)."""
 
+    _target_: str = "rlgrasp.vision.distill.DAgger"  # the Algorithm class (rlgrasp.train.algorithm)
     name: str = "distill"
     # A state policy's checkpoint or run directory (its last.pt); relative paths are tried from the
     # working directory, then from the repository root (policies/grasp_ppo.pt).
@@ -500,6 +536,7 @@ def register_configs() -> None:
     cs.store(group="env", name="env_schema", node=EnvConfig)
     cs.store(group="algo", name="ppo_schema", node=PPOConfig)
     cs.store(group="algo", name="distill_schema", node=DistillConfig)
+    cs.store(group="algo", name="sac_schema", node=SACConfig)
     cs.store(group="model", name="mlp_schema", node=MLPConfig)
     cs.store(group="model", name="cnn_schema", node=CNNConfig)
     cs.store(group="collector", name="collector_schema", node=CollectorConfig)
@@ -532,10 +569,7 @@ def _train_problems(cfg: Any, batch: int) -> list[str]:
         ("collector.envs_per_worker", c.envs_per_worker, c.envs_per_worker >= 1, "must be >= 1"),
         ("collector.steps_per_env", c.steps_per_env, c.steps_per_env >= 1, "must be >= 1"),
         ("collector.torch_threads", c.torch_threads, c.torch_threads >= 1, "must be >= 1"),
-        ("algo.epochs", a.epochs, a.epochs >= 1, "must be >= 1"),
-        ("algo.lr", a.lr, a.lr > 0, "must be > 0"),
-        *(_ppo_checks(a, batch) + _extra_term_checks(a, cfg.env.get("camera")) if a.name == "ppo"
-          else _distill_checks(a)),
+        *_algo_checks(a, batch, cfg.env.get("camera")),
         ("model.hidden_sizes", list(m.hidden_sizes), len(m.hidden_sizes) > 0 and all(
             _positive(h) for h in m.hidden_sizes), "must be a non-empty list of positive sizes"),
         ("model.activation", m.activation, m.activation in ("tanh", "relu", "elu"),
@@ -584,6 +618,51 @@ def _cnn_checks(m: Any) -> list[tuple[str, Any, bool, str]]:
         ("model.pooling", m.pooling, m.pooling in POOLINGS, f"must be one of {', '.join(POOLINGS)}"),
         ("model.kernel_sizes", list(m.kernel_sizes), len(m.kernel_sizes) == len(m.channels), layers),
         ("model.strides", list(m.strides), len(m.strides) == len(m.channels), layers),
+    ]
+
+
+def _algo_checks(a: Any, batch: int, camera: Any) -> list[tuple[str, Any, bool, str]]:
+    """The checks of ``algo``'s own keys: each algorithm has its own (an unknown one is refused)."""
+    if a.name == "ppo":
+        return [*_learning_checks(a), *_ppo_checks(a, batch), *_extra_term_checks(a, camera)]
+    if a.name == "distill":
+        return [*_learning_checks(a), *_distill_checks(a)]
+    if a.name == "sac":
+        return _sac_checks(a, camera)
+    return [
+        ("algo.name", a.name, False, "must be ppo, sac or distill (the algo group: algo=ppo|sac|distill)")
+    ]
+
+
+def _learning_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
+    return [
+        ("algo.epochs", a.epochs, a.epochs >= 1, "must be >= 1"),
+        ("algo.lr", a.lr, a.lr > 0, "must be > 0"),
+    ]
+
+
+def _sac_checks(a: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
+    """SAC's keys: a ratio > 0, a buffer that holds a minibatch, rates > 0, a state policy."""
+    rates = [(f"algo.{k}", a[k], _positive(a[k]) and math.isfinite(a[k]), "must be finite and > 0")
+             for k in ("actor_lr", "critic_lr", "alpha_lr", "alpha_init")]
+    return [
+        ("algo.utd_ratio", a.utd_ratio, _positive(a.utd_ratio), "must be > 0 (gradient steps per env frame)"),
+        ("algo.batch_size", a.batch_size, a.batch_size >= 1, "must be >= 1"),
+        ("algo.buffer_frames", a.buffer_frames, a.buffer_frames >= a.batch_size,
+         f"must be >= algo.batch_size ({a.batch_size}): the buffer must hold a minibatch"),
+        ("algo.learning_starts", a.learning_starts, 0 <= a.learning_starts <= a.buffer_frames,
+         "must be between 0 and algo.buffer_frames"),
+        ("algo.gamma", a.gamma, 0 < a.gamma <= 1, "must be in (0, 1]"),
+        ("algo.tau", a.tau, 0 < a.tau <= 1, "must be in (0, 1]"),
+        ("algo.actor_every", a.actor_every, a.actor_every >= 1, "must be >= 1"),
+        ("algo.num_critics", a.num_critics, a.num_critics >= 1, "must be >= 1"),
+        ("algo.critic_hidden_sizes", list(a.critic_hidden_sizes), len(a.critic_hidden_sizes) > 0 and all(
+            _positive(h) for h in a.critic_hidden_sizes), "must be a non-empty list of positive sizes"),
+        ("algo.critic_activation", a.critic_activation, a.critic_activation in ("tanh", "relu", "elu"),
+         "must be tanh, relu or elu"),
+        ("algo.demo_ratio", a.demo_ratio, 0 < a.demo_ratio < 1, "must be in (0, 1)"),
+        ("algo", "sac", not camera, "learns from the state for now: use cameras=none (or algo=distill)"),
+        *rates,
     ]
 
 

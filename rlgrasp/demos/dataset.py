@@ -124,6 +124,35 @@ def summary(episodes: list[dict[str, Any]], kept: int) -> dict[str, Any]:
     }
 
 
+def demo_transitions(demos: Demos, env_cfg: Any) -> TensorDict:
+    """The demonstrations as an off-policy learner's transitions (``observation``, ``action``,
+    ``next``: ``observation``, ``reward``, ``done``, ``terminated``). Their rewards are the recording
+    env's, so a run with another reward is refused. A file recorded before next observations were
+    kept gives each step the following one, and drops each episode's last step (its successor is
+    the next episode's first)."""
+    recorded = demos.meta.get("env", {}).get("reward", "dense")
+    if recorded != env_cfg.get("reward", "dense"):
+        raise DemoError(
+            f"algo.demos={demos.meta['dir']}: recorded with env.reward={recorded}, this run has "
+            f"env.reward={env_cfg.get('reward')} (the replay learns from the recorded rewards; record "
+            "them with the run's reward)"
+        )
+    f = demos.frames
+    if "next_observation" in f.keys():
+        keep = torch.ones(f.numel(), dtype=torch.bool)
+        next_obs, terminated = f["next_observation"], f["terminated"]
+    else:
+        keep = ~f["done"]
+        next_obs = torch.roll(f["observation"], -1, 0)
+        terminated = torch.zeros(f.numel(), dtype=torch.bool)
+    n = int(keep.sum())
+    nxt = {"observation": next_obs[keep], "reward": f["reward"][keep].reshape(n, 1),
+           "done": f["done"][keep].reshape(n, 1) | terminated[keep].reshape(n, 1),
+           "terminated": terminated[keep].reshape(n, 1)}
+    return TensorDict({"observation": f["observation"][keep], "action": f["action"][keep], "next": nxt},
+                      batch_size=[n])
+
+
 def demos_for(path: str, make_env: Any, env_cfg: Any) -> Demos:
     """The demonstrations at ``path`` checked against the env ``make_env`` builds."""
     env = make_env()

@@ -32,7 +32,7 @@ def record_episode(env: Any, actor: Any, seed: int) -> dict[str, Any]:
     """One episode from ``env.reset(seed=seed)``: its arrays and outcome."""
     obs, info = env.reset(seed=seed)
     actor.reset(seed)
-    observations, actions, rewards = [], [], []
+    observations, actions, rewards, next_observations, terminal = [], [], [], [], []
     success = False
     while True:
         action = actor(obs)
@@ -40,6 +40,8 @@ def record_episode(env: Any, actor: Any, seed: int) -> dict[str, Any]:
         actions.append(np.asarray(action, np.float32))
         obs, reward, terminated, truncated, info = env.step(action)
         rewards.append(float(reward))
+        next_observations.append(np.asarray(obs, np.float32))  # an off-policy learner's transitions
+        terminal.append(bool(terminated))
         success = bool(info.get("is_success", False))
         if terminated or truncated:
             break
@@ -48,6 +50,8 @@ def record_episode(env: Any, actor: Any, seed: int) -> dict[str, Any]:
         "observation": np.stack(observations),
         "action": np.stack(actions),
         "reward": np.asarray(rewards, np.float32),
+        "next_observation": np.stack(next_observations),
+        "terminated": np.asarray(terminal, np.bool_),
         "length": len(rewards),
         "success": success,
         "object": str(info.get("object", "")),
@@ -104,6 +108,8 @@ def to_frames(episodes: list[dict[str, Any]]) -> TensorDict:
                     "observation": torch.from_numpy(e["observation"]),
                     "action": torch.from_numpy(e["action"]),
                     "reward": torch.from_numpy(e["reward"]),
+                    "next_observation": torch.from_numpy(e["next_observation"]),
+                    "terminated": torch.from_numpy(e["terminated"]),
                     "done": done,
                     "episode": torch.full((n,), index, dtype=torch.int64),
                     "success": torch.full((n,), e["success"], dtype=torch.bool),
