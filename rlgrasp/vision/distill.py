@@ -23,6 +23,7 @@ import torch
 from omegaconf import DictConfig
 from torchrl.envs import ExplorationType, set_exploration_type
 
+from rlgrasp.config import ConfigError
 from rlgrasp.demos.bc import mse_bc_loss
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.algorithm import Algorithm
@@ -45,6 +46,8 @@ class DAgger(Algorithm):
     def __init__(self, cfg: Any, parts: Any, device: torch.device) -> None:
         super().__init__(cfg, parts, device)
         a = cfg.algo
+        if parts.kind != "vision":  # the same words as a camera student's spec gives
+            raise ConfigError("env.camera=null: a camera policy needs a camera (e.g. cameras=wrist_depth)")
         self.teacher, _ = load_teacher(ckpt_lib.resolve_policy_path(a.teacher), parts.spec, cfg.env)
         self.student = parts.actor
         # What acts, is evaluated and is exported: the student's weights averaged over its recent
