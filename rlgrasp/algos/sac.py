@@ -89,8 +89,9 @@ class SAC(Algorithm):
             "critic": torch.optim.Adam(_trainable(self.loss.qvalue_network_params), lr=a.critic_lr),
             "alpha": torch.optim.Adam([self.loss.log_alpha], lr=a.alpha_lr),
         }
-        self.replay = _buffer(a.buffer_frames, a.batch_size, device)
         self.demos = self._demos() if a.get("demos") else None
+        online = a.batch_size - (self.demos.batch_size if self.demos is not None else 0)
+        self.replay = _buffer(a.buffer_frames, online, device)
         self.owed = 0.0  # gradient steps due but not yet taken (the ratio is kept across batches)
         self.replay_file: Path | None = None
 
@@ -101,7 +102,8 @@ class SAC(Algorithm):
 
         a = self.cfg.algo
         frames = demo_transitions(demos_for(a.demos, self.parts.make_env, self.cfg.env), self.cfg.env)
-        demos = _buffer(frames.numel(), max(1, round(a.batch_size * a.demo_ratio)), self.device)
+        demos = _buffer(frames.numel(), min(a.batch_size - 1, max(1, round(a.batch_size * a.demo_ratio))),
+                        self.device)
         demos.extend(frames.to(self.device))
         return demos
 
@@ -132,9 +134,7 @@ class SAC(Algorithm):
         """A minibatch: online transitions, and with demonstrations ``demo_ratio`` of it theirs."""
         if self.demos is None:
             return self.replay.sample()
-        demo = self.demos.sample()
-        online = self.replay.sample(self.cfg.algo.batch_size - demo.numel())
-        return torch.cat([online, demo])
+        return torch.cat([self.replay.sample(), self.demos.sample()])
 
     def _step(self) -> dict[str, float]:
         """One gradient step of the critics, the actor (every ``actor_every`` steps) and the
@@ -153,12 +153,8 @@ class SAC(Algorithm):
             self.optimizers["actor"].step()
             self.optimizers["alpha"].step()
         self.target_update.step()
-        return {
-            "loss_qvalue": float(losses["loss_qvalue"]),
-            "loss_actor": float(losses["loss_actor"]),
-            "alpha": float(losses["alpha"]),
-            "entropy": float(losses["entropy"]),
-        }
+        keys = ("loss_qvalue", "loss_actor", "alpha", "entropy")
+        return {key: float(losses[key].detach()) for key in keys}
 
     def trained_parameters(self) -> list[torch.nn.Parameter]:
         return [*self.actor.parameters(), *_trainable(self.loss.qvalue_network_params)]

@@ -127,7 +127,12 @@ class Trainer:
 
     @property
     def updates(self) -> int:
+        """The algorithm's update count (saved in checkpoints as ``updates``)."""
         return self.algo.updates
+
+    @updates.setter
+    def updates(self, value: int) -> None:
+        self.algo.updates = value
 
     # --- checkpoint state ---------------------------------------------------------------------
     def state_dict(self) -> dict[str, Any]:

@@ -1,0 +1,184 @@
+"""SAC on the training core (``rlgrasp.algos.sac``): the update-to-data ratio, what it learns on a toy
+batch, demonstrations in each minibatch (RLPD), resume with the replay buffer, and a short run whose
+checkpoint evaluation and export take as they take PPO's."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+from tensordict import TensorDict
+
+from rlgrasp.algos.sac import REPLAY_FILE, SAC
+from rlgrasp.compose import compose_config, compose_train
+from rlgrasp.config import ConfigError, validate_train
+from rlgrasp.demos.cli import record_demos
+from rlgrasp.demos.dataset import DemoError, demo_transitions, load_demos
+from rlgrasp.train.loop import Trainer, train
+from rlgrasp.train.parts import build_parts
+from rlgrasp.train.resume import prepare_run
+
+#: A SAC run small enough for a test: one in-process worker, tiny networks, updates from the start.
+SMALL = ["experiment=grasp_sac", "logger=none", "collector=single", "collector.envs_per_worker=2",
+         "collector.steps_per_env=32", "total_frames=256", "algo.learning_starts=64", "algo.batch_size=32",
+         "model.hidden_sizes=[16,16]", "algo.critic_hidden_sizes=[16,16]", "eval.interval_frames=0",
+         "eval.episodes=1", "eval.final_episodes=2", "eval.num_envs=1", "checkpoint.interval_frames=128",
+         "device=cpu"]
+
+
+def _sac(tmp_path: Path, *overrides: str) -> SAC:
+    cfg = compose_train([*SMALL, f"paths.output_dir={tmp_path}", *overrides])
+    torch.manual_seed(0)
+    return SAC(cfg, build_parts(cfg), torch.device("cpu"))
+
+
+def _batch(sac: SAC, n: int, reward_of=None) -> TensorDict:
+    """``n`` random transitions in the collector's ``[envs, time]`` layout (here ``[1, n]``)."""
+    obs_dim, act_dim = sac.parts.spec["obs_dim"], len(sac.parts.spec["action_low"])
+    action = torch.rand(n, act_dim) * 2 - 1
+    reward = reward_of(action) if reward_of else torch.rand(n, 1)
+    false = torch.zeros(n, 1, dtype=torch.bool)
+    return TensorDict({
+        "observation": torch.randn(n, obs_dim), "action": action, "sample_log_prob": torch.zeros(n),
+        "next": {"observation": torch.randn(n, obs_dim), "reward": reward, "done": false,
+                 "terminated": false},
+    }, [n]).unsqueeze(0)
+
+
+def test_the_update_to_data_ratio_is_kept_across_batches_of_any_size(tmp_path: Path) -> None:
+    sac = _sac(tmp_path, "algo.utd_ratio=0.3", "algo.learning_starts=10")
+    steps = [sac.update(_batch(sac, n), 0).get("charts/gradient_steps", 0.0) for n in (8, 7, 7, 9, 5)]
+    assert steps[0] == 0  # the buffer holds fewer than learning_starts frames
+    # 28 frames after the start, at 0.3 steps a frame: 8 steps, none lost to rounding
+    assert sum(steps) == int(0.3 * 28) and sac.updates == int(0.3 * 28)
+
+
+def test_the_actor_learns_the_action_the_reward_pays_for(tmp_path: Path) -> None:
+    """Reward = -|action - 0.5| on every dimension: after a few hundred steps the deterministic
+    action has moved towards 0.5 from the initial policy's 0."""
+    sac = _sac(tmp_path, "algo.utd_ratio=1", "algo.learning_starts=0", "algo.gamma=0.5",
+               "algo.actor_lr=3e-3", "algo.critic_lr=3e-3", "algo.alpha_init=0.01")
+    paid = lambda a: -(a - 0.5).abs().mean(-1, keepdim=True)  # noqa: E731
+    before = sac.actor.module[0](TensorDict({"observation": torch.zeros(1, sac.parts.spec["obs_dim"])}, [1]))
+    for _ in range(12):
+        sac.update(_batch(sac, 48, paid), 0)
+    after = sac.actor.module[0](TensorDict({"observation": torch.zeros(1, sac.parts.spec["obs_dim"])}, [1]))
+    start, end = torch.tanh(before["loc"]).mean(), torch.tanh(after["loc"]).mean()
+    assert float(end) > float(start) + 0.2
+
+
+def test_demonstrations_fill_their_share_of_each_minibatch(tmp_path: Path, recorded_demos: Path) -> None:
+    sac = _sac(tmp_path, f"algo.demos={recorded_demos}", "algo.demo_ratio=0.25", "env.ee_yaw=false")
+    demos = demo_transitions(load_demos(recorded_demos, _layout_of(sac)), sac.cfg.env)
+    sac.update(_batch(sac, 64), 0)
+    sample = sac._sample()
+    assert sample.numel() == 32
+    demo_obs = {tuple(row.tolist()) for row in demos["observation"]}
+    from_demos = sum(tuple(row.tolist()) in demo_obs for row in sample["observation"])
+    assert from_demos == 8
+
+
+def test_demonstrations_become_transitions_with_their_successors(recorded_demos: Path) -> None:
+    demos = load_demos(recorded_demos, _layout_of_env(ee_yaw=False))
+    frames, transitions = demos.frames, demo_transitions(demos, {"reward": "dense"})
+    assert transitions.numel() == frames.numel()
+    inside = ~frames["done"]  # within an episode the next observation is the following step's
+    following = frames["observation"][1:][inside[:-1]]
+    assert torch.equal(transitions["next", "observation"][:-1][inside[:-1]], following)
+    assert torch.equal(transitions["next", "reward"].flatten(), frames["reward"])
+
+
+def test_demonstrations_of_another_reward_are_refused(recorded_demos: Path) -> None:
+    demos = load_demos(recorded_demos, _layout_of_env(ee_yaw=False))
+    with pytest.raises(DemoError, match="recorded with env.reward=dense, this run has env.reward=sparse"):
+        demo_transitions(demos, {"reward": "sparse"})
+
+
+def test_resume_restores_the_learner_and_its_replay_buffer(tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    cfg = compose_train([*SMALL, f"paths.output_dir={run}"])
+    trainer = Trainer(cfg)
+    trainer.update(_batch(trainer.algo, 96))
+    trainer.frames = 96
+    trainer.save()
+    trainer.logger.close()
+    assert (run / REPLAY_FILE).is_file()
+    again = _resumed(run)
+    assert len(again.algo.replay) == 96 and again.updates == trainer.updates
+    for key, value in trainer.algo.loss.state_dict().items():
+        assert torch.equal(value, again.algo.loss.state_dict()[key]), key
+    again.logger.close()
+    (run / REPLAY_FILE).unlink()  # without the file: an empty buffer, said in the log
+    third = _resumed(run)
+    assert len(third.algo.replay) == 0
+    third.logger.close()
+    assert "starts with an empty replay buffer" in (run / "train.log").read_text()
+
+
+def test_a_ppo_checkpoint_is_not_resumed_as_sac(tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    ppo = Trainer(compose_train(["experiment=smoke", "logger=none", f"paths.output_dir={run}"]))
+    ppo.save()
+    ppo.logger.close()
+    with pytest.raises(ConfigError, match=r"algo\._target_: the checkpoint has 'rlgrasp\.algos\.ppo\.PPO'"):
+        _resumed(run)
+
+
+@pytest.mark.parametrize(("override", "message"), [
+    ("algo.utd_ratio=0", "algo.utd_ratio=0.0: must be > 0"),
+    ("algo.buffer_frames=16", "algo.buffer_frames=16: must be >= algo.batch_size (32)"),
+    ("cameras=wrist_depth", "algo='sac': learns from the state for now"),
+])
+def test_bad_sac_input_is_one_line(tmp_path: Path, override: str, message: str) -> None:
+    with pytest.raises(ConfigError) as info:
+        validate_train(compose_train([*SMALL, f"paths.output_dir={tmp_path}", override]))
+    assert message in str(info.value) and "\n" not in str(info.value)
+
+
+def test_a_short_sac_run_evaluates_and_exports_like_ppo(tmp_path: Path) -> None:
+    from rlgrasp.evaluation.cli import evaluate
+    from rlgrasp.export import export, register_export_config
+
+    run = tmp_path / "run"
+    success = train(compose_train([*SMALL, f"paths.output_dir={run}"]))
+    assert 0.0 <= success <= 1.0
+    last = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
+    assert last["frames"] == 256 and last["config"]["algo"]["name"] == "sac" and last["updates"] > 0
+    metrics = evaluate(compose_config("eval", [f"ckpt={run}", "ckpt_kind=last", "episodes=2", "video=false",
+                                               "plots=false", f"out_dir={tmp_path / 'eval'}"]))
+    assert metrics["episodes"] == 2
+    register_export_config()
+    results = export(compose_config("export", [f"ckpt={run}", "ckpt_kind=last", "format=torchscript",
+                                               f"out={tmp_path / 'policy.pt'}"]))
+    assert results["torchscript"]["max_abs_action_diff"] < 1e-5 and (tmp_path / "policy.pt").is_file()
+
+
+def _resumed(run: Path) -> Trainer:
+    cfg, resumed = prepare_run(compose_train([*SMALL, f"paths.output_dir={run}", f"resume={run}"]))
+    return Trainer(cfg, resumed=resumed)
+
+
+def _layout_of(sac: SAC) -> dict:
+    return _layout_of_env(ee_yaw=bool(sac.cfg.env.ee_yaw))
+
+
+def _layout_of_env(ee_yaw: bool) -> dict:
+    from rlgrasp.demos.dataset import layout_of
+    from rlgrasp.envs.factory import env_factory
+
+    cfg = compose_train(["experiment=grasp_sac", f"env.ee_yaw={ee_yaw}", "paths.output_dir=."])
+    env = env_factory(cfg.env)()
+    try:
+        return layout_of(env, dict(cfg.env))
+    finally:
+        env.close()
+
+
+@pytest.fixture(scope="module")
+def recorded_demos(tmp_path_factory) -> Path:
+    """Two episodes of the scripted expert on the cube, recorded in this process."""
+    out = tmp_path_factory.mktemp("demos") / "cube"
+    info = record_demos(compose_config("demos", ["episodes=2", f"out={out}", "workers=1", "keep=all"]))
+    assert info["kept"] == 2
+    return out / "demos"
