@@ -27,7 +27,9 @@ EXPERIMENTS = sorted(p.stem for p in (Path(CONFIG_DIR) / "experiment").glob("*.y
 def test_experiment_composes(experiment: str, train_cfg) -> None:
     cfg = train_cfg(f"experiment={experiment}")
     assert cfg.experiment_name == experiment
-    assert cfg.algo.name == ("distill" if "vision_distill" in experiment else "ppo")
+    expected = "distill" if "vision_distill" in experiment else "sac" if "_sac" in experiment else "ppo"
+    assert cfg.algo.name == expected
+    assert cfg.algo._target_.rsplit(".", 1)[-1] == {"ppo": "PPO", "sac": "SAC", "distill": "DAgger"}[expected]
     assert (cfg.env.camera is not None) == ("vision" in experiment)
     assert cfg.env._target_ == "rlgrasp.envs.PandaGraspEnv"
     OmegaConf.to_container(cfg, resolve=True)  # every interpolation resolves
