@@ -195,7 +195,8 @@ def test_the_seed_check_catches_an_unseeded_worker(tmp_path: Path, train_cfg) ->
 # --- the refactor guard: what the seed decides before any torch kernel runs ----------------------
 #: experiment=smoke composed, except ``env`` (its own guard below) and ``paths.output_dir``.
 SMOKE_CONFIG = """
-algo: {_target_: rlgrasp.algos.ppo.PPO, name: ppo, gamma: 0.9, gae_lambda: 0.9, epochs: 2, minibatch_size: 256, lr: 0.0003, anneal_lr: true,
+algo: {_target_: rlgrasp.algos.ppo.PPO, name: ppo, gamma: 0.9, gae_lambda: 0.9, epochs: 2,
+       minibatch_size: 256, lr: 0.0003, anneal_lr: true,
        min_lr_frac: 0.0, anneal_lr_frames: null, clip_epsilon: 0.2, entropy_coeff: 0.0, critic_coeff: 0.5,
        loss_critic_type: l2,
        normalize_advantage: true, max_grad_norm: 0.5, target_kl: 0.05, desired_kl: null, adam_eps: 1.0e-05,

@@ -1,12 +1,15 @@
 """Checkpoints: atomic save/load, retention, and rebuilding a deterministic policy from one file.
 
 Layout of a checkpoint (a plain dict, ``torch.save``d; ``rlgrasp.train.loop.Trainer.state_dict``
-writes it):
+writes it, for every algorithm):
 
 - ``format``: 2 (1: RNG states as numpy/python objects, not loadable with ``weights_only=True``)
-- ``actor``, ``critic``: state dicts (both include the observation normalizer's buffers
-  ``norm.mean``/``norm.var``/``norm.count``)
-- ``optimizer``: Adam's state dict
+- ``actor``: the policy's state dict (it includes the observation normalizer's buffers
+  ``norm.mean``/``norm.var``/``norm.count``); every algorithm's, so evaluation and export read any
+- what the algorithm adds (``rlgrasp.train.algorithm.Algorithm.state_dict``): PPO ``critic`` and
+  ``optimizer`` (Adam's state); SAC ``sac`` (its loss's critics, target critics and temperature, the
+  optimizers, the gradient steps owed; the replay buffer is ``replay.pt`` in the run directory);
+  DAgger ``student``, ``aux``, ``optimizer``
 - ``frames``, ``updates``: counters; ``generation``: how many times the run was resumed
 - ``best_eval_success``, ``last_eval``: evaluation bookkeeping (``last_eval`` may be None)
 - ``rng``: python / numpy / torch RNG states of the learner, as tensors and plain values

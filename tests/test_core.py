@@ -1,0 +1,93 @@
+"""The training core is the same for every algorithm: a fault after the first batch keeps the work and
+says where to resume; a non-finite network never reaches a checkpoint; a stop signal saves. Each
+case runs for PPO and SAC (DAgger is the same loop: ``rlgrasp.vision.distill.DAgger``)."""
+
+from __future__ import annotations
+
+import errno
+import signal
+from pathlib import Path
+
+import pytest
+import torch
+
+from rlgrasp.compose import compose_train
+from rlgrasp.train.algorithm import algorithm_class
+from rlgrasp.train.loop import Trainer, TrainingError
+
+#: One in-process worker, tiny networks, a few batches: PPO's and SAC's.
+SMALL = {
+    "ppo": ["experiment=smoke", "collector=single", "collector.envs_per_worker=2",
+            "collector.steps_per_env=32", "algo.minibatch_size=32"],
+    "sac": ["experiment=grasp_sac", "collector=single", "collector.envs_per_worker=2",
+            "collector.steps_per_env=32", "algo.learning_starts=64", "algo.batch_size=32",
+            "algo.critic_hidden_sizes=[16,16]"],
+}
+COMMON = ["logger=none", "model.hidden_sizes=[16,16]", "total_frames=320", "eval.interval_frames=0",
+          "eval.episodes=1", "eval.final_episodes=1", "eval.num_envs=1", "checkpoint.interval_frames=0",
+          "device=cpu"]
+
+
+def _trainer(algo: str, run: Path) -> Trainer:
+    return Trainer(compose_train([*SMALL[algo], *COMMON, f"paths.output_dir={run}"]))
+
+
+@pytest.mark.parametrize("algo", sorted(SMALL))
+def test_a_fault_after_the_first_batch_saves_and_says_where_to_resume(algo: str, tmp_path: Path) -> None:
+    """A full disk while logging the second batch: the first batch's work is in ``last.pt``."""
+    trainer = _trainer(algo, tmp_path / "run")
+    logged = []
+
+    def scalars(metrics, frames):
+        logged.append(frames)
+        if len(logged) == 2:
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+    trainer.logger.scalars = scalars
+    with pytest.raises(TrainingError) as info:
+        trainer.run()
+    message = str(info.value)
+    assert "OSError" in message and "No space left on device" in message and "\n" not in message
+    assert f"resume with resume={tmp_path / 'run'}" in message
+    saved = torch.load(tmp_path / "run" / "checkpoints" / "last.pt", weights_only=True)
+    assert saved["frames"] == trainer.frames > 0 and saved["config"]["algo"]["name"] == algo
+
+
+@pytest.mark.parametrize("algo", sorted(SMALL))
+def test_a_non_finite_network_stops_the_run_before_any_checkpoint(algo: str, tmp_path: Path) -> None:
+    trainer = _trainer(algo, tmp_path / "run")
+    update = trainer.algo.update
+
+    def poisoned(batch, frames):
+        metrics = update(batch, frames)
+        with torch.no_grad():
+            next(iter(trainer.actor.parameters())).fill_(float("nan"))
+        return metrics
+
+    trainer.algo.update = poisoned
+    with pytest.raises(TrainingError, match="non-finite values in the network parameters"):
+        trainer.run()
+    assert not (tmp_path / "run" / "checkpoints" / "last.pt").exists()
+
+
+@pytest.mark.parametrize("algo", sorted(SMALL))
+def test_a_stop_signal_saves_and_returns(algo: str, tmp_path: Path) -> None:
+    trainer = _trainer(algo, tmp_path / "run")
+    update = trainer.algo.update
+
+    def stopped(batch, frames):
+        trainer.signals.received = signal.SIGTERM  # as the handler records a scheduler's signal
+        return update(batch, frames)
+
+    trainer.algo.update = stopped
+    trainer.run()
+    saved = torch.load(tmp_path / "run" / "checkpoints" / "last.pt", weights_only=True)
+    assert 0 < saved["frames"] < 320
+
+
+def test_every_algorithm_is_named_by_its_target_and_an_unknown_one_is_refused() -> None:
+    assert algorithm_class({"_target_": "rlgrasp.algos.sac.SAC"}).name == "sac"
+    assert algorithm_class({"name": "ppo"}).name == "ppo"  # a config from before algo._target_
+    assert algorithm_class({"name": "distill"}).name == "distill"
+    with pytest.raises(TypeError, match="is not an rlgrasp Algorithm"):
+        algorithm_class({"_target_": "collections.OrderedDict"})
