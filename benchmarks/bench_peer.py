@@ -130,7 +130,7 @@ def sac_kwargs(cfg: Any) -> dict[str, Any]:
 
     a, m = cfg.algo, cfg.model
     if a.get("demos"):
-        raise ValueError(f"algo.demos={a.demos}: SB3's SAC has no demonstrations in its replay; run without")
+        raise ValueError(f"algo.demos={a.demos}: SB3's SAC replays no demonstrations")
     steps = gradient_steps(cfg)
     if steps < 1:
         frames = n_envs(cfg) * cfg.collector.steps_per_env
