@@ -1,18 +1,21 @@
-"""Peer comparison: rlgrasp's training against Stable-Baselines3 PPO, same env, settings and budget.
+"""Peer comparison: rlgrasp's training against Stable-Baselines3, same env, settings and budget.
 
 Both run one after the other on the same machine, on the same wall-clock budget.
 
     pip install -c constraints.txt -e ".[peer]"
     python benchmarks/bench_peer.py --minutes 5 --seed 0
     python benchmarks/bench_peer.py --minutes 5 --only sb3 -- env.control_mode=ee_delta
+    python benchmarks/bench_peer.py --minutes 5 --experiment grasp_sac
 
 rlgrasp runs as ``scripts/train.py experiment=<experiment>`` and is read back from its TensorBoard.
-SB3 runs PPO over a ``SubprocVecEnv`` of the same env (SB3's layout: one process per env) behind
-``VecNormalize`` on observations only (rlgrasp normalizes observations, not rewards), with the
-keywords ``sb3_kwargs`` maps from the same composed config. SB3's periodic evaluation is rlgrasp's
-own ``Evaluator`` (same episodes, seeds and deterministic actions) run inside SB3's ``learn`` after
-an update, so it costs SB3's clock what it costs rlgrasp's. Each side runs in its own process and
-its minutes count from that process's launch, so start-up is charged to both alike.
+The SB3 algorithm follows the experiment's ``algo.name``: PPO for ``ppo``, SAC for ``sac``. It runs
+over a ``SubprocVecEnv`` of the same env (SB3's layout: one process per env) behind ``VecNormalize``
+on observations only (rlgrasp normalizes observations, not rewards), with the keywords
+``sb3_kwargs`` maps from the same composed config; ``unmatched`` names what SB3 cannot set alike.
+SB3's periodic evaluation is rlgrasp's own ``Evaluator`` (same episodes, seeds and deterministic
+actions) run inside SB3's ``learn`` after an update, so it costs SB3's clock what it costs
+rlgrasp's. Each side runs in its own process and its minutes count from that process's launch, so
+start-up is charged to both alike.
 
 Printed for each side: eval success against minutes, ``SPS`` (rlgrasp's console figure: frames/s
 from the end of the first update on, evaluations included) and frames/s from launch; then a table
@@ -68,8 +71,22 @@ def n_envs(cfg: Any) -> int:
     return collector_backend(cfg.collector).frames_per_batch // cfg.collector.steps_per_env
 
 
+def sb3_algo(cfg: Any) -> str:
+    """The SB3 class the config's algorithm is compared with (the peer must learn the same way)."""
+    names = {"ppo": "PPO", "sac": "SAC"}
+    if cfg.algo.name not in names:
+        raise ValueError(f"algo.name={cfg.algo.name!r}: the SB3 side runs PPO or SAC only")
+    return names[cfg.algo.name]
+
+
 def sb3_kwargs(cfg: Any) -> dict[str, Any]:
-    """SB3 ``PPO`` keywords for a composed rlgrasp training config (env, seed and device aside)."""
+    """SB3 keywords for a composed rlgrasp training config (env, seed and device aside), for the
+    class ``sb3_algo`` names; a ``ValueError`` for a config SB3 cannot run."""
+    return sac_kwargs(cfg) if sb3_algo(cfg) == "SAC" else ppo_kwargs(cfg)
+
+
+def ppo_kwargs(cfg: Any) -> dict[str, Any]:
+    """SB3 ``PPO`` keywords for a composed rlgrasp PPO config."""
     from rlgrasp.train.models import ACTIVATIONS
 
     a, m = cfg.algo, cfg.model
@@ -99,6 +116,46 @@ def sb3_kwargs(cfg: Any) -> dict[str, Any]:
     }
 
 
+def gradient_steps(cfg: Any) -> int:
+    """SB3's gradient steps per rollout for rlgrasp's ``utd_ratio``: a rollout is one batch
+    (``steps_per_env`` steps of every env), so ``utd_ratio`` x its frames, rounded (SB3 takes a
+    whole number; rlgrasp carries the fraction over to the next batch)."""
+    return round(cfg.algo.utd_ratio * n_envs(cfg) * cfg.collector.steps_per_env)
+
+
+def sac_kwargs(cfg: Any) -> dict[str, Any]:
+    """SB3 ``SAC`` keywords for a composed rlgrasp SAC config: one rollout per rlgrasp batch, the
+    same update-to-data ratio, replay, temperature and networks."""
+    from rlgrasp.train.models import ACTIVATIONS
+
+    a, m = cfg.algo, cfg.model
+    if a.get("demos"):
+        raise ValueError(f"algo.demos={a.demos}: SB3's SAC replays no demonstrations")
+    steps = gradient_steps(cfg)
+    if steps < 1:
+        frames = n_envs(cfg) * cfg.collector.steps_per_env
+        raise ValueError(f"algo.utd_ratio={a.utd_ratio} x {frames} frames a batch rounds to 0 gradient "
+                         "steps: SB3 would never train")
+    return {
+        "train_freq": (cfg.collector.steps_per_env, "step"),  # each of the n_envs envs steps this often
+        "gradient_steps": steps,
+        "batch_size": a.batch_size,
+        "buffer_size": a.buffer_frames,
+        "learning_starts": a.learning_starts,
+        "learning_rate": a.actor_lr,  # SB3's one rate for actor, critics and temperature
+        "gamma": a.gamma,
+        "tau": a.tau,
+        "target_update_interval": 1,  # rlgrasp soft-updates the target critics after every step
+        "ent_coef": f"auto_{a.alpha_init}",  # learned, starting at alpha_init
+        "target_entropy": "auto" if a.target_entropy is None else a.target_entropy,  # auto: -(action size)
+        "policy_kwargs": {
+            "net_arch": {"pi": list(m.hidden_sizes), "qf": list(a.critic_hidden_sizes)},
+            "activation_fn": ACTIVATIONS[m.activation],
+            "n_critics": a.num_critics,
+        },
+    }
+
+
 def vecnorm_kwargs(cfg: Any) -> dict[str, Any]:
     """``VecNormalize`` as rlgrasp's ``RunningNorm``: observations only, clipped, eps 1e-8."""
     return {"norm_obs": bool(cfg.model.obs_norm), "norm_reward": False, "clip_obs": cfg.model.obs_clip,
@@ -108,9 +165,14 @@ def vecnorm_kwargs(cfg: Any) -> dict[str, Any]:
 def unmatched(cfg: Any) -> list[str]:
     """What the SB3 side cannot set like rlgrasp, for this config (printed with the results)."""
     c = cfg.collector
+    layout = (f"layout: {n_envs(cfg)} env processes (SubprocVecEnv steps one env per process); rlgrasp "
+              f"{c.num_workers} workers x {c.envs_per_worker} envs")
+    return [layout, *(sac_unmatched(cfg) if sb3_algo(cfg) == "SAC" else ppo_unmatched(cfg))]
+
+
+def ppo_unmatched(cfg: Any) -> list[str]:
+    """PPO's differences: the std floor, the KL stop, the policy's squashing, the advantages."""
     notes = [
-        f"layout: {n_envs(cfg)} env processes (SubprocVecEnv steps one env per process); rlgrasp "
-        f"{c.num_workers} workers x {c.envs_per_worker} envs",
         f"std floor model.min_std={cfg.model.min_std}: SB3 has none",
         "target_kl: SB3 estimates KL as mean((r - 1) - log r) and stops before the step, rlgrasp as "
         "mean(-log r) and after it",
@@ -127,10 +189,50 @@ def unmatched(cfg: Any) -> list[str]:
     return notes
 
 
+def sac_unmatched(cfg: Any) -> list[str]:
+    """SAC's differences: the std, the rates, the critics' make-up, the warm-up, the batch timing."""
+    from rlgrasp.train.collectors import collector_backend
+
+    a, m = cfg.algo, cfg.model
+    notes = [
+        f"std: rlgrasp's actor has a state-independent std (a learned vector from model.init_log_std="
+        f"{m.init_log_std}, floor model.min_std={m.min_std}); SB3's SAC a state-dependent one (a linear "
+        "head, log-std clipped to [-20, 2]; its log_std_init applies only with gSDE)",
+        "init: rlgrasp's actor is orthogonal (gain sqrt(2), 0.01 on the head); SB3's SAC PyTorch's default",
+        "warm-up: SB3 acts uniformly at random until algo.learning_starts frames and trains from the first "
+        "batch past them; rlgrasp acts with its initial policy and trains from the batch that reaches them",
+        "observation statistics: VecNormalize updates them every step, rlgrasp once a batch",
+    ]
+    if not a.critic_lr == a.alpha_lr == a.actor_lr:
+        notes.append(f"learning rates: SB3 has one for actor, critics and temperature (algo.actor_lr="
+                     f"{a.actor_lr}); rlgrasp's critics use algo.critic_lr={a.critic_lr}, its temperature "
+                     f"algo.alpha_lr={a.alpha_lr}")
+    if a.critic_layer_norm:
+        notes.append("algo.critic_layer_norm=true: SB3's SAC critics have no LayerNorm")
+    if a.critic_activation != m.activation:
+        notes.append(f"activation: SB3's SAC has one for actor and critics (model.activation="
+                     f"{m.activation}); rlgrasp's critics use algo.critic_activation={a.critic_activation}")
+    if a.actor_every != 1:
+        notes.append(f"algo.actor_every={a.actor_every}: SB3's SAC steps the actor and temperature every "
+                     "gradient step")
+    per_batch = a.utd_ratio * n_envs(cfg) * cfg.collector.steps_per_env
+    if per_batch != gradient_steps(cfg):
+        notes.append(f"algo.utd_ratio={a.utd_ratio}: {per_batch:g} gradient steps a batch, SB3 takes "
+                     f"{gradient_steps(cfg)} (a whole number; rlgrasp carries the fraction over)")
+    if collector_backend(cfg.collector).collects_ahead:
+        notes.append("collector.overlap=true: rlgrasp's workers collect the next batch during the update "
+                     "(with the policy one update behind); SB3 steps its envs only between updates")
+    if m.get("distribution", "tanh_normal") == "normal":
+        notes.append("model.distribution=normal: rlgrasp's SAC actor is an unsquashed Gaussian, SB3's "
+                     "squashes with tanh")
+    return notes
+
+
 # --- the SB3 side (its own process) ---------------------------------------------------------------
 def eval_policy(model: Any, vecnorm: Any) -> Any:
-    """SB3's deterministic action (the mean, clipped to the bounds) on VecNormalize's view of the
-    observation, as the TensorDict module rlgrasp's ``Evaluator`` rolls out."""
+    """SB3's deterministic action (PPO: the mean, clipped to the bounds; SAC: the mean, squashed
+    into them) on VecNormalize's view of the observation, as the TensorDict module rlgrasp's
+    ``Evaluator`` rolls out."""
     import torch  # imports inside functions: SB3's env workers re-run this file's top level
     from tensordict.nn import TensorDictModule
 
@@ -143,7 +245,11 @@ def eval_policy(model: Any, vecnorm: Any) -> Any:
 
 class PeriodicEval(BaseCallback):
     """rlgrasp's loop order inside SB3's ``learn``: after each update the SPS, then an evaluation
-    when one is due, then the budget check before the next rollout (SB3 stops at its first step)."""
+    when one is due, then the budget check before the next rollout (SB3 stops at its first step).
+
+    Both of SB3's loops call ``on_rollout_start`` before each rollout, after the previous update:
+    PPO's rollout is ``n_steps`` steps, SAC's ``train_freq`` steps, of every env. ``num_timesteps``
+    counts the steps of all envs, rlgrasp's frames."""
 
     def __init__(self, cfg: Any, evaluator: Any, vecnorm: Any, start: float, budget_s: float) -> None:
         # the schedule and SPS training itself uses (imported here: see the module docstring)
@@ -187,10 +293,10 @@ class PeriodicEval(BaseCallback):
 
 
 def run_sb3(cfg: Any, out_json: Path) -> None:
-    """Train SB3 PPO on ``cfg`` until its frames or time budget run out, then the final evaluation,
-    as ``Trainer.finish`` does; writes the curve to ``out_json``."""
+    """Train SB3's PPO or SAC on ``cfg`` until its frames or time budget run out, then the final
+    evaluation, as ``Trainer.finish`` does; writes the curve to ``out_json``."""
+    import stable_baselines3
     import torch  # imports inside functions: SB3's env workers re-run this file's top level
-    from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
     from rlgrasp.envs.factory import env_factory
@@ -204,7 +310,8 @@ def run_sb3(cfg: Any, out_json: Path) -> None:
     venv = VecNormalize(SubprocVecEnv([make_env] * n_envs(cfg), start_method="spawn"), **vecnorm_kwargs(cfg))
     evaluator = periodic_evaluator(make_env, cfg)
     try:
-        model = PPO("MlpPolicy", venv, seed=cfg.seed, device=str(resolve_device(cfg.device)), verbose=0,
+        algo = getattr(stable_baselines3, sb3_algo(cfg))
+        model = algo("MlpPolicy", venv, seed=cfg.seed, device=str(resolve_device(cfg.device)), verbose=0,
                     **sb3_kwargs(cfg))
         venv.seed(worker_seed(cfg.seed, 0))  # env k seeded worker_seed + k (rlgrasp: per worker)
         budget_s = cfg.time_budget_min * 60 if cfg.time_budget_min else math.inf
@@ -229,8 +336,9 @@ def sb3_child(args: argparse.Namespace) -> None:
     cfg = compose_train([f"experiment={args.experiment}", f"seed={args.seed}",
                          f"time_budget_min={args.minutes}", f"paths.output_dir={run_dir}", *args.overrides])
     validate_train(cfg)
-    print(f"SB3 PPO: {n_envs(cfg)} envs (SubprocVecEnv), VecNormalize {vecnorm_kwargs(cfg)}", flush=True)
-    print(f"PPO keywords: {sb3_kwargs(cfg)}", flush=True)
+    print(f"SB3 {sb3_algo(cfg)}: {n_envs(cfg)} envs (SubprocVecEnv), VecNormalize {vecnorm_kwargs(cfg)}",
+          flush=True)
+    print(f"{sb3_algo(cfg)} keywords: {sb3_kwargs(cfg)}", flush=True)
     run_sb3(cfg, args.out / f"sb3_seed{args.seed}.json")
 
 
@@ -292,7 +400,7 @@ def summary(evals: Curve, sps: list[tuple[float, int, float]]) -> dict[str, Any]
 def print_curves(results: dict[str, dict[str, Any]], args: argparse.Namespace) -> Path:
     """Each side's eval success against minutes, printed and written to one CSV."""
     names = {"rlgrasp": f"rlgrasp (scripts/train.py experiment={args.experiment})",
-             "sb3": "Stable-Baselines3 PPO (SubprocVecEnv + VecNormalize)"}
+             "sb3": f"Stable-Baselines3 {args.algo} (SubprocVecEnv + VecNormalize)"}
     rows = [("side", "seed", "minutes", "frames", "eval_success_rate", "episodes")]
     for side, r in results.items():
         print(f"\n{names[side]}, seed {args.seed}: eval success against minutes from launch")
@@ -352,14 +460,21 @@ def main() -> None:
     if args.sb3_child:
         sb3_child(args)
         return
+    from rlgrasp.compose import compose_train
+
+    cfg = compose_train([f"experiment={args.experiment}", f"seed={args.seed}", *args.overrides])
+    args.algo, notes = "", []
+    if "sb3" in sides:  # refused before either side runs, not after rlgrasp's minutes
+        try:
+            args.algo, notes = sb3_algo(cfg), unmatched(cfg)
+            sb3_kwargs(cfg)
+        except ValueError as exc:
+            raise SystemExit(f"the SB3 side cannot run this config: {exc}") from None
     results = {}
     for side in sides:
         results[side] = rlgrasp_side(args) if side == "rlgrasp" else sb3_side(args)
     if "sb3" in results:
-        from rlgrasp.compose import compose_train
-
-        cfg = compose_train([f"experiment={args.experiment}", f"seed={args.seed}", *args.overrides])
-        results["sb3"]["unmatched"] = unmatched(cfg)
+        results["sb3"]["unmatched"] = notes
     report(results, args)
 
 

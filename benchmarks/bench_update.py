@@ -1,14 +1,22 @@
-"""What one PPO update costs the learner, per frame: the ceiling on frames/s however many workers
+"""What one update costs the learner, per frame: the ceiling on frames/s however many workers
 collect (with ``collector.overlap`` a batch takes about max(collection, update + evaluation)).
 
     python benchmarks/bench_update.py [--threads 1 2] [--minibatch 512 1024] [--repeats 3] [--compile]
         [overrides ...]
+    python benchmarks/bench_update.py [--threads 1 2] [--steps 50] [--env-steps 500] experiment=grasp_sac
 
-Collects one batch of training's size in-process (default ``experiment=grasp_ppo``), then
+PPO (default ``experiment=grasp_ppo``): collects one batch of training's size in-process, then
 times ``PPOLearner.update`` on it for each torch thread count and minibatch size, with the target-KL
 stop off so that every update runs all its epochs (training stops some updates early: a bound).
 ``--compile`` adds a row per setting with the loss under ``torch.compile`` (TorchRL's sota PPO
 compiles its update; training here does not): its first update, which compiles, is timed apart.
+
+SAC (an experiment whose ``algo.name`` is ``sac``): fills the replay buffer with frames collected
+in-process, times one gradient step (``SAC._step``) for each torch thread count, and sets the
+learner's cost per env frame (a step's time x ``algo.utd_ratio``) against the env's (one env stepped
+in this process with random actions, divided by the workers that step envs in parallel): the larger
+of the two bounds a run in which learner and workers overlap. The env figure leaves out the actor's
+and TorchRL's share of a worker's time, so the ceiling it implies is optimistic.
 """
 
 from __future__ import annotations
@@ -18,6 +26,7 @@ import copy
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout, uninstalled
 import torch
@@ -28,29 +37,23 @@ from rlgrasp.train.parts import build_parts
 from rlgrasp.train.ppo import PPOLearner
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    parser.add_argument("--threads", type=int, nargs="+", default=[1, 2])
-    parser.add_argument("--minibatch", type=int, nargs="+", default=[512, 1024])
-    parser.add_argument("--repeats", type=int, default=3, help="timed updates per setting, after a warm-up")
-    parser.add_argument("--compile", action="store_true", help="also time the loss under torch.compile")
-    parser.add_argument("overrides", nargs="*", help="Hydra overrides (default experiment=grasp_ppo)")
-    args = parser.parse_args()
-
-    cfg = compose_train(args.overrides or ["experiment=grasp_ppo"])
-    # One in-process worker collects the batch training would get from all of them.
-    frames = collector_backend(cfg.collector).frames_per_batch
-    cfg = compose_train([
-        *(args.overrides or ["experiment=grasp_ppo"]),
-        "collector=single",
-        f"collector.steps_per_env={frames // cfg.collector.envs_per_worker}",
+def collect(overrides: list[str], frames: int) -> tuple[Any, Any]:
+    """The config as training composes it, and ``frames`` frames collected by one in-process
+    worker (as many envs as a training worker steps, each for more steps)."""
+    cfg = compose_train(overrides)
+    single = compose_train([
+        *overrides, "collector=single",
+        f"collector.steps_per_env={max(1, frames // cfg.collector.envs_per_worker)}",
     ])
     torch.manual_seed(0)
-    collector = build_parts(cfg).make_collector()
+    collector = build_parts(single).make_collector()
     batch = next(iter(collector))
     collector.shutdown()
+    return cfg, batch
+
+
+def ppo_table(cfg: Any, batch: Any, args: argparse.Namespace) -> None:
+    """One row per thread count, minibatch size (and with ``--compile``, compiled or not)."""
     frames = batch.numel()
     print(f"{frames:,} frames per batch, {cfg.algo.epochs} epochs, hidden {list(cfg.model.hidden_sizes)}")
     print("| torch threads | minibatch | loss | first update, s | ms per update | ms per frame"
@@ -76,6 +79,89 @@ def main() -> None:
                 row = [threads, minibatch, "compiled" if compiled else "eager", f"{first:.1f}", f"{ms:.0f}",
                        f"{ms / frames:.3f}", f"{frames / ms * 1000:,.0f}"]
                 print("| " + " | ".join(map(str, row)) + " |", flush=True)
+
+
+def sac_step_ms(cfg: Any, batch: Any, threads: int, steps: int) -> float:
+    """ms per gradient step of a fresh ``SAC`` whose replay holds ``batch`` (and whose normalizer
+    has seen it), after a few untimed steps."""
+    from rlgrasp.algos.sac import SAC, TRANSITION_KEYS
+    from rlgrasp.train.models import OBS_KEY
+
+    torch.set_num_threads(threads)
+    torch.manual_seed(0)
+    algo = SAC(cfg, build_parts(cfg), torch.device("cpu"))
+    flat = batch.reshape(-1)
+    algo.norm.update(flat[OBS_KEY])
+    algo.replay.extend(flat.select(*TRANSITION_KEYS))
+    for _ in range(3):  # warm-up: the optimizers' state, the allocator
+        algo._step()
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        algo._step()
+    return (time.perf_counter() - t0) / steps * 1000
+
+
+def env_ms_per_frame(cfg: Any, steps: int) -> float:
+    """ms per step of one env in this process under random actions (no actor, no TorchRL)."""
+    env = build_parts(cfg).make_env()
+    env.reset(seed=0)
+    env.action_space.seed(0)
+    for _ in range(20):  # warm-up
+        env.step(env.action_space.sample())
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        if terminated or truncated:
+            env.reset()
+    ms = (time.perf_counter() - t0) / steps * 1000
+    env.close()
+    return ms
+
+
+def sac_table(cfg: Any, batch: Any, args: argparse.Namespace) -> None:
+    """Per thread count: a gradient step, the learner per frame, the env per frame over the
+    workers, which of the two bounds, and the ceiling it implies."""
+    a, workers = cfg.algo, max(1, cfg.collector.num_workers)
+    env_ms = env_ms_per_frame(cfg, args.env_steps)
+    print(f"replay: {batch.numel():,} frames; minibatch {a.batch_size}, {a.num_critics} critics "
+          f"{list(a.critic_hidden_sizes)}, actor {list(cfg.model.hidden_sizes)}, utd_ratio {a.utd_ratio}")
+    print(f"env: {env_ms:.3f} ms per frame (one env, random actions, {args.env_steps} steps); "
+          f"{workers} workers: {env_ms / workers:.3f} ms per frame")
+    print("| torch threads | ms per gradient step | learner ms per frame | env ms per frame / workers"
+          " | learner / env | bound | ceiling, frames/s |")
+    print("|---|---|---|---|---|---|---|")
+    for threads in args.threads:
+        step_ms = sac_step_ms(cfg, batch, threads, args.steps)
+        learner, env = step_ms * a.utd_ratio, env_ms / workers
+        bound = "learner" if learner > env else "env"
+        row = [threads, f"{step_ms:.1f}", f"{learner:.3f}", f"{env:.3f}", f"{learner / env:.2f}", bound,
+               f"{1000 / max(learner, env):,.0f}"]  # overlapped: the slower of the two sets the pace
+        print("| " + " | ".join(map(str, row)) + " |", flush=True)
+    print(f"The ceiling gives the learner and each of the {workers} workers a core of its own; on 2 cores "
+          "they share them, and a worker also runs the actor and TorchRL's bookkeeping.")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--threads", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--minibatch", type=int, nargs="+", default=[512, 1024], help="PPO")
+    parser.add_argument("--repeats", type=int, default=3, help="PPO: timed updates per setting, after one")
+    parser.add_argument("--compile", action="store_true", help="PPO: also time the loss under torch.compile")
+    parser.add_argument("--steps", type=int, default=50, help="SAC: timed gradient steps per thread count")
+    parser.add_argument("--env-steps", type=int, default=500, help="SAC: timed steps of one env")
+    parser.add_argument("overrides", nargs="*", help="Hydra overrides (default experiment=grasp_ppo)")
+    args = parser.parse_args()
+
+    overrides = args.overrides or ["experiment=grasp_ppo"]
+    cfg = compose_train(overrides)
+    if cfg.algo.name == "sac":
+        # a replay of a few minibatches (training's batch is small: 128 frames for grasp_sac)
+        frames = max(collector_backend(cfg.collector).frames_per_batch, 4 * cfg.algo.batch_size)
+        sac_table(*collect(overrides, frames), args)
+    else:  # one in-process worker collects the batch training would get from all of them
+        ppo_table(*collect(overrides, collector_backend(cfg.collector).frames_per_batch), args)
 
 
 if __name__ == "__main__":

@@ -1,5 +1,5 @@
-"""benchmarks/bench_peer.py's mapping from an rlgrasp training config to Stable-Baselines3's PPO: the
-peer comparison is only fair if SB3 gets rlgrasp's settings, and SB3 must accept them as given."""
+"""benchmarks/bench_peer.py's mapping from an rlgrasp training config to Stable-Baselines3's PPO and
+SAC: the peer comparison is only fair if SB3 gets rlgrasp's settings, and SB3 must accept them as given."""
 
 import runpy
 from pathlib import Path
@@ -48,3 +48,70 @@ def test_sb3_gets_grasp_ppo_settings(peer, train_cfg):
     assert model.lr_schedule(1.0) == pytest.approx(a.lr)
     assert model.lr_schedule(0.25) == pytest.approx(0.25 * a.lr)
     venv.close()
+
+
+def test_sb3_gets_grasp_sac_settings(peer, train_cfg):
+    """SAC: one SB3 rollout per rlgrasp batch, as many gradient steps per frame, the same replay,
+    temperature and networks; SB3 builds its SAC from the keywords as given."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize  # optional: skipped without it
+
+    cfg = train_cfg("experiment=grasp_sac")
+    a, m, c = cfg.algo, cfg.model, cfg.collector
+    assert peer["sb3_algo"](cfg) == "SAC"
+    kw = peer["sb3_kwargs"](cfg)
+    envs = peer["n_envs"](cfg)
+    assert envs * kw["train_freq"][0] == c.num_workers * c.envs_per_worker * c.steps_per_env
+    assert kw["train_freq"] == (c.steps_per_env, "step")
+    # grasp_sac: 8 envs x 16 steps = 128 frames a rollout, x 0.25 = 32 gradient steps, exactly.
+    assert kw["gradient_steps"] == a.utd_ratio * envs * c.steps_per_env == 32
+    assert (kw["batch_size"], kw["buffer_size"], kw["learning_starts"]) == (
+        a.batch_size, a.buffer_frames, a.learning_starts)
+    assert (kw["gamma"], kw["tau"], kw["learning_rate"], kw["target_update_interval"]) == (
+        a.gamma, a.tau, a.actor_lr, 1)
+
+    venv = VecNormalize(DummyVecEnv([lambda: gym.make("Pendulum-v1")] * envs), **peer["vecnorm_kwargs"](cfg))
+    model = sb3.SAC("MlpPolicy", venv, seed=0, device="cpu", **kw)
+    assert model.gradient_steps / (envs * model.train_freq.frequency) == a.utd_ratio
+    assert float(model.log_ent_coef.detach().exp()) == pytest.approx(a.alpha_init)
+    assert model.target_entropy == -venv.action_space.shape[0]  # target_entropy null: -(action size)
+    widths = [layer.out_features for layer in model.actor.latent_pi if isinstance(layer, torch.nn.Linear)]
+    assert widths == list(m.hidden_sizes)
+    assert any(isinstance(layer, torch.nn.Tanh) for layer in model.actor.latent_pi)
+    assert len(model.critic.q_networks) == a.num_critics
+    for q in model.critic.q_networks:
+        widths = [layer.out_features for layer in q if isinstance(layer, torch.nn.Linear)]
+        assert widths == [*a.critic_hidden_sizes, 1]
+    for opt in (model.actor.optimizer, model.critic.optimizer, model.ent_coef_optimizer):
+        assert opt.param_groups[0]["lr"] == pytest.approx(a.actor_lr)
+    venv.close()
+
+
+def test_sac_ratio_rounds_to_whole_steps(peer, train_cfg):
+    """SB3 takes a whole number of gradient steps per rollout: the nearest one, named as unmatched;
+    a ratio that rounds to none is refused (SB3 would never train)."""
+    cfg = train_cfg("experiment=grasp_sac", "algo.utd_ratio=0.3")
+    assert peer["sb3_kwargs"](cfg)["gradient_steps"] == 38  # 0.3 x 128 = 38.4
+    assert any("38.4 gradient steps" in note for note in peer["unmatched"](cfg))
+    assert not any("utd_ratio" in note for note in peer["unmatched"](train_cfg("experiment=grasp_sac")))
+    with pytest.raises(ValueError, match="0 gradient steps"):
+        peer["sb3_kwargs"](train_cfg("experiment=grasp_sac", "algo.utd_ratio=0.001"))
+
+
+def test_sac_unmatched_names_the_differences(peer, train_cfg):
+    notes = "\n".join(peer["unmatched"](train_cfg(
+        "experiment=grasp_sac", "algo.critic_lr=1e-3", "algo.actor_every=2")))
+    named_all = ("state-independent std", "model.min_std=0.05", "algo.critic_lr=0.001", "layer_norm",
+                 "critic_activation=relu", "algo.actor_every=2", "uniformly at random", "collector.overlap")
+    for named in named_all:
+        assert named in notes, named
+    assert "target_kl" not in notes  # PPO's notes stay PPO's
+    plain = "\n".join(peer["unmatched"](train_cfg(
+        "experiment=grasp_sac", "algo.critic_layer_norm=false", "algo.critic_activation=tanh",
+        "collector.overlap=false")))
+    for absent in ("LayerNorm", "critic_activation", "learning rates", "actor_every", "overlap"):
+        assert absent not in plain, absent
+
+
+def test_sac_with_demonstrations_is_refused(peer, train_cfg):
+    with pytest.raises(ValueError, match="algo.demos"):
+        peer["sb3_kwargs"](train_cfg("experiment=grasp_sac", "algo.demos=some/demos"))
