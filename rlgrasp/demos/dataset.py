@@ -17,6 +17,7 @@ import torch
 from tensordict import TensorDict
 
 from rlgrasp.config import ConfigError
+from rlgrasp.targets import UntrustedConfigError, check_plain_memmap
 
 FORMAT = 1
 META = "demos.json"
@@ -97,6 +98,10 @@ def load_demos(path: str | Path, layout: dict[str, Any]) -> Demos:
             )
     if not meta.get("summary", {}).get("kept"):
         raise DemoError(f"algo.demos={path}: holds no demonstrations (0 episodes kept)")
+    try:  # load_memmap unpickles what is not a plain tensor: check the folder first
+        check_plain_memmap(Path(meta["dir"]) / FRAMES, f"algo.demos={path}")
+    except UntrustedConfigError as exc:
+        raise DemoError(str(exc)) from None
     frames = TensorDict.load_memmap(Path(meta["dir"]) / FRAMES).to_tensordict()
     if not bool(frames["success"].any()):  # learning imitates successes only
         raise DemoError(f"algo.demos={path}: none of its {meta['summary']['kept']} episodes succeeded")

@@ -25,7 +25,9 @@ from rlgrasp.config import EnvConfig
 from rlgrasp.envs.robot import robot_label
 from rlgrasp.evaluation.policies import POLICIES, PolicySource, build_policy
 from rlgrasp.overrides import explain
+from rlgrasp.targets import UntrustedConfigError, check_received_config
 from rlgrasp.train.checkpoint import unpickler_reason
+from rlgrasp.train.legacy import upgrade_config
 from rlgrasp.vision.models import image_specs
 
 CKPT_KINDS = ("best", "last")
@@ -88,6 +90,10 @@ def load_checked_checkpoint(path: Path) -> dict[str, Any]:
         raise EvaluationError(
             f"corrupt checkpoint: {path} holds a {type(ckpt).__name__}, not a checkpoint dict"
         )
+    try:  # data until checked: the env is built from its config with Hydra's instantiate
+        check_received_config(upgrade_config(ckpt.get("config") or {}), str(path))
+    except UntrustedConfigError as exc:
+        raise EvaluationError(str(exc)) from None
     missing = [k for k in REQUIRED_KEYS if k not in ckpt]
     missing += [f"spec.{k}" for k in REQUIRED_SPEC if k not in (ckpt.get("spec") or {})]
     if missing:

@@ -37,6 +37,7 @@ import random
 import re
 import sys
 import zipfile
+from collections.abc import Iterable
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -47,6 +48,7 @@ from omegaconf import OmegaConf
 from tensordict.nn import TensorDictModuleBase
 
 from rlgrasp.config import CONFIG_DIR
+from rlgrasp.targets import UntrustedConfigError, check_received_config
 from rlgrasp.train.legacy import upgrade_config
 from rlgrasp.train.models import OBS_KEY, RunningNorm, build_actor
 from rlgrasp.train.rundir import CHECKPOINTS
@@ -71,7 +73,9 @@ def save_checkpoint(path: str | os.PathLike, state: dict[str, Any]) -> Path:
     return path
 
 
-def read_checkpoint(path: str | os.PathLike, map_location: str | torch.device = "cpu") -> dict[str, Any]:
+def read_checkpoint(
+    path: str | os.PathLike, map_location: str | torch.device = "cpu", trusted: Iterable[str] = ()
+) -> dict[str, Any]:
     """Load one checkpoint file with ``weights_only=True``; ``CheckpointError`` says what is wrong."""
     path = Path(path)
     if not path.is_file():
@@ -93,6 +97,10 @@ def read_checkpoint(path: str | os.PathLike, map_location: str | torch.device = 
     if not isinstance(state, dict) or "actor" not in state or "config" not in state:
         raise CheckpointError(f"not an rlgrasp training checkpoint: {path}")
     state["config"] = upgrade_config(state["config"])  # older checkpoints: rlgrasp.train.legacy
+    try:  # data until checked: its config is built with Hydra's instantiate (rlgrasp.targets)
+        check_received_config(state["config"], str(path), trusted)
+    except UntrustedConfigError as exc:
+        raise CheckpointError(str(exc)) from None
     return state
 
 
@@ -117,7 +125,7 @@ def checkpoint_files(ckpt_dir: str | os.PathLike) -> list[Path]:
 
 
 def newest_readable(
-    run_dir: str | os.PathLike, map_location: str | torch.device = "cpu"
+    run_dir: str | os.PathLike, map_location: str | torch.device = "cpu", trusted: Iterable[str] = ()
 ) -> tuple[Path, dict[str, Any]]:
     """``(path, state)`` of the newest checkpoint of a run that loads; a bad ``last.pt`` (say,
     truncated by a full disk) is skipped with a warning naming it."""
@@ -128,7 +136,7 @@ def newest_readable(
     errors = []
     for path in files:
         try:
-            state = read_checkpoint(path, map_location)
+            state = read_checkpoint(path, map_location, trusted)
         except CheckpointError as exc:
             errors.append(str(exc))
             log.warning("skipping %s", exc)

@@ -26,6 +26,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from rlgrasp.compose import compose_train
 from rlgrasp.config import CONFIG_DIR, ConfigError, validate_train
+from rlgrasp.targets import trusted_targets
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.rundir import CHECKPOINTS
 from rlgrasp.utils import flatten
@@ -88,10 +89,12 @@ def prepare_run(cfg: DictConfig, changed: Iterable[str] | None = None) -> tuple[
     if source is None:
         validate_train(cfg)
         return cfg, None
+    # The classes this command line's own config names are trusted in the file's (rlgrasp.targets).
+    trusted = trusted_targets(OmegaConf.to_container(cfg, resolve=False))
     if source.is_dir():
-        path, state = ckpt_lib.newest_readable(source)
+        path, state = ckpt_lib.newest_readable(source, trusted=trusted)
     else:
-        path, state = source, ckpt_lib.read_checkpoint(source)
+        path, state = source, ckpt_lib.read_checkpoint(source, trusted=trusted)
     merged = merged_config(cfg, state["config"], changed)
     merged.resume = resume  # what it resumed with, also when a requeue chose it
     validate_train(merged)

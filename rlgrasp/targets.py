@@ -1,0 +1,118 @@
+"""What a config read from a file may name: rlgrasp's own classes, at the nodes that build them.
+
+A checkpoint loads with ``weights_only=True`` and cannot run code while it loads; its ``config`` is
+then rebuilt with Hydra's ``instantiate`` (the env, and on resume the collector, the logger and the
+algorithm), which calls whatever ``_target_`` a node names, with whatever ``_args_`` it gives, at any
+depth. Hydra refuses a few targets (``os.system``) and not others (``builtins.open`` truncates a file
+of the sender's choosing). So a config that came from a file is data until this module has checked
+it: a ``_target_`` may stand only at the top of a node that rlgrasp builds, and must name one of the
+classes below; no other instantiation key may appear anywhere. A class of your own is trusted when
+your own command line's config names it (``trusted``), never because a received file does.
+
+This module imports nothing of rlgrasp's: every reader can use it.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+#: The classes a received config may name, by the node that builds them.
+REGISTRY: dict[str, frozenset[str]] = {
+    "env": frozenset({"rlgrasp.envs.PandaGraspEnv", "rlgrasp.envs.GraspEnv"}),
+    "collector": frozenset({
+        "rlgrasp.train.collectors.ProcessCollector",
+        "rlgrasp.train.collectors.SingleCollector",
+        "rlgrasp.train.collectors.RayCollector",
+    }),
+    "logger": frozenset({
+        "rlgrasp.train.logger.TensorBoardLogger",
+        "rlgrasp.train.logger.ConsoleLogger",
+        "rlgrasp.train.trackers.WandbLogger",
+        "rlgrasp.train.trackers.MlflowLogger",
+    }),
+    "algo": frozenset({"rlgrasp.algos.ppo.PPO", "rlgrasp.algos.sac.SAC", "rlgrasp.vision.distill.DAgger"}),
+}
+#: Hydra's keys that make a node callable or change how it is called.
+INSTANTIATE_KEYS = ("_target_", "_args_", "_partial_", "_recursive_", "_convert_")
+
+
+class UntrustedConfigError(ValueError):
+    """A config read from a file names something rlgrasp does not build; the message is one line."""
+
+
+def check_received_config(config: Any, source: str, trusted: Iterable[str] = ()) -> None:
+    """Refuse ``config`` (a plain dict, as checkpoints store it) if it would make ``instantiate``
+    call anything but rlgrasp's own classes at their nodes (or a class in ``trusted``)."""
+    if not isinstance(config, Mapping):
+        return
+    trusted = frozenset(trusted)
+    for node, allowed in REGISTRY.items():
+        value = config.get(node)
+        if isinstance(value, Mapping) and "_target_" in value:
+            target = value["_target_"]
+            if target not in allowed and target not in trusted:
+                raise UntrustedConfigError(
+                    f"{source}: refused: config.{node}._target_={target!r} is not a class rlgrasp builds "
+                    f"(allowed: {', '.join(sorted(allowed))})"
+                )
+    for path, key in _instantiation_keys(config, ""):
+        top = path.count(".") == 0 and path in REGISTRY and key == "_target_"
+        if not top:
+            where = f"config.{path}.{key}" if path else f"config.{key}"
+            raise UntrustedConfigError(
+                f"{source}: refused: {where} would be called when the config is built "
+                "(a file's config may name a class only at env, collector, logger or algo)"
+            )
+
+
+def _instantiation_keys(node: Any, path: str) -> Iterable[tuple[str, str]]:
+    """Each (path of the node, key) where an instantiation key stands, at any depth."""
+    if isinstance(node, Mapping):
+        for key, value in node.items():
+            if key in INSTANTIATE_KEYS:
+                yield path, str(key)
+            yield from _instantiation_keys(value, f"{path}.{key}" if path else str(key))
+    elif isinstance(node, (list, tuple)):
+        for i, value in enumerate(node):
+            yield from _instantiation_keys(value, f"{path}[{i}]")
+
+
+def trusted_targets(config: Any) -> set[str]:
+    """The ``_target_`` of each node of the user's own composed config (what their command line
+    chose, e.g. a collector class of their own), to pass as ``trusted`` for a file read beside it."""
+    return {str(config[n]["_target_"]) for n in REGISTRY
+            if isinstance(config.get(n), Mapping) and "_target_" in config[n]}
+
+
+#: What ``TensorDict.memmap`` writes for a TensorDict of plain tensors.
+_PLAIN_TYPE = "<class 'tensordict._td.TensorDict'>"
+_META_KEYS = {"shape", "device", "_type"}
+
+
+def check_plain_memmap(folder: str | Path, source: str) -> None:
+    """Refuse a ``TensorDict.memmap`` folder holding anything but plain tensors (nested folders of
+    them included) before ``TensorDict.load_memmap`` reads it: for other entry types it unpickles
+    ``other.pickle``, which can run code."""
+    folder = Path(folder)
+    meta_file = folder / "meta.json"
+    if not meta_file.is_file():
+        raise UntrustedConfigError(f"{source}: {folder} has no meta.json (not a TensorDict memory map)")
+    meta = json.loads(meta_file.read_text())
+    if meta.get("_type") != _PLAIN_TYPE:
+        kind = meta.get("_type")
+        raise UntrustedConfigError(f"{source}: refused: {folder} holds a {kind}, not plain tensors")
+    for key, entry in meta.items():
+        if key in _META_KEYS:
+            continue
+        if not isinstance(entry, Mapping) or "dtype" not in entry or entry.get("is_nested"):
+            raise UntrustedConfigError(f"{source}: refused: entry {key!r} of {folder} is not a plain tensor")
+    for item in folder.iterdir():
+        if item.is_dir():
+            check_plain_memmap(item, source)
+        elif item.name != "meta.json" and item.suffix != ".memmap":
+            raise UntrustedConfigError(
+                f"{source}: refused: {item.name} in {folder} is not a tensor file (it could be unpickled)"
+            )
