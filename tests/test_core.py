@@ -91,3 +91,39 @@ def test_every_algorithm_is_named_by_its_target_and_an_unknown_one_is_refused() 
     assert algorithm_class({"name": "distill"}).name == "distill"
     with pytest.raises(TypeError, match="is not an rlgrasp Algorithm"):
         algorithm_class({"_target_": "collections.OrderedDict"})
+
+
+def test_a_second_process_on_a_run_directory_is_refused_in_one_line(tmp_path: Path) -> None:
+    from rlgrasp.config import ConfigError
+    from rlgrasp.train.rundir import run_lock
+
+    run = tmp_path / "run"
+    trainer = _trainer("ppo", run)
+    with run_lock(run):  # as another training process on the same run would hold it
+        with pytest.raises(ConfigError, match=r"is being trained by pid \d+: one process per run directory"):
+            trainer.run()
+    assert not (run / "checkpoints").exists()
+
+
+def test_checkpoints_write_last_first_and_a_failed_write_leaves_nothing_behind(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from rlgrasp.train import checkpoint as ckpt_lib
+
+    written = []
+    save = ckpt_lib.save_checkpoint
+    spy = lambda path, state: written.append(path.name) or save(path, state)  # noqa: E731
+    monkeypatch.setattr(ckpt_lib, "save_checkpoint", spy)
+    ckpt_lib.write_checkpoints(tmp_path, {"frames": 7, "actor": {}}, keep_last=2, is_best=True)
+    assert written == ["last.pt", "ckpt_0000000007.pt", "best.pt"]
+    monkeypatch.setattr(ckpt_lib, "save_checkpoint", save)
+
+    def full_disk(state, f):
+        f.write(b"half a checkpoint")
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(torch, "save", full_disk)
+    with pytest.raises(OSError):
+        ckpt_lib.write_checkpoints(tmp_path, {"frames": 8, "actor": {}}, keep_last=2, is_best=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["best.pt", "ckpt_0000000007.pt", "last.pt"]
+    assert torch.load(tmp_path / "last.pt", weights_only=True)["frames"] == 7  # untouched

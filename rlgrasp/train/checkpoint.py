@@ -64,13 +64,37 @@ class CheckpointError(ValueError):
 
 
 def save_checkpoint(path: str | os.PathLike, state: dict[str, Any]) -> Path:
-    """Write ``state`` to ``path`` atomically: a crash mid-write never leaves a broken file."""
+    """Write ``state`` to ``path`` atomically and durably: a crash mid-write never leaves a broken
+    file, a failed write (a full disk) leaves no temporary file, and the file and its directory entry
+    are on disk before this returns (a power loss after it cannot lose the checkpoint)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    torch.save(state, tmp)
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as f:
+            torch.save(state, f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    _fsync_dir(path.parent)
     return path
+
+
+def _fsync_dir(folder: Path) -> None:
+    """The rename itself on disk (POSIX; a no-op where directories cannot be opened)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 def read_checkpoint(
@@ -211,10 +235,13 @@ def package_versions(
 def write_checkpoints(
     ckpt_dir: str | os.PathLike, state: dict[str, Any], keep_last: int, is_best: bool
 ) -> Path:
-    """Write ``ckpt_<frames>.pt`` and ``last.pt`` (and ``best.pt``), keep the last K numbered ones."""
+    """Write ``last.pt`` first, then ``ckpt_<frames>.pt`` (and ``best.pt``), and keep the last K
+    numbered ones: an interruption between the writes leaves ``last.pt`` the newest, which is what a
+    resume reads first. Separate files, not links: a ``last.pt`` damaged in place leaves the
+    numbered ones to resume from."""
     ckpt_dir = Path(ckpt_dir)
-    numbered = save_checkpoint(ckpt_dir / f"ckpt_{state['frames']:010d}.pt", state)
     save_checkpoint(ckpt_dir / "last.pt", state)
+    numbered = save_checkpoint(ckpt_dir / f"ckpt_{state['frames']:010d}.pt", state)
     if is_best:
         save_checkpoint(ckpt_dir / "best.pt", state)
     olds = sorted(p for p in ckpt_dir.glob("ckpt_*.pt") if _NUMBERED.search(p.name))

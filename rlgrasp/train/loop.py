@@ -38,7 +38,7 @@ from rlgrasp.train.metrics import Due, Throughput, finished_episodes
 from rlgrasp.train.parts import build_parts
 from rlgrasp.train.preemption import StopSignals
 from rlgrasp.train.resume import prepare_run
-from rlgrasp.train.rundir import CHECKPOINTS, ENV_ERRORS
+from rlgrasp.train.rundir import CHECKPOINTS, ENV_ERRORS, RunLockedError, run_lock
 from rlgrasp.train.warm_start import warm_start
 from rlgrasp.utils import flatten
 
@@ -197,6 +197,11 @@ class Trainer:
     def run(self) -> float:
         """Train; returns the final evaluation success rate (NaN if the env has none)."""
         with contextlib.ExitStack() as cleanup:
+            try:
+                cleanup.enter_context(run_lock(self.run_dir))
+            except RunLockedError as exc:
+                self.logger.close()
+                raise ConfigError(str(exc)) from None
             cleanup.callback(self.logger.close)
             cleanup.callback(self.evaluator.close)
             if self.background is not None:

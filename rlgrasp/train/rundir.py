@@ -11,12 +11,14 @@ What a start continues from once it is there (which checkpoint, which config) is
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import secrets
 import shutil
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -142,3 +144,38 @@ class RunDirCheck(Callback):
         if problem:
             print(f"error: cannot create the run directory {path}: {problem}", file=sys.stderr)
             sys.exit(2)
+
+
+#: The lock a training process holds on its run directory while it runs.
+LOCK_FILE = ".lock"
+
+
+@contextlib.contextmanager
+def run_lock(run_dir: Path) -> Iterator[None]:
+    """Hold ``<run_dir>/.lock`` while training: a second process on the same run (two
+    ``resume=auto`` started at once) is refused in one line instead of interleaving its checkpoints
+    with the first's. The lock is the kernel's (``flock``): it goes with the process, however that ends."""
+    import fcntl  # POSIX; rlgrasp's training runs on Linux and macOS
+
+    handle = open(Path(run_dir) / LOCK_FILE, "a+")  # noqa: SIM115 - held for the run, closed below
+    try:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            handle.seek(0)
+            holder = handle.read().strip() or "another process"
+            raise RunLockedError(
+                f"{run_dir} is being trained by {holder}: one process per run directory (wait for it, "
+                "or start this run elsewhere)"
+            ) from None
+        handle.seek(0)
+        handle.truncate()
+        handle.write(f"pid {os.getpid()}")
+        handle.flush()
+        yield
+    finally:
+        handle.close()
+
+
+class RunLockedError(RuntimeError):
+    """Another process holds the run directory's lock; the message says which."""
