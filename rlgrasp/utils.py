@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import ctypes
+import multiprocessing
+import os
 import signal
+import sys
 import threading
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -81,7 +85,23 @@ class SpawnContextIgnoringCtrlC(SpawnContext):
     Process = _SpawnIgnoringCtrlC
 
 
+def die_with_parent() -> None:
+    """In a process rlgrasp spawned: be killed when the parent dies, however it dies. A ``kill -9``
+    (the OOM killer's signal) gives the parent no chance to end its workers, and a worker blocked
+    on its task queue would run on for ever; Linux's ``PR_SET_PDEATHSIG`` has the kernel send
+    SIGKILL instead. No-op in a process that is not a multiprocessing child, and elsewhere than Linux
+    (where the workers' broken pipes end them when they next talk to the parent)."""
+    parent = multiprocessing.parent_process()
+    if parent is None or not sys.platform.startswith("linux"):
+        return
+    libc = ctypes.CDLL(None, use_errno=True)
+    libc.prctl(1, signal.SIGKILL)  # 1: PR_SET_PDEATHSIG
+    if os.getppid() != parent.pid:  # the parent died before the line above
+        os._exit(1)
+
+
 def _init_from_queue(handoff: Any) -> None:
+    die_with_parent()
     initializer, initargs = handoff.get()
     initializer(*initargs)
 

@@ -137,3 +137,19 @@ def test_training_stopped_mid_background_evaluation_exits_and_leaves_nothing(
     assert re.search(r"SIGTERM at [\d,]+ frames: saving a checkpoint", out), out[-3000:]
     assert "Traceback" not in out, out[-3000:]
     assert started.left() == []  # the evaluation process is of the group too
+
+
+def test_eval_killed_with_sigkill_leaves_no_worker(tmp_path: Path, script) -> None:
+    """``kill -9`` (the OOM killer's signal) gives the parent no chance to end its pool: the
+    workers end themselves (``rlgrasp.utils.die_with_parent``)."""
+    run = make_run(tmp_path)
+    killed = script("evaluate", f"ckpt={run}", "episodes=2000", "workers=2", "name=killed", *QUIET_EVAL)
+    # Each worker's physics client says "argv[0]=" once it is set up: both are into their episodes.
+    started = lambda: killed.output().partition("evaluating")[2].count("argv[0]=") >= 2 or None  # noqa: E731
+    wait_for(started, 180, killed)
+    killed.proc.send_signal(signal.SIGKILL)
+    killed.wait(timeout=30)
+    deadline = time.monotonic() + 5
+    while in_group(killed.pid, "spawn_main") and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert in_group(killed.pid, "spawn_main") == []

@@ -23,6 +23,8 @@ from torchrl.data import Composite, Unbounded
 from torchrl.envs import EnvBase, GymWrapper, default_info_dict_reader
 from torchrl.envs.transforms import Compose, RewardSum, StepCounter, TransformedEnv
 
+from rlgrasp.utils import die_with_parent
+
 ERROR_FILE_PREFIX = "env_error_"
 # Info entries copied into the tensordict (those the env provides).
 INFO_DTYPES = {"is_success": torch.bool, "grasped": torch.bool, "lift_height": torch.float32,
@@ -108,6 +110,7 @@ def _guarded_env(
 ) -> Any:
     """One env; with ``stagger_over`` = n > 1, env ``index`` of n ends its first episode after
     (index + 1) / n of the episode length."""
+    die_with_parent()  # in a collector's worker process: it must not outlive the learner
     env = _guard(make_env(), name, error_dir)
     length = getattr(env.unwrapped, "max_episode_steps", None)
     if stagger_over > 1 and length:

@@ -31,7 +31,7 @@ import torch
 
 from rlgrasp.config import PeriodicEvalConfig
 from rlgrasp.train.evaluate import Evaluator
-from rlgrasp.utils import SpawnContextIgnoringCtrlC
+from rlgrasp.utils import SpawnContextIgnoringCtrlC, die_with_parent
 
 log = logging.getLogger("rlgrasp.train")
 #: How often ``wait`` checks whether to stop waiting.
@@ -67,7 +67,8 @@ def _serve(conn: Connection) -> None:
     with those weights; answers ``("ok", metrics, seconds)`` or ``("error", message, traceback)``. Ends on
     ``None`` or when the learner's end of the pipe closes."""
     # Born ignoring Ctrl-C (it reaches the whole process group): the learner decides when this
-    # process ends. The evaluator and the policy come first through the pipe, after the launch.
+    # process ends, or its death does. The evaluator and the policy come through the pipe.
+    die_with_parent()
     try:
         evaluator, policy, threads = conn.recv()
     except (EOFError, OSError):  # the learner is gone before it sent them
