@@ -10,6 +10,7 @@ command line.
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 from collections.abc import Callable
@@ -562,6 +563,9 @@ def _train_problems(cfg: Any, batch: int) -> list[str]:
     c, a, m, e, k = cfg.collector, cfg.algo, cfg.model, cfg.eval, cfg.checkpoint
     distribution = m.get("distribution", "tanh_normal")  # a camera model has no such key
     checks = [
+        ("seed", cfg.seed, 0 <= cfg.seed < 2**32, "must be an integer in [0, 2**32)"),
+        ("experiment_name", cfg.experiment_name, _one_path_component(cfg.experiment_name),
+         "must be a plain name (no '/', not '..' or empty): it names a folder under the outputs"),
         ("total_frames", cfg.total_frames, cfg.total_frames > 0, "must be > 0"),
         ("time_budget_min", cfg.time_budget_min, cfg.time_budget_min is None or cfg.time_budget_min > 0,
          "must be > 0 or null"),
@@ -576,6 +580,7 @@ def _train_problems(cfg: Any, batch: int) -> list[str]:
          "must be tanh, relu or elu"),
         ("model.distribution", distribution, distribution in ("tanh_normal", "normal"),
          "must be tanh_normal or normal"),
+        ("model.obs_clip", m.obs_clip, m.obs_clip > 0, "must be > 0 (the normalized observation's bound)"),
         *_model_camera_checks(m, cfg.env.get("camera"), a.name),
         ("eval.episodes", e.episodes, e.episodes >= 1, "must be >= 1"),
         ("eval.final_episodes", e.final_episodes, e.final_episodes is None or e.final_episodes >= 1,
@@ -599,6 +604,12 @@ def _eval_randomization_problems(spec: Any) -> list[str]:
     except (ValueError, OSError) as exc:
         return [f"eval.randomization={plain(spec)!r}: {exc}"]
     return []
+
+
+def _one_path_component(name: Any) -> bool:
+    """A name that stays one folder below where it is joined (no separator, no '..', not absolute)."""
+    text = str(name)
+    return bool(text) and text not in (".", "..") and "/" not in text and "\\" not in text
 
 
 def _model_camera_checks(m: Any, camera: Any, algo: str) -> list[tuple[str, Any, bool, str]]:
@@ -638,6 +649,8 @@ def _learning_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
     return [
         ("algo.epochs", a.epochs, a.epochs >= 1, "must be >= 1"),
         ("algo.lr", a.lr, a.lr > 0, "must be > 0"),
+        ("algo.lr", a.lr, math.isfinite(a.lr), "must be finite"),
+        ("algo.min_lr_frac", a.min_lr_frac, 0 <= a.min_lr_frac <= 1, "must be in [0, 1]"),
     ]
 
 
@@ -673,7 +686,10 @@ def _ppo_checks(a: Any, batch: int) -> list[tuple[str, Any, bool, str]]:
          "steps_per_env)"),
         ("algo.gamma", a.gamma, 0 < a.gamma <= 1, "must be in (0, 1]"),
         ("algo.gae_lambda", a.gae_lambda, 0 <= a.gae_lambda <= 1, "must be in [0, 1]"),
-        ("algo.clip_epsilon", a.clip_epsilon, a.clip_epsilon > 0, "must be > 0"),
+        ("algo.clip_epsilon", a.clip_epsilon, 0 < a.clip_epsilon < 1, "must be in (0, 1)"),
+        ("algo.target_kl", a.target_kl, a.target_kl is None or a.target_kl > 0, "must be > 0 or null"),
+        ("algo.loss_critic_type", a.loss_critic_type, a.loss_critic_type in ("l1", "l2", "smooth_l1"),
+         "must be l1, l2 or smooth_l1"),
         ("algo.max_grad_norm", a.max_grad_norm, a.max_grad_norm > 0, "must be > 0"),
         ("algo.desired_kl", a.desired_kl, a.desired_kl is None or a.desired_kl > 0,
          "must be > 0 or null (null: the learning rate anneals linearly)"),
@@ -716,7 +732,6 @@ def _distill_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
         ("algo.minibatch_size", a.minibatch_size, a.minibatch_size >= 1, "must be >= 1"),
         ("algo.beta0", a.beta0, 0 <= a.beta0 <= 1, "must be in [0, 1]"),
         ("algo.beta_decay", a.beta_decay, 0 < a.beta_decay <= 1, "must be in (0, 1]"),
-        ("algo.min_lr_frac", a.min_lr_frac, 0 <= a.min_lr_frac <= 1, "must be in [0, 1]"),
         ("algo.buffer_frames", a.buffer_frames, a.buffer_frames >= a.minibatch_size,
          f"must be >= algo.minibatch_size ({a.minibatch_size})"),
         ("algo.learner_threads", a.learner_threads, a.learner_threads is None or a.learner_threads >= 1,
@@ -756,6 +771,16 @@ def _built(key: str, node: Any, build: Callable[[Any], Any]) -> Any:
         raise ConfigError(f"{key}._target_={node.get('_target_')!r} cannot be built: {reason}") from None
 
 
+def _warn_about_workers(workers: int) -> None:
+    """Far more worker processes than cores is allowed (a shared machine may lend more later) but
+    slows every one of them: say so."""
+    cores = os.cpu_count() or 1
+    if workers > 2 * cores:
+        logging.getLogger("rlgrasp.train").warning(
+            "collector.num_workers=%d on a machine with %d cores: each worker gets a fraction of a core "
+            "(collector.num_workers=%d or fewer is usually fastest)", workers, cores, cores)
+
+
 def validate_train(cfg: Any) -> None:
     """Refuse a training config with a bad value: ``ConfigError`` naming the first (and how many
     more). The env's own keywords are checked by the env when the learner builds it, before workers."""
@@ -766,6 +791,7 @@ def validate_train(cfg: Any) -> None:
             raise ConfigError(f"env: {str(exc).splitlines()[0]}") from None
     collector = _built("collector", cfg.collector, lambda node: instantiate(node, _convert_="all"))
     _built("logger", cfg.logger, lambda node: instantiate(node, _partial_=True))  # built with the run dir
+    _warn_about_workers(cfg.collector.num_workers)
     problems = _train_problems(cfg, collector.frames_per_batch)
     if problems:
         more = f" (and {len(problems) - 1} more: {'; '.join(problems[1:])})" if len(problems) > 1 else ""

@@ -120,6 +120,11 @@ def read_checkpoint(
         ) from exc
     if not isinstance(state, dict) or "actor" not in state or "config" not in state:
         raise CheckpointError(f"not an rlgrasp training checkpoint: {path}")
+    if isinstance(state.get("format"), int) and state["format"] > FORMAT:
+        raise CheckpointError(
+            f"checkpoint of a newer rlgrasp: {path} has format {state['format']}, this version reads up to "
+            f"format {FORMAT} (upgrade rlgrasp)"
+        )
     state["config"] = upgrade_config(state["config"])  # older checkpoints: rlgrasp.train.legacy
     try:  # data until checked: its config is built with Hydra's instantiate (rlgrasp.targets)
         check_received_config(state["config"], str(path), trusted)

@@ -95,6 +95,11 @@ def prepare_run(cfg: DictConfig, changed: Iterable[str] | None = None) -> tuple[
         path, state = ckpt_lib.newest_readable(source, trusted=trusted)
     else:
         path, state = source, ckpt_lib.read_checkpoint(source, trusted=trusted)
+    if "rng" not in state or "optimizer" not in state and "sac" not in state:
+        raise ConfigError(
+            f"resume={resume}: {path} is a policy file (no training state to continue); resume takes a "
+            f"run directory or its checkpoint; to start a new run from this policy: algo.init_from={path}"
+        )
     merged = merged_config(cfg, state["config"], changed)
     merged.resume = resume  # what it resumed with, also when a requeue chose it
     validate_train(merged)
