@@ -197,3 +197,16 @@ def test_rlgrasp_targets_and_a_users_own_class_from_their_command_line_pass() ->
     with pytest.raises(UntrustedConfigError):
         check_received_config(mine, "f.pt")
     check_received_config(mine, "f.pt", trusted={"mypkg.MyCollector"})
+
+
+def test_a_checkpoint_of_a_newer_format_is_refused_by_every_loader(tmp_path: Path) -> None:
+    from rlgrasp.evaluation.source import load_checked_checkpoint
+    from rlgrasp.train.checkpoint import read_checkpoint
+
+    ckpt = torch.load(SHIPPED, weights_only=True)
+    ckpt["format"] = 99
+    torch.save(ckpt, tmp_path / "future.pt")
+    with pytest.raises(CheckpointError, match="has format 99, this version reads up to format 2"):
+        read_checkpoint(tmp_path / "future.pt")
+    with pytest.raises(EvaluationError, match="has format 99, this version reads up to format 2"):
+        load_checked_checkpoint(tmp_path / "future.pt")

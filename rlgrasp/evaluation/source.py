@@ -26,6 +26,7 @@ from rlgrasp.envs.robot import robot_label
 from rlgrasp.evaluation.policies import POLICIES, PolicySource, build_policy
 from rlgrasp.overrides import explain
 from rlgrasp.targets import UntrustedConfigError, check_received_config
+from rlgrasp.train.checkpoint import FORMAT as CHECKPOINT_FORMAT
 from rlgrasp.train.checkpoint import unpickler_reason
 from rlgrasp.train.legacy import upgrade_config
 from rlgrasp.vision.models import image_specs
@@ -89,6 +90,11 @@ def load_checked_checkpoint(path: Path) -> dict[str, Any]:
     if not isinstance(ckpt, dict):
         raise EvaluationError(
             f"corrupt checkpoint: {path} holds a {type(ckpt).__name__}, not a checkpoint dict"
+        )
+    if isinstance(ckpt.get("format"), int) and ckpt["format"] > CHECKPOINT_FORMAT:
+        raise EvaluationError(
+            f"checkpoint of a newer rlgrasp: {path} has format {ckpt['format']}, this version reads up to "
+            f"format {CHECKPOINT_FORMAT} (upgrade rlgrasp)"
         )
     try:  # data until checked: the env is built from its config with Hydra's instantiate
         check_received_config(upgrade_config(ckpt.get("config") or {}), str(path))
