@@ -217,6 +217,9 @@ class CollectorConfig:
     # Cut each env's first episode at a different length so that a worker's envs are not in phase:
     # needed when steps_per_env is short against an episode (rlgrasp/train/collect.py StaggeredStart).
     stagger_starts: bool = False
+    # A batch not delivered within this many seconds ends the run (a worker that hangs, not dies: a
+    # checkpoint is saved and the run stops in one line, instead of waiting for ever).
+    worker_timeout_s: float = 600.0
 
 
 @dataclass
@@ -573,6 +576,8 @@ def _train_problems(cfg: Any, batch: int) -> list[str]:
         ("collector.envs_per_worker", c.envs_per_worker, c.envs_per_worker >= 1, "must be >= 1"),
         ("collector.steps_per_env", c.steps_per_env, c.steps_per_env >= 1, "must be >= 1"),
         ("collector.torch_threads", c.torch_threads, c.torch_threads >= 1, "must be >= 1"),
+        ("collector.worker_timeout_s", c.worker_timeout_s, _positive(c.worker_timeout_s),
+         "must be > 0 (seconds a batch may take)"),
         *_algo_checks(a, batch, cfg.env.get("camera")),
         ("model.hidden_sizes", list(m.hidden_sizes), len(m.hidden_sizes) > 0 and all(
             _positive(h) for h in m.hidden_sizes), "must be a non-empty list of positive sizes"),

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import threading
+import time
+
 import pytest
 import torch
 
-from rlgrasp.train.batches import Batches
+from rlgrasp.train.batches import Batches, WorkerTimeoutError
 
 
 class RecordingCollector:
@@ -51,3 +54,24 @@ def test_with_overlap_each_batch_is_one_update_late(repeat: int) -> None:
     seen, _ = _run(overlap=True)
     # batch k+1 is collected while the learner updates on batch k, with the weights before it
     assert seen == [0.0, 0.0, 1.0, 2.0]
+
+
+class HangingCollector(RecordingCollector):
+    """A worker that hangs: its first batch arrives, the second never does."""
+
+    def __iter__(self):
+        yield 0.0
+        threading.Event().wait()  # for ever (the fetching thread is a daemon)
+
+
+@pytest.mark.parametrize("overlap", [True, False])
+def test_a_hanging_worker_ends_the_wait_with_one_line(overlap: bool) -> None:
+    behaviour = torch.nn.Linear(1, 1, bias=False)
+    batches = Batches(HangingCollector(behaviour), torch.nn.Linear(1, 1, bias=False), behaviour, overlap,
+                      timeout_s=0.5)
+    assert next(batches) == 0.0
+    started = time.monotonic()
+    with pytest.raises(WorkerTimeoutError, match=r"no batch from the workers in 0.5 s: a worker hangs"):
+        next(batches)
+    batches.close()  # does not wait for the hung batch either
+    assert time.monotonic() - started < 5

@@ -208,7 +208,8 @@ algo: {_target_: rlgrasp.algos.ppo.PPO, name: ppo, gamma: 0.9, gae_lambda: 0.9, 
 model: {name: mlp, hidden_sizes: [64, 64], activation: tanh, init_log_std: -0.5, min_std: 0.05,
         obs_norm: true, obs_clip: 10.0, distribution: tanh_normal}
 collector: {_target_: rlgrasp.train.collectors.ProcessCollector, num_workers: 2, envs_per_worker: 2,
-            steps_per_env: 256, torch_threads: 1, overlap: true, stagger_starts: false}
+            steps_per_env: 256, torch_threads: 1, overlap: true, stagger_starts: false,
+            worker_timeout_s: 600.0}
 logger: {_target_: rlgrasp.train.logger.TensorBoardLogger, console_interval_s: 0.0}
 eval: {interval_frames: 1024, episodes: 4, final_episodes: 8, num_envs: 4, seed_offset: 1000000,
        background: false, randomization: null}

@@ -37,15 +37,22 @@ class EnvSync(Protocol):
     def push(self, collector: BaseCollector) -> None: ...
 
 
+class WorkerTimeoutError(RuntimeError):
+    """No batch arrived within ``collector.worker_timeout_s``: a worker hangs."""
+
+
 class Batches(Iterator[TensorDictBase]):
-    """``next()`` gives the next batch; with ``overlap`` the one after is already being collected."""
+    """``next()`` gives the next batch; with ``overlap`` the one after is already being collected.
+    ``timeout_s``: how long a batch may take before ``WorkerTimeoutError`` (a worker that hangs,
+    not dies, would otherwise keep the learner waiting for ever; None: no limit)."""
 
     def __init__(
         self, collector: BaseCollector, actor: torch.nn.Module, behaviour: torch.nn.Module, overlap: bool,
-        env_sync: EnvSync | None = None,
+        env_sync: EnvSync | None = None, timeout_s: float | None = None,
     ) -> None:
         self.collector, self.actor, self.behaviour, self.overlap = collector, actor, behaviour, overlap
-        self.env_sync = env_sync
+        self.env_sync, self.timeout_s = env_sync, timeout_s
+        self.timed_out = False
         self._iterator = iter(collector)
         self._thread: threading.Thread | None = None
         self._result: tuple[Any, BaseException | None] = (None, None)
@@ -53,7 +60,10 @@ class Batches(Iterator[TensorDictBase]):
     def __next__(self) -> TensorDictBase:
         if not self.overlap:
             self._push_weights()
-            return self._arrived(next(self._iterator))
+            if self.timeout_s is None:
+                return self._arrived(next(self._iterator))
+            self._start()  # through the fetching thread only to bound the wait
+            return self._arrived(self._wait())
         if self._thread is None:
             if self.env_sync is not None:  # the first batch too (a resume's ranges are not the start's)
                 self.env_sync.push(self.collector)
@@ -70,9 +80,9 @@ class Batches(Iterator[TensorDictBase]):
 
     def close(self) -> None:
         """Let a batch in flight arrive (it is dropped) so the workers are idle at shutdown."""
-        if self._thread is not None:
+        if self._thread is not None and not self.timed_out:
             self._thread.join(DRAIN_TIMEOUT_S)
-            self._thread = None
+        self._thread = None
 
     def _push_weights(self) -> None:
         self.behaviour.load_state_dict(self.actor.state_dict())  # in place, into the shared memory
@@ -94,7 +104,13 @@ class Batches(Iterator[TensorDictBase]):
 
     def _wait(self) -> TensorDictBase:
         assert self._thread is not None
-        self._thread.join()
+        self._thread.join(self.timeout_s)
+        if self._thread.is_alive():  # the daemon thread is left behind; the run stops
+            self.timed_out = True
+            raise WorkerTimeoutError(
+                f"no batch from the workers in {self.timeout_s:g} s: a worker hangs "
+                "(collector.worker_timeout_s sets how long a batch may take)"
+            )
         self._thread = None
         batch, error = self._result
         if error is not None:

@@ -38,6 +38,7 @@ class CollectorBackend:
         torch_threads: int = 1,
         overlap: bool = True,
         stagger_starts: bool = False,
+        worker_timeout_s: float = 600.0,
     ) -> None:
         self.num_workers = num_workers
         self.envs_per_worker = envs_per_worker
@@ -45,6 +46,7 @@ class CollectorBackend:
         self.torch_threads = torch_threads
         self.overlap = overlap
         self.stagger_starts = stagger_starts
+        self.worker_timeout_s = worker_timeout_s
 
     @property
     def in_process(self) -> bool:

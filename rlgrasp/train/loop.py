@@ -269,9 +269,9 @@ class Trainer:
         loop ends."""
         behaviour = copy.deepcopy(self.algo.behaviour)
         collector = self.parts.make_collector(self.generation, str(self.error_dir), behaviour)
-        batches = Batches(
-            collector, self.algo.behaviour, behaviour, self.parts.collector.collects_ahead, self.adr
-        )
+        backend = self.parts.collector
+        batches = Batches(collector, self.algo.behaviour, behaviour, backend.collects_ahead, self.adr,
+                          timeout_s=None if backend.in_process else backend.worker_timeout_s)
         try:
             yield batches
         finally:

@@ -51,6 +51,7 @@ MUTABLE = (
     "collector._target_",
     "collector.torch_threads",
     "collector.overlap",
+    "collector.worker_timeout_s",
     "collector.ray.",
     "device",
 )
