@@ -58,6 +58,11 @@ def check_received_config(config: Any, source: str, trusted: Iterable[str] = ())
                     f"{source}: refused: config.{node}._target_={target!r} is not a class rlgrasp builds "
                     f"(allowed: {', '.join(sorted(allowed))})"
                 )
+    for path in _interpolations(config, ""):
+        raise UntrustedConfigError(
+            f"{source}: refused: config.{path} holds an interpolation (${{...}}); a saved config is stored "
+            "resolved, so this one was made by hand"
+        )
     for path, key in _instantiation_keys(config, ""):
         top = path.count(".") == 0 and path in REGISTRY and key == "_target_"
         if not top:
@@ -78,6 +83,18 @@ def _instantiation_keys(node: Any, path: str) -> Iterable[tuple[str, str]]:
     elif isinstance(node, (list, tuple)):
         for i, value in enumerate(node):
             yield from _instantiation_keys(value, f"{path}[{i}]")
+
+
+def _interpolations(node: Any, path: str) -> Iterable[str]:
+    """Each path whose string value OmegaConf would resolve (``${...}``) when the config is built."""
+    if isinstance(node, Mapping):
+        for key, value in node.items():
+            yield from _interpolations(value, f"{path}.{key}" if path else str(key))
+    elif isinstance(node, (list, tuple)):
+        for i, value in enumerate(node):
+            yield from _interpolations(value, f"{path}[{i}]")
+    elif isinstance(node, str) and "${" in node:
+        yield path
 
 
 def trusted_targets(config: Any) -> set[str]:

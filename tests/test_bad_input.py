@@ -105,7 +105,7 @@ BAD_ARM = ("model:franka_panda/panda.urdf,arm_joints:[panda_joint1,panda_joint9]
            "neutral_pose:[0,0],max_finger_width:0.08")
 # (entry point, what, arguments after BASE (placeholders filled by _fill), a fragment of the one line)
 TRAIN = [
-    ("unknown key", ["algo.lrr=1"], "algo.lrr=1: unknown key 'lrr'; algo has name, gamma"),
+    ("unknown key", ["algo.lrr=1"], "algo.lrr=1: unknown key 'lrr'; algo has _target_, name, gamma"),
     ("new key of an open node", ["cameras=wrist_depth", "model=cnn", "env.camera.width=48"],
      "env.camera.width=48: unknown key 'width'; env.camera has mount, modality "
      "(a new key of env.camera: +env.camera.width=48)"),

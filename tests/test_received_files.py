@@ -183,6 +183,8 @@ def _layout() -> dict:
     ({"collector": {"_target_": "shutil.copyfile"}}, "config.collector._target_='shutil.copyfile'"),
     ({"algo": {"_target_": "rlgrasp.algos.sac.SAC", "demos": {"_partial_": True}}},
      "config.algo.demos._partial_ would be called"),
+    ({"env": {"_target_": "rlgrasp.envs.PandaGraspEnv", "objects": "${oc.env:HOME}"}},
+     "config.env.objects holds an interpolation"),
 ])
 def test_the_allow_list_names_the_key_and_the_target(config: dict, where: str) -> None:
     with pytest.raises(UntrustedConfigError) as info:
