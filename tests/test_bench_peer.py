@@ -63,7 +63,7 @@ def test_sb3_gets_grasp_sac_settings(peer, train_cfg):
     assert envs * kw["train_freq"][0] == c.num_workers * c.envs_per_worker * c.steps_per_env
     assert kw["train_freq"] == (c.steps_per_env, "step")
     # grasp_sac: 8 envs x 16 steps = 128 frames a rollout, x 0.25 = 32 gradient steps, exactly.
-    assert kw["gradient_steps"] == a.utd_ratio * envs * c.steps_per_env == 32
+    assert kw["gradient_steps"] == a.utd_ratio * envs * c.steps_per_env == 64  # grasp_sac: 0.5 steps a frame
     assert (kw["batch_size"], kw["buffer_size"], kw["learning_starts"]) == (
         a.batch_size, a.buffer_frames, a.learning_starts)
     assert (kw["gamma"], kw["tau"], kw["learning_rate"], kw["target_update_interval"]) == (
