@@ -16,6 +16,7 @@ import inspect
 import io
 import json
 import logging
+import os
 import re
 import sys
 import warnings
@@ -409,19 +410,33 @@ def _write_one(
     module: nn.Module, fmt: str, path: Path, info: dict[str, Any],
     recorded: tuple[Inputs, np.ndarray] | None, cfg: Any, tolerance: float,
 ) -> dict[str, Any]:
-    """One format: the file, its JSON, its largest action difference on ``recorded`` (if any)."""
-    write_format(module, fmt, path, info["inputs"])
-    diff = max_abs_diff(path, *recorded) if recorded else None
-    check = {"observations": cfg.verify_obs, "seed": cfg.seed, "max_abs_action_diff": diff,
-             "tolerance": tolerance}
-    meta = {"format": fmt, "file": path.name, **info, "verification": check if recorded else None}
+    """One format: the file, its JSON, its largest action difference on ``recorded`` (if any).
+
+    Written and verified under a temporary name beside ``path`` (same suffix: the loader goes by
+    it), then renamed over it with its JSON: a file that fails its verification, or a write that
+    fails, leaves the previous export and its JSON as they were and no temporary file.
+    """
+    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
     json_path = path.with_name(path.name + ".json")
-    json_path.write_text(_dumps(meta))
-    shown = "not verified" if diff is None else f"max |action diff| {diff:.2e} on {cfg.verify_obs} obs"
+    json_tmp = tmp.with_name(tmp.name + ".json")
+    try:
+        write_format(module, fmt, tmp, info["inputs"])
+        diff = max_abs_diff(tmp, *recorded) if recorded else None
+        shown = "not verified" if diff is None else f"max |action diff| {diff:.2e} on {cfg.verify_obs} obs"
+        if diff is not None and not diff <= tolerance:
+            raise ExportError(f"{path}: exported actions differ from the checkpoint's by {diff:.3g} "
+                              f"> tolerance {tolerance} (nothing was replaced)")
+        check = {"observations": cfg.verify_obs, "seed": cfg.seed, "max_abs_action_diff": diff,
+                 "tolerance": tolerance}
+        meta = {"format": fmt, "file": path.name, **info, "verification": check if recorded else None}
+        with _writing(json_path):
+            json_tmp.write_text(_dumps(meta))
+        os.replace(tmp, path)
+        os.replace(json_tmp, json_path)
+    finally:
+        tmp.unlink(missing_ok=True)
+        json_tmp.unlink(missing_ok=True)
     log.info("%s: %s (%s)", fmt, path, shown)
-    if diff is not None and not diff <= tolerance:
-        raise ExportError(f"{path}: exported actions differ from the checkpoint's by {diff:.3g} "
-                          f"> tolerance {tolerance}")
     return {"path": str(path), "json": str(json_path), "max_abs_action_diff": diff}
 
 

@@ -168,3 +168,35 @@ def test_output_paths(tmp_path: Path) -> None:
     every = output_paths("all", str(tmp_path / "out"), loose)
     assert every == {f: tmp_path / "out" / f"policy{ext}" for f, ext in
                      (("torchscript", ".pt"), ("onnx", ".onnx"), ("pt2", ".pt2"))}
+
+
+def test_a_failed_export_leaves_the_previous_one_and_no_temporary_file(tmp_path: Path, monkeypatch) -> None:
+    """An export that fails its verification, or whose write fails (a full disk), used to replace the
+    file it was to write (and its JSON): a deployment reading it then ran unverified actions."""
+    import rlgrasp.export as export_module
+
+    run = _spread_run(tmp_path)
+    first = export(_cfg(f"ckpt={run}", "format=torchscript", "verify_obs=20"))["torchscript"]
+    path, json_path = Path(first["path"]), Path(first["json"])
+    before = {p: p.read_bytes() for p in (path, json_path)}
+    ckpt_path = run / "checkpoints" / "best.pt"
+    ckpt = torch.load(ckpt_path, weights_only=False)
+    ckpt["actor"] = {k: v * 2 if k.endswith("weight") else v for k, v in ckpt["actor"].items()}
+    torch.save(ckpt, ckpt_path)  # another policy: a new export would write other bytes
+
+    monkeypatch.setattr(export_module, "max_abs_diff", lambda *args: 1.0)  # a mismatching file
+    mismatch = r"differ from the checkpoint's by 1 > tolerance .*nothing was replaced"
+    with pytest.raises(ExportError, match=mismatch):
+        export(_cfg(f"ckpt={run}", "format=torchscript", "verify_obs=20"))
+    assert {p: p.read_bytes() for p in (path, json_path)} == before
+    assert sorted(p.name for p in path.parent.iterdir()) == sorted([path.name, json_path.name])
+
+    def disk_full(module, f, *args, **kwargs):
+        Path(f).write_bytes(b"PK" + b"\0" * 4096)  # some bytes went out
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(torch.jit, "save", disk_full)
+    with pytest.raises(ExportError, match="No space left on device"):
+        export(_cfg(f"ckpt={run}", "format=torchscript", "verify_obs=20"))
+    assert {p: p.read_bytes() for p in (path, json_path)} == before
+    assert sorted(p.name for p in path.parent.iterdir()) == sorted([path.name, json_path.name])
