@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 import torch
 from omegaconf import OmegaConf
 from tensordict import TensorDict
 
 from rlgrasp.config import MLPConfig, PPOConfig
-from rlgrasp.train.models import build_models
-from rlgrasp.train.ppo import PPOLearner
+from rlgrasp.train.models import LOC_BOUND, build_models
+from rlgrasp.train.ppo import LOG_RATIO_BOUND, PPOLearner
 
 OBS_DIM, ACT_DIM, ENVS, STEPS = 5, 2, 4, 32
 
@@ -136,3 +138,54 @@ def test_the_adaptive_rate_resumes_with_adams_state() -> None:
     resumed, _ = _learner(desired_kl=0.01)
     resumed.optimizer.load_state_dict(learner.optimizer.state_dict())
     assert resumed.lr_at(frames=0, total_frames=1000) == pytest.approx(2.5e-4)
+
+
+def _at_the_std_floor(
+    distribution: str = "tanh_normal", stale_batches: bool = False
+) -> tuple[PPOLearner, object]:
+    """A learner whose actor's standard deviation sits at its floor (``model.min_std``)."""
+    torch.manual_seed(0)
+    model_cfg = OmegaConf.structured(MLPConfig(hidden_sizes=[16, 16], init_log_std=-10.0,
+                                               distribution=distribution))
+    algo_cfg = OmegaConf.structured(PPOConfig(minibatch_size=32, target_kl=None))
+    actor, critic, norm = build_models(OBS_DIM, -torch.ones(ACT_DIM), torch.ones(ACT_DIM), model_cfg)
+    return PPOLearner(actor, critic, norm, algo_cfg, torch.device("cpu"), stale_batches), actor
+
+
+def _set_loc(actor, value: float) -> None:
+    """Every observation's pre-tanh mean ``value`` (the actor's last layer: zero weights, that bias)."""
+    last = [m for m in actor.modules() if isinstance(m, torch.nn.Linear)][-1]
+    with torch.no_grad():
+        last.weight.zero_()
+        last.bias.fill_(value)
+
+
+@pytest.mark.parametrize("distribution", ["tanh_normal", "normal"])
+def test_the_pre_tanh_mean_is_bounded_for_a_tanh_actor_only(distribution: str) -> None:
+    _, actor = _at_the_std_floor(distribution)
+    _set_loc(actor, 1e3)
+    td = actor(TensorDict({"observation": torch.randn(8, OBS_DIM)}, [8]))
+    expected = LOC_BOUND if distribution == "tanh_normal" else 1e3  # a Gaussian's action is clipped
+    assert torch.equal(td["loc"], torch.full_like(td["loc"], expected))
+
+
+def test_a_saturated_action_at_the_std_floor_keeps_the_ratio_and_loss_finite() -> None:
+    """PPO from pixels stopped on a non-finite loss: actions collected with the mean far beyond
+    saturation and the standard deviation at its floor have log-probs thousands below the
+    learner's once its mean moves back, and exp of the difference is inf."""
+    learner, actor = _at_the_std_floor(stale_batches=True)  # collector.overlap's path
+    _set_loc(actor, 30.0)  # the collecting policy: saturated
+    n = 64
+    td = TensorDict({"observation": torch.randn(n, OBS_DIM)}, [n])
+    with torch.no_grad():
+        actor(td)
+    learner.refresh_log_probs(td)  # of the saturated actions, from their pre-image atanh(action)
+    _set_loc(actor, 7.0)  # the learner's, a few updates on: near that pre-image
+    td["advantage"] = torch.randn(n, 1)
+    td["value_target"] = torch.zeros(n, 1)
+    losses = learner.loss(td)
+    assert float(losses["max_ratio"]) <= math.exp(LOG_RATIO_BOUND) * 1.001  # inf before the cap
+    total = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
+    assert torch.isfinite(total), {k: float(v) for k, v in losses.items() if v.numel() == 1}
+    total.backward()
+    assert all(torch.isfinite(p.grad).all() for p in actor.parameters() if p.grad is not None)

@@ -80,19 +80,36 @@ def _mlp(in_dim: int, out_dim: int, hidden: Sequence[int], activation: str, last
     return mlp
 
 
+#: The pre-tanh mean of a squashing actor is clamped to +-LOC_BOUND. Unbounded, a saturated action
+#: dimension drifts ever further out, and with the standard deviation at its floor its log-probs
+#: reach magnitudes whose differences overflow ``exp`` in the PPO ratio (``rlgrasp.train.ppo``).
+#: At 10 the mode is already at the bound (tanh(10) is 1 in float32, and TorchRL's safe tanh clamps
+#: it just below), so the clamp changes no deterministic action; trained policies stay below 5, so
+#: an ordinary run never reaches it and trains bit for bit as without it.
+LOC_BOUND = 10.0
+
+
+def bounded_loc(loc: torch.Tensor, squash: bool) -> torch.Tensor:
+    """``loc`` clamped to +-``LOC_BOUND`` for a tanh actor; a Gaussian actor's (the env clips its
+    action) as it is. A hard clamp rather than TorchRL's ``tanh_loc``: that rescales every loc, so
+    ordinary runs would change, and it shifts the loc of asymmetric action bounds."""
+    return loc.clamp(-LOC_BOUND, LOC_BOUND) if squash else loc
+
+
 class ActorNet(nn.Module):
-    """normalized obs -> MLP -> (loc, state-independent scale)."""
+    """normalized obs -> MLP -> (loc, bounded for a tanh actor; state-independent scale)."""
 
     def __init__(self, norm: RunningNorm, obs_dim: int, act_dim: int, model_cfg) -> None:
         super().__init__()
         self.norm = norm
+        self.squash = squashes(model_cfg)
         self.mlp = _mlp(obs_dim, act_dim, model_cfg.hidden_sizes, model_cfg.activation, 0.01)
         self.scale = AddStateIndependentNormalScale(
             act_dim, scale_lb=model_cfg.min_std, init_value=model_cfg.init_log_std
         )
 
     def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        return self.scale(self.mlp(self.norm(obs)))
+        return self.scale(bounded_loc(self.mlp(self.norm(obs)), self.squash))
 
 
 class CriticNet(nn.Module):

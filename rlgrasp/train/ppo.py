@@ -34,6 +34,12 @@ __all__ = ["NonFiniteError", "PPOLearner", "explained_variance"]
 
 #: Bounds of the KL-adaptive learning rate (``algo.desired_kl``), rsl_rl's.
 ADAPTIVE_LR_RANGE = (1e-5, 1e-2)
+#: The importance ratio pi_new / pi_old is capped at exp(LOG_RATIO_BOUND). A saturated tanh action
+#: with the standard deviation at its floor can have log-probs thousands apart under two nearby
+#: policies: exp of that is inf, the loss inf or NaN, and training stops (PPO from pixels did, on
+#: all three seeds). An ordinary update's ratio stays within a few times 1 +- clip_epsilon, so it
+#: never reaches the cap and trains bit for bit as without it.
+LOG_RATIO_BOUND = 20.0
 
 
 class Extra(Protocol):
@@ -73,6 +79,9 @@ class PPOLearner:
             critic_coeff=algo_cfg.critic_coeff,
             loss_critic_type=algo_cfg.loss_critic_type,
             normalize_advantage=algo_cfg.normalize_advantage,
+            # TorchRL's own cap: it lifts the (gradient-free) old log-prob rather than clamping the
+            # ratio, so a capped sample keeps a finite, rescaled gradient instead of none.
+            max_importance_ratio=math.exp(LOG_RATIO_BOUND),
         )
         self.actor = actor
         self.stale_batches = stale_batches

@@ -17,7 +17,7 @@ from torch import nn
 from torchrl.modules import ConvNet, ProbabilisticActor, TanhNormal
 
 from rlgrasp.config import POOLINGS
-from rlgrasp.train.models import ACTIVATIONS, OBS_KEY, RunningNorm, _bound, _mlp
+from rlgrasp.train.models import ACTIVATIONS, OBS_KEY, RunningNorm, _bound, _mlp, bounded_loc
 
 IMAGE_KEYS = ("depth", "rgb")
 
@@ -105,7 +105,7 @@ class VisionActorNet(nn.Module):
 
     def forward(self, state: torch.Tensor, *images: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         parts = [self.norm(state)] + [enc(img) for enc, img in zip(self.encoders.values(), images)]
-        return self.scale(self.mlp(torch.cat(parts, -1)))
+        return self.scale(bounded_loc(self.mlp(torch.cat(parts, -1)), squash=True))
 
 
 def image_specs(spec: Mapping[str, Any]) -> dict[str, tuple[int, ...]]:
