@@ -7,7 +7,8 @@ depth. Hydra refuses a few targets (``os.system``) and not others (``builtins.op
 of the sender's choosing). So a config that came from a file is data until this module has checked
 it: a ``_target_`` may stand only at the top of a node that rlgrasp builds, and must name one of the
 classes below; no other instantiation key may appear anywhere. A class of your own is trusted when
-your own command line's config names it (``trusted``), never because a received file does.
+your own command line's config names it (``trusted``, on resume) or your shell lists it in
+``RLGRASP_TRUSTED_TARGETS``, never because a received file does.
 
 This module imports nothing of rlgrasp's: every reader can use it.
 """
@@ -15,6 +16,7 @@ This module imports nothing of rlgrasp's: every reader can use it.
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -48,7 +50,7 @@ def check_received_config(config: Any, source: str, trusted: Iterable[str] = ())
     call anything but rlgrasp's own classes at their nodes (or a class in ``trusted``)."""
     if not isinstance(config, Mapping):
         return
-    trusted = frozenset(trusted)
+    trusted = frozenset(trusted) | env_trusted_targets()
     for node, allowed in REGISTRY.items():
         value = config.get(node)
         if isinstance(value, Mapping) and "_target_" in value:
@@ -71,6 +73,16 @@ def check_received_config(config: Any, source: str, trusted: Iterable[str] = ())
                 f"{source}: refused: {where} would be called when the config is built "
                 "(a file's config may name a class only at env, collector, logger or algo)"
             )
+
+
+#: Classes of your own that files may name, comma-separated (e.g. the env your runs were trained on).
+TRUSTED_ENV_VAR = "RLGRASP_TRUSTED_TARGETS"
+
+
+def env_trusted_targets() -> frozenset[str]:
+    """The classes the user listed in ``RLGRASP_TRUSTED_TARGETS``: their own env or backend, set in
+    their own shell, never by a file."""
+    return frozenset(t.strip() for t in os.environ.get(TRUSTED_ENV_VAR, "").split(",") if t.strip())
 
 
 def _instantiation_keys(node: Any, path: str) -> Iterable[tuple[str, str]]:

@@ -114,12 +114,12 @@ def test_a_run_with_rnd_logs_it_checkpoints_its_networks_and_resumes(tmp_path) -
     trainer.run()
     assert len(seen["charts/intrinsic_reward"]) == 2 and len(seen["losses/rnd_loss"]) == 2
     state = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
-    assert torch.equal(state["rnd"]["obs_rms.mean"], trainer.rnd.obs_rms.mean)
+    assert torch.equal(state["rnd"]["obs_rms.mean"], trainer.algo.rnd.obs_rms.mean)
     cfg, resumed = prepare_run(compose_train([*args, f"resume={run}", "total_frames=384"]),
                                {"resume", "total_frames"})
     again = Trainer(cfg, resumed=resumed)
     predictor = {k: v for k, v in state["rnd"].items() if k.startswith("predictor.")}
-    assert all(torch.equal(again.rnd.state_dict()[k], v) for k, v in predictor.items())
-    assert float(again.rnd.reward_rms.count) == float(state["rnd"]["reward_rms.count"]) > 1
+    assert all(torch.equal(again.algo.rnd.state_dict()[k], v) for k, v in predictor.items())
+    assert float(again.algo.rnd.reward_rms.count) == float(state["rnd"]["reward_rms.count"]) > 1
     again.run()
     assert again.updates == 3
