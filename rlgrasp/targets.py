@@ -60,17 +60,15 @@ def check_received_config(config: Any, source: str, trusted: Iterable[str] = ())
                     f"{source}: refused: config.{node}._target_={target!r} is not a class rlgrasp builds "
                     f"(allowed: {', '.join(sorted(allowed))})"
                 )
-    for path in _interpolations(config, ""):
-        raise UntrustedConfigError(
-            f"{source}: refused: config.{path} holds an interpolation (${{...}}); a saved config is stored "
-            "resolved, so this one was made by hand"
-        )
-    for path, key in _instantiation_keys(config, ""):
-        top = path.count(".") == 0 and path in REGISTRY and key == "_target_"
-        if not top:
-            where = f"config.{path}.{key}" if path else f"config.{key}"
+    for path, key, value in _entries(config, ""):
+        if isinstance(value, str) and "${" in value:
             raise UntrustedConfigError(
-                f"{source}: refused: {where} would be called when the config is built "
+                f"{source}: refused: {_where(path, key)} holds an interpolation (${{...}}); a saved config "
+                "is stored resolved, so this one was made by hand"
+            )
+        if key in INSTANTIATE_KEYS and not (path in REGISTRY and key == "_target_"):
+            raise UntrustedConfigError(
+                f"{source}: refused: {_where(path, key)} would be called when the config is built "
                 "(a file's config may name a class only at env, collector, logger or algo)"
             )
 
@@ -85,28 +83,20 @@ def env_trusted_targets() -> frozenset[str]:
     return frozenset(t.strip() for t in os.environ.get(TRUSTED_ENV_VAR, "").split(",") if t.strip())
 
 
-def _instantiation_keys(node: Any, path: str) -> Iterable[tuple[str, str]]:
-    """Each (path of the node, key) where an instantiation key stands, at any depth."""
-    if isinstance(node, Mapping):
-        for key, value in node.items():
-            if key in INSTANTIATE_KEYS:
-                yield path, str(key)
-            yield from _instantiation_keys(value, f"{path}.{key}" if path else str(key))
-    elif isinstance(node, (list, tuple)):
-        for i, value in enumerate(node):
-            yield from _instantiation_keys(value, f"{path}[{i}]")
+def _entries(node: Any, path: str) -> Iterable[tuple[str, str, Any]]:
+    """Every (path of the container, key or index, value) of a config, at any depth."""
+    items = node.items() if isinstance(node, Mapping) else enumerate(node) if isinstance(
+        node, (list, tuple)) else ()
+    for key, value in items:
+        yield path, str(key) if isinstance(node, Mapping) else f"[{key}]", value
+        child = (f"{path}.{key}" if path else str(key)) if isinstance(node, Mapping) else f"{path}[{key}]"
+        yield from _entries(value, child)
 
 
-def _interpolations(node: Any, path: str) -> Iterable[str]:
-    """Each path whose string value OmegaConf would resolve (``${...}``) when the config is built."""
-    if isinstance(node, Mapping):
-        for key, value in node.items():
-            yield from _interpolations(value, f"{path}.{key}" if path else str(key))
-    elif isinstance(node, (list, tuple)):
-        for i, value in enumerate(node):
-            yield from _interpolations(value, f"{path}[{i}]")
-    elif isinstance(node, str) and "${" in node:
-        yield path
+def _where(path: str, key: str) -> str:
+    if key.startswith("["):
+        return f"config.{path}{key}"
+    return f"config.{path}.{key}" if path else f"config.{key}"
 
 
 def trusted_targets(config: Any) -> set[str]:

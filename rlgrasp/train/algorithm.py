@@ -44,6 +44,9 @@ class Algorithm:
         #: How many updates were made (the core counts batches; an algorithm may take several steps).
         self.updates = 0
 
+    #: Whether the run starts workers: False for one that learns from no env frames (PPO's bc_only).
+    collects = True
+
     @property
     def behaviour(self) -> torch.nn.Module:
         """The policy the workers run (a copy of it; the core refreshes the copy between batches)."""

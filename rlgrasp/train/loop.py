@@ -222,7 +222,7 @@ class Trainer:
             self.frames_at_start = self.frames
             try:
                 # a finished run, or an algorithm that learns without env frames (bc_only), starts no workers
-                if self.frames < self.cfg.total_frames and getattr(self.algo, "collects", True):
+                if self.frames < self.cfg.total_frames and self.algo.collects:
                     with self._collector() as batches:
                         self._loop(batches)
                 return self.finish()
