@@ -83,6 +83,17 @@ def output_subdir(output_dir: str) -> str:
     return _OUTPUT_SUBDIRS[key]
 
 
+def name_problem(key: str, value: object) -> str | None:
+    """Why ``value`` cannot name one folder (``None``: it can). Names become one path component
+    under an output root (``outputs/train/<experiment_name>``, a sweep's ``<root_dir>/<study_name>``,
+    an evaluation's ``eval/<name>``): ``../x`` or ``/tmp/x`` would put the files somewhere else,
+    where no reader (resume=auto, a sweep's summary, rlgrasp-report) looks for them."""
+    text = str(value)
+    if text in ("", ".", "..") or "/" in text or "\\" in text or "\0" in text:
+        return f"{key}={text!r}: must be one folder name (no '/', '..' or absolute path)"
+    return None
+
+
 def register_resolvers() -> None:
     """``rlgrasp_run_dir`` and ``rlgrasp_output_subdir``, which ``configs/hydra/default.yaml`` calls."""
     if not OmegaConf.has_resolver("rlgrasp_run_dir"):
@@ -125,10 +136,20 @@ class RunDirCheck(Callback):
 
     def on_run_start(self, config: DictConfig, **kwargs: Any) -> None:
         _OUTPUT_SUBDIRS.clear()  # a new start in this process (tests run several): choose afresh
+        self._check_name(config)
         self._check(config.hydra.run.dir)
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        self._check_name(config)
         self._check(config.hydra.sweep.dir)
+
+    @staticmethod
+    def _check_name(config: DictConfig) -> None:
+        # Before Hydra creates the run directory: ``experiment_name=../x`` would create it elsewhere.
+        problem = name_problem("experiment_name", config.get("experiment_name", "default"))
+        if problem:
+            print(f"error: {problem}", file=sys.stderr)
+            sys.exit(2)
 
     @staticmethod
     def _check(path: Any) -> None:
