@@ -98,14 +98,27 @@ def load_demos(path: str | Path, layout: dict[str, Any]) -> Demos:
             )
     if not meta.get("summary", {}).get("kept"):
         raise DemoError(f"algo.demos={path}: holds no demonstrations (0 episodes kept)")
-    try:  # load_memmap unpickles what is not a plain tensor: check the folder first
-        check_plain_memmap(Path(meta["dir"]) / FRAMES, f"algo.demos={path}")
-    except UntrustedConfigError as exc:
-        raise DemoError(str(exc)) from None
-    frames = TensorDict.load_memmap(Path(meta["dir"]) / FRAMES).to_tensordict()
+    frames = _frames(path, Path(meta["dir"]) / FRAMES)
     if not bool(frames["success"].any()):  # learning imitates successes only
         raise DemoError(f"algo.demos={path}: none of its {meta['summary']['kept']} episodes succeeded")
     return Demos(frames, meta)
+
+
+def _frames(path: Path, folder: Path) -> TensorDict:
+    """The transitions of ``folder``; a folder copied without them (only ``demos.json``), or cut short,
+    is refused naming it, not with TensorDict's traceback from inside the learner."""
+    if not (folder / "meta.json").is_file():
+        raise DemoError(f"algo.demos={path}: {folder} is missing (its {META} came without the "
+                        "transitions; copy the whole demos folder, or record it again with rlgrasp-demos)")
+    try:  # load_memmap unpickles what is not a plain tensor: check the folder first
+        check_plain_memmap(folder, f"algo.demos={path}")
+    except UntrustedConfigError as exc:
+        raise DemoError(str(exc)) from None
+    try:
+        return TensorDict.load_memmap(folder).to_tensordict()
+    except (OSError, ValueError, RuntimeError, KeyError) as exc:
+        raise DemoError(f"algo.demos={path}: unreadable {folder} ({type(exc).__name__}: "
+                        f"{str(exc).splitlines()[0][:200] if str(exc) else ''})") from None
 
 
 def summary(episodes: list[dict[str, Any]], kept: int) -> dict[str, Any]:
