@@ -14,11 +14,13 @@ import json
 import logging
 import math
 import os
+import socket
 import time
 import uuid
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
+from urllib.parse import urlsplit
 
 from rlgrasp.config import ConfigError
 from rlgrasp.train.logger import TensorBoardLogger
@@ -26,6 +28,31 @@ from rlgrasp.utils import flatten
 
 log = logging.getLogger("rlgrasp.train")
 ID_FILE = "tracker.json"
+
+
+#: How long a tracking server may take to accept a connection before the run is refused.
+CONNECT_TIMEOUT_S = 5.0
+
+
+def unreachable(
+    uri: str | None, key: str = "logger.tracking_uri", timeout_s: float = CONNECT_TIMEOUT_S
+) -> str | None:
+    """Why the server of an ``http(s)://`` tracking URI cannot be reached (``None``: it accepts a
+    connection, or the URI is a folder or database). Asked once, with a bounded wait: MLflow's own
+    client retries a refused connection with back-off for minutes, then fails with a traceback."""
+    parsed = urlsplit(uri or "")
+    if parsed.scheme not in ("http", "https"):
+        return None
+    try:
+        port = parsed.port or (443 if parsed.scheme == "https" else 80)
+        with socket.create_connection((parsed.hostname or "", port), timeout=timeout_s):
+            return None
+    except ValueError as exc:  # a port that is not a number
+        return f"{key}={uri}: not a valid URI ({exc})"
+    except OSError as exc:
+        reason = "no answer" if isinstance(exc, TimeoutError) else (exc.strerror or type(exc).__name__)
+        return (f"{key}={uri}: no tracking server answers ({reason}; waited up to {timeout_s:g} s); "
+                "start it, or log to a folder (logger.tracking_uri=file:<dir>)")
 
 
 class Tracker:
@@ -229,6 +256,10 @@ class MlflowLogger(TrackedLogger):
         tracking_uri: str | None = None,
     ) -> None:
         self.tracking_uri = tracking_uri
+        problem = (unreachable(tracking_uri) if tracking_uri
+                   else unreachable(os.environ.get("MLFLOW_TRACKING_URI"), "$MLFLOW_TRACKING_URI"))
+        if problem:  # before TensorBoard's folder: a refused start leaves nothing in the run directory
+            raise ConfigError(problem)
         super().__init__(run_dir, config, resumed_frames, console_interval_s, project, tags, run_name)
 
     def open_tracker(self, name: str, run_dir: Path, config: dict[str, Any], ids: dict[str, Any]) -> Tracker:
