@@ -21,6 +21,7 @@ from rlgrasp.sweep.objective import schedule_overrides, trial_overrides
 from rlgrasp.sweep.score import KINDS
 from rlgrasp.sweep.space import Space, to_overrides
 from rlgrasp.sweep.study import PRUNERS, SAMPLERS, open_study, study_dir
+from rlgrasp.train.rundir import name_problem
 from rlgrasp.utils import flatten
 
 #: What training reports to ``on_eval`` (``rlgrasp.train.evaluate.Evaluator.run``): the metrics a
@@ -71,9 +72,43 @@ def check_values(cfg: Any) -> None:
     for key, value, ok, allowed in checks:
         if not ok:
             raise SweepError(f"sweep.{key}={value}: {allowed}")
+    _check_study_name(cfg)
     problem = unwritable(study_dir(cfg), folder=True)
     if problem:
         raise SweepError(f"sweep.root_dir={cfg.root_dir}: cannot create {study_dir(cfg)}: {problem}")
+    problem = storage_problem(cfg.storage)
+    if problem:
+        raise SweepError(problem)
+
+
+def _check_study_name(cfg: Any) -> None:
+    """The study's folder is ``<root_dir>/<study_name>``: a name with a path in it would put the
+    journal, the trials' runs and the summary outside ``root_dir``."""
+    problem = name_problem("sweep.study_name", cfg.study_name)
+    if problem:
+        raise SweepError(problem)
+
+
+def storage_problem(storage: str | None) -> str | None:
+    """Why ``sweep.storage`` cannot be opened (``None``: it can, or it is a server this does not ask):
+    a journal file, or a ``sqlite:///`` database, must be creatable where it is named. Checked before
+    the trials' configs are composed, not as Optuna's traceback when the study opens."""
+    if not storage:
+        return None  # the journal in the study directory, checked above
+    if "://" not in storage:
+        path = Path(storage)
+    elif storage.startswith("sqlite:///"):
+        path = Path(storage[len("sqlite:///"):])
+        if not str(path) or str(path) == ":memory:":
+            return None
+    else:
+        return None
+    if path.is_dir():
+        return f"sweep.storage={storage}: {path} is a directory (a journal or database file goes there)"
+    if storage.startswith("sqlite:///") and not path.parent.is_dir():  # SQLite creates no folder
+        return f"sweep.storage={storage}: cannot open {path}: {path.parent} is not a directory"
+    problem = unwritable(path)
+    return f"sweep.storage={storage}: cannot open {path}: {problem}" if problem else None
 
 
 def _sample(d: BaseDistribution) -> Any:
@@ -129,6 +164,7 @@ def check_training(
 
 def load_existing(cfg: Any) -> optuna.Study:
     """The stored study, for a summary; ``SweepError`` when there is none (and nothing created)."""
+    _check_study_name(cfg)
     where = cfg.storage if cfg.storage and "://" in cfg.storage else None
     if where is None:
         path = Path(cfg.storage) if cfg.storage else study_dir(cfg) / "journal.log"
