@@ -38,6 +38,7 @@ from rlgrasp.evaluation.tb_log import log_to_tensorboard
 from rlgrasp.evaluation.teacher import prepare_teacher
 from rlgrasp.evaluation.video import video_format, write_video
 from rlgrasp.overrides import entry_point, unwritable
+from rlgrasp.train.rundir import name_problem
 from rlgrasp.utils import WorkerDiedError, plain
 
 log = logging.getLogger("rlgrasp.eval")
@@ -128,6 +129,8 @@ def _validate(cfg: DictConfig) -> tuple[PolicySource, PolicySource | None, str |
     for key, minimum in (("episodes", 1), ("workers", 1), ("video_episodes", 0), ("seed", 0)):
         if cfg[key] < minimum:
             raise EvaluationError(f"{key}={cfg[key]}: must be at least {minimum}")
+    if cfg.name is not None and name_problem("name", cfg.name):  # a folder of <run>/eval or outputs/eval
+        raise EvaluationError(name_problem("name", cfg.name))
     fmt = None
     if cfg.video and cfg.video_episodes > 0:
         try:
