@@ -354,6 +354,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--group-by", choices=("experiment", "none"), default="experiment")
     parser.add_argument("--reps", type=int, default=2000, help="bootstrap resamples")
     args = parser.parse_args(argv)
+    if args.reps < 1:  # before any run is read or anything written: the bootstrap needs a resample
+        print(f"error: --reps {args.reps}: must be at least 1 (bootstrap resamples)", file=sys.stderr)
+        return 2
     out = args.out or Path("outputs/report") / datetime.now().strftime("%Y-%m-%d_%H-%M-%S")
     try:
         result = build_report(args.runs, out, args.eval_name, args.group_by, args.reps)
