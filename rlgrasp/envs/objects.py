@@ -137,7 +137,19 @@ def obj_bounds(path: str) -> tuple[tuple[float, float, float], tuple[float, floa
     points = np.array(vertices, dtype=float).reshape(-1, 3)
     if len(points) < 4 or not np.all(np.isfinite(points)):
         raise ValueError(f"mesh {path} has no usable vertices (need at least 4 finite 'v x y z' lines)")
+    _check_solid(path, points)
     return tuple(points.min(0).tolist()), tuple(points.max(0).tolist())
+
+
+def _check_solid(path: str, points: np.ndarray) -> None:
+    """Refuse a mesh of zero volume (its vertices on one plane, one line or one point): PyBullet
+    would build a collision shape without thickness from it, no object to grasp. The smallest spread
+    across the vertices' principal axes, against the largest, is zero for such a mesh whatever its
+    orientation."""
+    spread = np.linalg.svd(points - points.mean(0), compute_uv=False)
+    if spread[-1] <= 1e-6 * max(spread[0], 1e-12):
+        raise ValueError(f"mesh {path} has zero volume (its vertices lie on one plane or line); an object "
+                         "needs a solid mesh")
 
 
 def mesh_geometry(path: str, scale: float) -> Geometry:
