@@ -2,7 +2,8 @@
 non-zero exit code, no traceback, and leaves nothing behind (no run, evaluation or export folder).
 The cases run the real entry points (Hydra and argparse included) in-process: scripts/train.py,
 scripts/evaluate.py (rlgrasp-eval), scripts/export.py, scripts/enjoy.py (without a display: the
-checks come before the display's), scripts/sweep.py, scripts/demos.py (rlgrasp-demos) and rlgrasp-demo.
+checks come before the display's), scripts/sweep.py, scripts/demos.py (rlgrasp-demos), rlgrasp-demo and
+scripts/report.py (rlgrasp-report).
 
 ``python -m tests.test_bad_input`` (from the repository root) prints the bad-input table of the docs
 from these cases.
@@ -16,17 +17,22 @@ import logging
 import os
 import pickle
 import runpy
+import socket
 import sys
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
+import pybullet_data
 import pytest
+import torch
 from hydra.core.global_hydra import GlobalHydra
 from omegaconf import OmegaConf
 
 from rlgrasp import demo
 from rlgrasp.compose import compose_train
+from rlgrasp.config import validate_train
+from rlgrasp.train.checkpoint import FORMAT
 from rlgrasp.train.loop import Trainer
 from rlgrasp.utils import markdown_table
 from tests.test_demos import demo_files
@@ -37,7 +43,7 @@ SMOKE = ["experiment=smoke", "logger=none"]
 #: What PyBullet prints on stderr when it is imported, whatever the command: not one of our lines.
 PYBULLET_BANNER = "pybullet build time:"
 SCRIPTS = {"train": "train.py", "eval": "evaluate.py", "export": "export.py", "enjoy": "enjoy.py",
-           "sweep": "sweep.py", "demos": "demos.py"}
+           "sweep": "sweep.py", "demos": "demos.py", "report": "report.py"}
 #: Each entry point's command before a case's arguments (placeholders filled by _fill).
 BASE = {
     "train": [*SMOKE, "paths.root_dir={root}"],
@@ -47,6 +53,7 @@ BASE = {
     "sweep": ["experiment=smoke", "sweep.root_dir={root}/sweeps"],
     "demo": ["--out", "{root}/demo", "--episodes", "1"],
     "demos": ["out={root}/demos_out", "episodes=1", "workers=1"],
+    "report": ["{run}", "--out", "{root}/report"],
 }
 COMMANDS = {
     "train": "scripts/train.py experiment=smoke logger=none",
@@ -56,6 +63,7 @@ COMMANDS = {
     "sweep": "rlgrasp-sweep experiment=smoke",
     "demo": "rlgrasp-demo --out <dir> --episodes 1",
     "demos": "rlgrasp-demos out=<dir> episodes=1 workers=1",
+    "report": "rlgrasp-report <run> --out <dir>",
 }
 
 
@@ -96,7 +104,27 @@ def _files(root: Path) -> dict[str, str]:
     return {"run": str(run), "empty": str(empty), "truncated": str(truncated), "foreign": str(foreign),
             "unwritable": str(unwritable / "out"), "notamesh": str(notamesh), "notes": str(notes),
             **bad_input_files(root),  # camera checkpoints: student, orphan, mismatched; the teacher
-            **demo_files(root)}  # demonstrations of another control mode, and of no episode
+            **demo_files(root),  # demonstrations of another control mode, and of no episode
+            **_more_files(root, run, Path(demo_files(root)["empty_demos"]))}
+
+
+def _more_files(root: Path, run: Path, demos: Path) -> dict[str, str]:
+    """A checkpoint of a newer format, demonstrations without their frames, a flat mesh, a closed port."""
+    newer = root / "newer.pt"
+    if not newer.exists():
+        state = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
+        torch.save({**state, "format": FORMAT + 1}, newer)
+    frameless = root / "frameless_demos" / "demos"
+    frameless.mkdir(parents=True, exist_ok=True)
+    meta = (demos / "demos.json").read_text().replace('"kept": 0', '"kept": 3')
+    (frameless / "demos.json").write_text(meta)
+    flat = root / "flat.obj"  # a square: four vertices, two faces, on the plane z = 0
+    flat.write_text("v 0 0 0\nv 0.03 0 0\nv 0.03 0.03 0\nv 0 0.03 0\nf 1 2 3\nf 1 3 4\n")
+    with socket.socket() as sock:  # a port nothing listens on (bound, then released)
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    return {"newer": str(newer), "frameless_demos": str(frameless), "flat": str(flat),
+            "closed_port": str(port)}
 
 
 #: A user's arm (the Panda's model) naming a joint its model does not have.
@@ -213,9 +241,9 @@ TRAIN = [
     ("pre-training without demonstrations", ["algo.bc_epochs=5"], "algo.bc_epochs=5: needs algo.demos="),
     ("a negative seed", ["seed=-1"], "seed=-1: must be an integer in [0, 2**32)"),
     ("an experiment name that leaves the outputs folder", ["experiment_name=../escaped"],
-     "experiment_name='../escaped': must be a plain name"),
+     "experiment_name='../escaped': must be one folder name"),
     ("an absolute experiment name", ["experiment_name=/tmp/escaped"],
-     "experiment_name='/tmp/escaped': must be a plain name"),
+     "experiment_name='/tmp/escaped': must be one folder name"),
     ("an unknown critic loss", ["algo.loss_critic_type=l3"],
      "algo.loss_critic_type='l3': must be l1, l2 or smooth_l1"),
     ("a clip range of 2", ["algo.clip_epsilon=2"], "algo.clip_epsilon=2.0: must be in (0, 1)"),
@@ -227,6 +255,18 @@ TRAIN = [
     ("resume a policy file", [f"resume={ROOT}/policies/grasp_ppo.pt"],
      "is a policy file (no training state to continue)"),
     ("an unknown algorithm", ["algo=dqn"], "algo=dqn: no such option; algo is one of distill, ppo, sac"),
+    ("a seed above numpy's", ["seed=4294967296"], "seed=4294967296: must be an integer in [0, 2**32)"),
+    ("resume a checkpoint of a newer format", ["resume={newer}"],
+     f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)"),
+    ("fine-tuning from a checkpoint of a newer format", ["algo.init_from={newer}"],
+     f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)"),
+    ("demonstrations without their frames", ["algo.demos={frameless_demos}"],
+     "frames is missing (its demos.json came without the transitions"),
+    ("a tracking server that does not answer",
+     ["logger=mlflow", "logger.tracking_uri=http://127.0.0.1:{closed_port}"],
+     "no tracking server answers (Connection refused; waited up to 5 s)"),
+    ("own objects: a mesh of zero volume", ["env.objects={paths:[{flat}]}"],
+     "flat.obj has zero volume (its vertices lie on one plane or line)"),
 ]
 EVAL = [
     ("unknown objects option (a typo of random_urdfs_test)", ["objects=random_urdfs_tset"],
@@ -271,6 +311,11 @@ EVAL = [
      "env.control_mode='ee_delta' in the teacher, 'joint_delta' here"),
     ("a camera policy as the teacher", ["ckpt={student}", "teacher={student}"],
      "the teacher must be a state policy"),
+    ("a checkpoint of a newer format", ["ckpt={newer}"],
+     f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)"),
+    ("a name with a path", ["name=../x"], "name='../x': must be one folder name (no '/', '..' or absolute"),
+    ("an absolute name", ["name=/tmp/x"], "name='/tmp/x': must be one folder name"),
+    ("own objects: a mesh of zero volume", ["objects={paths:[{flat}]}"], "flat.obj has zero volume"),
 ]
 EXPORT = [
     ("unknown format", ["format=tflite"], "format=tflite: must be one of torchscript, onnx, pt2 or all"),
@@ -285,6 +330,8 @@ EXPORT = [
     ("unknown key", ["formatt=onnx"], "formatt=onnx: unknown key 'formatt'; the config has ckpt"),
     ("a camera checkpoint whose env gives other images", ["ckpt={mismatched}"],
      "image mismatch: checkpoint reads rgb [3, 64, 64], env gives depth [1, 64, 64]"),
+    ("a checkpoint of a newer format", ["ckpt={newer}"],
+     f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)"),
 ]
 ENJOY = [
     ("no episodes", ["episodes=0"], "episodes=0: must be at least 1"),
@@ -301,6 +348,8 @@ ENJOY = [
      "is a camera policy (depth [1, 64, 64] + 29 state values) and the env has no camera"),
     ("a checkpoint of another arm", ["robot=xarm6"], "was trained on the robot 'panda' and the env has the "
      "robot 'xarm6'"),
+    ("a checkpoint of a newer format", ["ckpt={newer}"],
+     f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)"),
 ]
 SWEEP = [
     ("unknown sweep", ["sweep=bogus"],
@@ -321,6 +370,13 @@ SWEEP = [
      "a trial's env: object path"),
     ("an unwritable study directory", ["sweep.root_dir={unwritable}"], "cannot create"),
     ("a summary of no study", ["--summary"], "no study to summarize: "),
+    ("a study name with a path", ["sweep.study_name=../x"],
+     "sweep.study_name='../x': must be one folder name (no '/', '..' or absolute path)"),
+    ("an absolute study name", ["sweep.study_name=/tmp/x"], "sweep.study_name='/tmp/x': must be one folder"),
+    ("a storage inside a file", ["sweep.storage={unwritable}/journal.log"],
+     "a_file/out/journal.log: cannot open "),
+    ("a database in a missing folder", ["sweep.storage=sqlite:///{root}/nowhere/study.db"],
+     "nowhere/study.db: cannot open "),
 ]
 DEMO = [
     ("no episodes", ["--episodes", "0"], "--episodes 0: must be at least 1"),
@@ -341,10 +397,15 @@ DEMOS = [
     ("a missing policy checkpoint", ["policy={root}/nowhere.pt"], "nowhere.pt: missing checkpoint"),
     ("unknown objects option", ["objects=random_urdfs_tset"], "objects=random_urdfs_tset: no such option"),
     ("an unwritable output directory", ["out={unwritable}"], "cannot write there"),
+    ("a policy checkpoint of a newer format", ["policy={newer}"],
+     f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)"),
+]
+REPORT = [
+    ("no bootstrap resamples", ["--reps", "0"], "--reps 0: must be at least 1 (bootstrap resamples)"),
 ]
 CASES = [(entry, *case) for entry, cases in (("train", TRAIN), ("eval", EVAL), ("export", EXPORT),
                                               ("enjoy", ENJOY), ("sweep", SWEEP), ("demo", DEMO),
-                                              ("demos", DEMOS))
+                                              ("demos", DEMOS), ("report", REPORT))
          for case in cases]
 
 
@@ -422,6 +483,32 @@ def test_bad_input_gives_one_line_and_leaves_nothing(files, capsys, entry, what,
     assert after == before, f"left behind: {set(after) - set(before)}"
 
 
+def test_far_more_workers_than_cores_is_a_warning_not_an_error(caplog, monkeypatch) -> None:
+    """64 workers on 2 cores run, slowly: one warning naming both counts, and validation passes."""
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    cfg = compose_train([*SMOKE, "collector.num_workers=64"])
+
+    def warnings() -> list[str]:
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="rlgrasp.train"):
+            validate_train(cfg)
+        return [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+
+    assert warnings() == ["collector.num_workers=64 on a machine with 2 cores: each worker gets a fraction "
+                          "of a core (collector.num_workers=2 or fewer is usually fastest)"]
+    cfg.collector.num_workers = 4
+    assert warnings() == []  # up to twice the cores: no line
+
+
+def _as_documented(text: str, tmp: str, paths: dict[str, str]) -> str:
+    """``text`` without what differs from one machine or run of the table to the next: the
+    temporary folder, the closed port, the checkout's and the installed packages' folders."""
+    port = f"127.0.0.1:{paths['closed_port']}"
+    site = str(Path(pybullet_data.getDataPath()).parent)
+    return (text.replace(tmp, "...").replace(port, "127.0.0.1:<closed port>").replace(f"{ROOT}/", "")
+            .replace(site, ".../site-packages"))
+
+
 def _table() -> str:
     """The bad-input table of the docs: each case and the line it prints, per entry point."""
     sections = []
@@ -435,8 +522,8 @@ def _table() -> str:
                 with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
                     code = run_entry(entry, _fill([*BASE[entry], *args], root, paths), root)
                 lines = error_lines(out.getvalue(), err.getvalue()) or ["(no error line)"]
-                line = lines[0].replace(tmp, "...").replace("|", "\\|")
-                shown = " ".join(_fill(args, root, paths)).replace(tmp, "...")
+                line = _as_documented(lines[0], tmp, paths).replace("|", "\\|")
+                shown = _as_documented(" ".join(_fill(args, root, paths)), tmp, paths)
                 rows.append((what, f"`{shown}`", code, line))
             sections.append(f"### `{script}`\n\n" + markdown_table(["input", "arguments", "exit", "message"],
                                                                     rows))
