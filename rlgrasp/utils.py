@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
+import logging
 import multiprocessing
 import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
@@ -50,6 +53,20 @@ def markdown_table(head: Sequence[Any], rows: Sequence[Sequence[Any]]) -> str:
     )
 
 
+class Progress:
+    """``progress(done, total)`` for a pool's results: logs ``done/total episodes`` to ``logger`` at
+    each fifth of the way."""
+
+    def __init__(self, logger: logging.Logger) -> None:
+        self.logger, self.logged = logger, 0
+
+    def __call__(self, done: int, total: int) -> None:
+        fifth = 5 * done // total
+        if fifth > self.logged or done == total:
+            self.logged = fifth
+            self.logger.info("  %d/%d episodes", done, total)
+
+
 def pyplot() -> Any:
     """``matplotlib.pyplot`` drawing to files only (no display on workers, clusters or CI)."""
     # Imported here: only plots need matplotlib, and choosing its backend when rlgrasp.utils is
@@ -62,10 +79,63 @@ def pyplot() -> Any:
     return plt
 
 
+_PR_SET_PDEATHSIG = 1  # linux/prctl.h
+#: How often a child's watchdog looks whether its parent is still there.
+PARENT_POLL_S = 0.5
+_WATCHING = False  # die_with_parent ran in this process
+
+
+def die_with_parent() -> None:
+    """End this process when the process that started it ends, however it ends (``kill -9``
+    included); nothing in the main process of a command, which has no parent of ours.
+
+    A spawned worker blocks on its task queue or steps envs; nothing it does notices the parent's
+    death, so a killed command left its workers running, orphaned, for good. Two means, as neither
+    covers every case alone: Linux's ``PR_SET_PDEATHSIG`` has the kernel send SIGKILL at once, even
+    to a child stuck in C code holding the GIL, but it comes too late if the parent died before this
+    call (the import of the main module takes seconds) and exists on Linux only; a daemon thread
+    that watches ``os.getppid()`` covers both. (The signal follows the parent *thread* that started
+    the child: every worker here is started from its parent's main thread.)
+    """
+    global _WATCHING
+    if multiprocessing.parent_process() is None or _WATCHING:
+        return
+    _WATCHING, parent = True, os.getppid()
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+    threading.Thread(target=_exit_without, args=(parent,), name="rlgrasp-parent-watch", daemon=True).start()
+
+
+def _exit_without(parent: int) -> None:
+    while os.getppid() == parent:
+        time.sleep(PARENT_POLL_S)
+    os._exit(1)
+
+
+@contextlib.contextmanager
+def sigterm_as_interrupt() -> Iterator[list[int]]:
+    """SIGTERM (``kill``, a scheduler) stops the command as Ctrl-C does, unwinding through a worker
+    pool's exit (which terminates the workers) and the removal of partial output. Python's default
+    would end the process at once, before any of that. Yields the signals caught."""
+    caught: list[int] = []
+
+    def interrupt(signum: int, frame: Any) -> None:
+        caught.append(signum)
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield caught
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 class _SpawnIgnoringCtrlC(SpawnProcess):
-    """A spawned process born with SIGINT blocked (see ``SpawnPool``). The parent blocks SIGINT for
-    the launch, and a Ctrl-C that arrives then is delivered to it when the launch is done: blocked,
-    not ignored, so that it is late rather than lost (a busy machine can take seconds to launch)."""
+    """A spawned process born with SIGINT blocked (see ``SpawnPool``), which ends with its parent
+    (``die_with_parent``). The parent blocks SIGINT for the launch, and a Ctrl-C that arrives then is
+    delivered to it when the launch is done: blocked, not ignored, so that it is late rather than
+    lost (a busy machine can take seconds to launch)."""
 
     @staticmethod
     def _Popen(process_obj: Any) -> Any:  # noqa: N802 (multiprocessing's name)
@@ -77,27 +147,16 @@ class _SpawnIgnoringCtrlC(SpawnProcess):
         finally:
             signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
+    def run(self) -> None:
+        die_with_parent()  # the child's first instruction of ours: see die_with_parent
+        super().run()
+
 
 class SpawnContextIgnoringCtrlC(SpawnContext):
     """multiprocessing's spawn context, its processes born with SIGINT blocked (see ``SpawnPool``);
     hand them large arguments after the launch, as ``SpawnPool`` does."""
 
     Process = _SpawnIgnoringCtrlC
-
-
-def die_with_parent() -> None:
-    """In a process rlgrasp spawned: be killed when the parent dies, however it dies. A ``kill -9``
-    (the OOM killer's signal) gives the parent no chance to end its workers, and a worker blocked
-    on its task queue would run on for ever; Linux's ``PR_SET_PDEATHSIG`` has the kernel send
-    SIGKILL instead. No-op in a process that is not a multiprocessing child, and elsewhere than Linux
-    (where the workers' broken pipes end them when they next talk to the parent)."""
-    parent = multiprocessing.parent_process()
-    if parent is None or not sys.platform.startswith("linux"):
-        return
-    libc = ctypes.CDLL(None, use_errno=True)
-    libc.prctl(1, signal.SIGKILL)  # 1: PR_SET_PDEATHSIG
-    if os.getppid() != parent.pid:  # the parent died before the line above
-        os._exit(1)
 
 
 def _init_from_queue(handoff: Any) -> None:

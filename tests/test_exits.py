@@ -153,3 +153,21 @@ def test_eval_killed_with_sigkill_leaves_no_worker(tmp_path: Path, script) -> No
     while in_group(killed.pid, "spawn_main") and time.monotonic() < deadline:
         time.sleep(0.2)
     assert in_group(killed.pid, "spawn_main") == []
+
+
+def _demos_working(tmp_path: Path, script):
+    started = script("demos", "episodes=100", f"out={tmp_path / 'demos_out'}", "workers=2")
+    workers = wait_for(lambda: w if len(w := in_group(started.pid, "spawn_main")) == 2 else None, 180,
+                       started)
+    wait_for(lambda: re.search(r"\d+/100 episodes", started.output()), 180, started)  # mid-recording
+    return started, workers
+
+
+def test_demos_stopped_with_sigterm_exits_with_one_line_and_leaves_nothing(tmp_path: Path, script) -> None:
+    started, _ = _demos_working(tmp_path, script)
+    started.proc.send_signal(signal.SIGTERM)  # `kill <pid>`: the main process only
+    assert started.wait(timeout=60) == 128 + signal.SIGTERM, started.output()[-2000:]
+    out = started.output()
+    assert "error: stopped by SIGTERM; nothing was written" in out and "Traceback" not in out, out[-3000:]
+    assert not (tmp_path / "demos_out" / "demos").exists()
+    assert started.left() == []

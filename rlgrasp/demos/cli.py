@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import logging
+import signal
 import sys
 from pathlib import Path
 from typing import Any
@@ -22,7 +23,7 @@ from rlgrasp.envs.factory import env_factory
 from rlgrasp.evaluation.policies import PolicySource
 from rlgrasp.overrides import entry_point, unwritable
 from rlgrasp.train.checkpoint import CheckpointError, load_checkpoint
-from rlgrasp.utils import WorkerDiedError
+from rlgrasp.utils import Progress, WorkerDiedError, sigterm_as_interrupt
 
 register_configs()
 log = logging.getLogger("rlgrasp.demos")
@@ -95,7 +96,7 @@ def record_demos(cfg: DictConfig) -> dict[str, Any]:
     source, layout = _source(cfg)
     who = source.ckpt_path or "the scripted expert"
     log.info("recording %d episodes of %s with %d worker(s)", cfg.episodes, who, cfg.workers)
-    episodes = record(source, cfg.episodes, cfg.seed, cfg.workers)
+    episodes = record(source, cfg.episodes, cfg.seed, cfg.workers, Progress(log))
     for e in episodes:
         e["kept"] = cfg.keep == "all" or e["success"]
     kept = [e for e in episodes if e["kept"]]
@@ -121,14 +122,21 @@ def _objects_line(objects: dict[str, Any], out: str, most: int = 8) -> str:
 @entry_point("demos")  # objects={paths:[...]} as in training; a refused command line in one line
 @hydra.main(config_path=CONFIG_DIR, config_name="demos", version_base="1.3")
 def main(cfg: DictConfig) -> None:
-    try:
-        record_demos(cfg)
-    except DemosInputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        sys.exit(2)
-    except WorkerDiedError as exc:
-        print(f"error: {exc}; nothing was written", file=sys.stderr)
-        sys.exit(1)
+    """Bad input exits 2, a dead worker 1, Ctrl-C or SIGTERM 128 + the signal's number, each with one
+    line; a signal terminates the worker pool on its way out (SIGTERM's default would orphan it)."""
+    with sigterm_as_interrupt() as caught:
+        try:
+            record_demos(cfg)
+        except DemosInputError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            sys.exit(2)
+        except WorkerDiedError as exc:
+            print(f"error: {exc}; nothing was written", file=sys.stderr)
+            sys.exit(1)
+        except KeyboardInterrupt:
+            sig = signal.Signals(caught[0] if caught else signal.SIGINT)
+            print(f"error: stopped by {sig.name}; nothing was written", file=sys.stderr)
+            sys.exit(128 + sig)
 
 
 if __name__ == "__main__":

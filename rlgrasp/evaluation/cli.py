@@ -6,14 +6,12 @@ the output location first; create the output directory only once episodes have r
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import os
 import shutil
 import signal
 import sys
 import tempfile
-from collections.abc import Iterator
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -39,7 +37,7 @@ from rlgrasp.evaluation.teacher import prepare_teacher
 from rlgrasp.evaluation.video import video_format, write_video
 from rlgrasp.overrides import entry_point, unwritable
 from rlgrasp.train.rundir import name_problem
-from rlgrasp.utils import WorkerDiedError, plain
+from rlgrasp.utils import Progress, WorkerDiedError, plain, sigterm_as_interrupt
 
 log = logging.getLogger("rlgrasp.eval")
 
@@ -88,12 +86,12 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
     run = {"episodes": cfg.episodes, "base_seed": cfg.seed, "workers": cfg.workers,
            "deterministic": cfg.deterministic}
     results, seconds = timed_run(
-        source=source, video_episodes=cfg.video_episodes if fmt else 0, progress=_Progress(), **run
+        source=source, video_episodes=cfg.video_episodes if fmt else 0, progress=Progress(log), **run
     )
     teacher_results: list = []
     if teacher:
         log.info("the teacher on the same %d episodes", cfg.episodes)
-        teacher_results, teacher_seconds = timed_run(source=teacher, progress=_Progress(), **run)
+        teacher_results, teacher_seconds = timed_run(source=teacher, progress=Progress(log), **run)
         seconds += teacher_seconds
     metrics = _metrics(cfg, source, results, seconds, ranges)
     if teacher:
@@ -174,19 +172,6 @@ def conditions(source: Any) -> dict[str, str]:
             trained = describe(trained)
             labels[key] = f"{used} (as trained)" if used == trained else f"{used} (trained on {trained})"
     return labels
-
-
-class _Progress:
-    """Logs ``done/total episodes`` at each fifth of the way."""
-
-    def __init__(self) -> None:
-        self.logged = 0
-
-    def __call__(self, done: int, total: int) -> None:
-        fifth = 5 * done // total
-        if fifth > self.logged or done == total:
-            self.logged = fifth
-            log.info("  %d/%d episodes", done, total)
 
 
 def _metrics(cfg: DictConfig, source: Any, results: list, seconds: float, ranges: dict) -> dict[str, Any]:
@@ -270,30 +255,11 @@ def _write_artefacts(
     return files
 
 
-@contextlib.contextmanager
-def _sigterm_as_interrupt() -> Iterator[list[int]]:
-    """SIGTERM (``kill``, a scheduler) stops the evaluation as Ctrl-C does, unwinding through the
-    worker pool's exit (which terminates the workers) and the staging folder's removal. Python's
-    default would end this process at once and leave the spawned workers running, orphaned.
-    Yields the signals caught."""
-    caught: list[int] = []
-
-    def interrupt(signum: int, frame: Any) -> None:
-        caught.append(signum)
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGTERM, interrupt)
-    try:
-        yield caught
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-
-
 def run(cfg: DictConfig) -> float:
     """Evaluate; a bad input exits with code 2 and one clear line (no traceback); Ctrl-C or SIGTERM
     with 128 + the signal's number and one line, a worker that died with 1 and one line, each
     leaving no worker and no partial output behind."""
-    with _sigterm_as_interrupt() as caught:
+    with sigterm_as_interrupt() as caught:
         try:
             return float(evaluate(cfg)["success_at_end"]["rate"])
         except EvaluationError as exc:
