@@ -1,5 +1,6 @@
-"""Session-wide test settings and the config fixtures: compose the train and eval configs the way
-their scripts do, once, here."""
+"""Session-wide test settings and the fixtures shared by test modules: compose the train and eval
+configs the way their scripts do, once, here; envs and scripts cleaned up after each test; a two-node
+Ray cluster. Shared helpers that are not fixtures are in ``tests/helpers.py``."""
 
 import os
 
@@ -70,3 +71,22 @@ def script(tmp_path):
     yield start
     for s in started:
         s.kill_group()
+
+
+@pytest.fixture(scope="module")
+def ray_cluster():
+    """Two Ray nodes (one CPU each) on 127.0.0.1, the driver connected; torn down after the module."""
+    pytest.importorskip("ray")  # on loopback: see RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER at the top
+    import ray  # an optional extra, imported only once it is there
+    from ray.cluster_utils import Cluster
+
+    node = {"num_cpus": 1, "node_ip_address": "127.0.0.1"}
+    cluster = Cluster(initialize_head=True, head_node_args={**node, "include_dashboard": False})
+    try:
+        cluster.add_node(**node)
+        cluster.wait_for_nodes()
+        ray.init(address=cluster.address, log_to_driver=False)
+        yield cluster
+    finally:
+        ray.shutdown()
+        cluster.shutdown()

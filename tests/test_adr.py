@@ -23,8 +23,7 @@ from rlgrasp.train.collectors import shut_down
 from rlgrasp.train.evaluate import periodic_evaluator
 from rlgrasp.train.loop import train
 from rlgrasp.train.parts import build_parts
-from tests.test_scale import ray_cluster  # noqa: F401 - the fixture: two Ray nodes on loopback
-from tests.test_train_run import _differences, _twice
+from tests.helpers import record_differences, train_twice
 
 ROOT = Path(__file__).resolve().parents[1]
 ADR_SPEC = yaml.safe_load((ROOT / "configs/randomization/adr.yaml").read_text())["randomization"]
@@ -307,9 +306,9 @@ def test_a_seed_gives_one_adr_run_on_this_machine(tmp_path: Path, train_cfg) -> 
     """Boundary draws, moves and ranges included: twice the same seed, the same curves bit for bit."""
     adr = ("randomization=adr", "env.randomization.adr.start=default", "env.randomization.adr.buffer_size=1",
            "collector.steps_per_env=128", "eval.episodes=2", "eval.final_episodes=2")
-    first, second = _twice(train_cfg, tmp_path, *adr)
+    first, second = train_twice(train_cfg, tmp_path, *adr)
     assert "adr/entropy" in first["curves"]
-    assert _differences(first, second) == []
+    assert record_differences(first, second) == []
 
 
 def _report_main():

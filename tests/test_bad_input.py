@@ -16,34 +16,24 @@ import io
 import logging
 import os
 import pickle
-import runpy
 import socket
-import sys
 import tempfile
-from collections.abc import Iterator
 from pathlib import Path
 
 import pybullet_data
 import pytest
 import torch
-from hydra.core.global_hydra import GlobalHydra
 from omegaconf import OmegaConf
 
-from rlgrasp import demo
 from rlgrasp.compose import compose_train
 from rlgrasp.config import validate_train
 from rlgrasp.train.checkpoint import FORMAT
 from rlgrasp.train.loop import Trainer
 from rlgrasp.utils import markdown_table
-from tests.test_demos import demo_files
-from tests.test_vision_eval import bad_input_files
+from tests.helpers import bad_input_files, demo_files, our_lines, run_entry
 
 ROOT = Path(__file__).resolve().parents[1]
 SMOKE = ["experiment=smoke", "logger=none"]
-#: What PyBullet prints on stderr when it is imported, whatever the command: not one of our lines.
-PYBULLET_BANNER = "pybullet build time:"
-SCRIPTS = {"train": "train.py", "eval": "evaluate.py", "export": "export.py", "enjoy": "enjoy.py",
-           "sweep": "sweep.py", "demos": "demos.py", "report": "report.py"}
 #: Each entry point's command before a case's arguments (placeholders filled by _fill).
 BASE = {
     "train": [*SMOKE, "paths.root_dir={root}"],
@@ -65,11 +55,6 @@ COMMANDS = {
     "demos": "rlgrasp-demos out=<dir> episodes=1 workers=1",
     "report": "rlgrasp-report <run> --out <dir>",
 }
-
-
-def our_lines(stderr: str) -> list[str]:
-    """The non-empty lines of ``stderr`` without PyBullet's import banner."""
-    return [ln for ln in stderr.splitlines() if ln.strip() and not ln.startswith(PYBULLET_BANNER)]
 
 
 def _make_run(root: Path) -> Path:
@@ -416,39 +401,6 @@ def _fill(args: list[str], root: Path, paths: dict[str, str]) -> list[str]:
             a = a.replace("{" + name + "}", value)
         out.append(a)
     return out
-
-
-@contextlib.contextmanager
-def _no_display() -> Iterator[None]:
-    """rlgrasp-enjoy as on a headless machine: its checks must not need the GUI."""
-    saved = {k: os.environ.pop(k) for k in ("DISPLAY", "WAYLAND_DISPLAY") if k in os.environ}
-    try:
-        yield
-    finally:
-        os.environ.update(saved)
-
-
-def run_entry(entry: str, argv: list[str], cwd: Path) -> int:
-    """One entry point with ``argv`` in this process, as its command would run it; the exit code."""
-    script = str(ROOT / "scripts" / SCRIPTS[entry]) if entry in SCRIPTS else "rlgrasp-demo"
-    old_argv, old_cwd = sys.argv, Path.cwd()
-    sys.argv = [script, *argv]
-    os.chdir(cwd)
-    try:
-        with _no_display():
-            if entry == "demo":
-                demo.main()
-            else:
-                runpy.run_path(script, run_name="__main__")
-        return 0
-    except SystemExit as exc:
-        return exc.code if isinstance(exc.code, int) else 1
-    finally:
-        sys.argv = old_argv
-        os.chdir(old_cwd)
-        GlobalHydra.instance().clear()
-        for handler in logging.getLogger().handlers[:]:
-            logging.getLogger().removeHandler(handler)
 
 
 def error_lines(out: str, err: str) -> list[str]:

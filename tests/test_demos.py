@@ -21,32 +21,7 @@ from rlgrasp.envs.factory import env_factory
 from rlgrasp.train.loop import Trainer
 from rlgrasp.train.models import build_models
 from rlgrasp.train.resume import prepare_run
-
-SMOKE = ["experiment=smoke", "logger=none", "collector=single", "collector.envs_per_worker=2",
-         "collector.steps_per_env=64", "algo.minibatch_size=64", "total_frames=256",
-         "eval.interval_frames=0", "eval.episodes=1", "eval.final_episodes=1", "eval.num_envs=1",
-         "checkpoint.interval_frames=128", "env.reward=sparse", "device=cpu"]
-
-
-def _env_cfg(control_mode: str = "ee_delta") -> dict:
-    cfg = compose_train([f"env.control_mode={control_mode}", "paths.output_dir=."])
-    return OmegaConf.to_container(cfg.env, resolve=True)
-
-
-def demo_files(root: Path) -> dict[str, str]:
-    """Demonstration files without recording: one of another control mode, one with no episode."""
-    out = {}
-    for name, mode, kept in (("foreign_demos", "joint_delta", 3), ("empty_demos", "ee_delta", 0)):
-        target = root / name / "demos"
-        if not target.exists():
-            env_cfg = _env_cfg(mode)
-            env = env_factory(env_cfg)()
-            layout = layout_of(env, env_cfg)
-            env.close()
-            frames = TensorDict({"observation": torch.zeros(2, layout["obs_dim"])}, [2])
-            write_demos(root / name, frames, {**layout, "summary": {"kept": kept}})
-        out[name] = str(target)
-    return out
+from tests.helpers import SMOKE_IN_PROCESS, demo_env_cfg, demo_files, logged_scalars
 
 
 @pytest.fixture(scope="module")
@@ -60,7 +35,7 @@ def recorded(tmp_path_factory) -> Path:
 
 
 def _layout(control_mode: str = "ee_delta") -> dict:
-    env_cfg = _env_cfg(control_mode)
+    env_cfg = demo_env_cfg(control_mode)
     env = env_factory(env_cfg)()
     try:
         return layout_of(env, env_cfg)
@@ -145,27 +120,13 @@ def test_the_demo_weight_decays_as_configured(recorded: Path) -> None:
     assert float(loss.detach()) == pytest.approx(0.5 * 0.81 * values["bc_loss"], rel=1e-5)
 
 
-def _logged(trainer: Trainer) -> dict[str, list[float]]:
-    """Every scalar the trainer logs, by name."""
-    seen: dict[str, list[float]] = {}
-    inner = trainer.logger.scalars
-
-    def scalars(metrics, step):
-        for k, v in metrics.items():
-            seen.setdefault(k, []).append(float(v))
-        return inner(metrics, step)
-
-    trainer.logger.scalars = scalars
-    return seen
-
-
 def test_ppo_with_demos_logs_checkpoints_and_resumes(recorded: Path, tmp_path: Path) -> None:
     run = tmp_path / "run"
-    args = [*SMOKE, f"algo.demos={recorded}", "algo.bc_epochs=1", "algo.demo_decay=0.5",
+    args = [*SMOKE_IN_PROCESS, f"algo.demos={recorded}", "algo.bc_epochs=1", "algo.demo_decay=0.5",
             f"paths.output_dir={run}"]
     cfg, resumed = prepare_run(compose_train(args))
     trainer = Trainer(cfg, resumed=resumed)
-    seen = _logged(trainer)
+    seen = logged_scalars(trainer)
     trainer.run()
     assert seen["charts/demo_weight"] == pytest.approx([0.1, 0.05])
     assert len(seen["losses/bc_loss"]) == 2 and "pretrain/bc_loss_first" in seen
@@ -175,14 +136,14 @@ def test_ppo_with_demos_logs_checkpoints_and_resumes(recorded: Path, tmp_path: P
     resume = compose_train([*args, f"resume={run}", "total_frames=384"])
     cfg, resumed = prepare_run(resume, {"resume", "total_frames"})
     again = Trainer(cfg, resumed=resumed)
-    seen = _logged(again)
+    seen = logged_scalars(again)
     again.run()
     assert again.updates == 3 and seen["charts/demo_weight"] == pytest.approx([0.1 * 0.5**2])
     assert "pretrain/bc_loss_first" not in seen  # pre-training belongs to the fresh start only
 
 
 def test_behaviour_cloning_alone_starts_no_workers(recorded: Path, tmp_path: Path) -> None:
-    args = [*SMOKE, f"algo.demos={recorded}", "algo.bc_epochs=1", "algo.bc_only=true",
+    args = [*SMOKE_IN_PROCESS, f"algo.demos={recorded}", "algo.bc_epochs=1", "algo.bc_only=true",
             f"paths.output_dir={tmp_path / 'bc'}"]
     trainer = Trainer(prepare_run(compose_train(args))[0])
     trainer.run()
@@ -192,7 +153,7 @@ def test_behaviour_cloning_alone_starts_no_workers(recorded: Path, tmp_path: Pat
 def test_a_moved_file_is_refused_before_training(recorded: Path, tmp_path: Path) -> None:
     moved = tmp_path / "moved"
     shutil.copytree(recorded, moved / "demos")
-    args = [*SMOKE, "env.control_mode=joint_delta", f"algo.demos={moved}",
+    args = [*SMOKE_IN_PROCESS, "env.control_mode=joint_delta", f"algo.demos={moved}",
             f"paths.output_dir={tmp_path / 'r'}"]
     with pytest.raises(DemoError, match="control_mode='ee_delta', this run has 'joint_delta'"):
         cfg = prepare_run(compose_train(args))[0]

@@ -17,8 +17,7 @@ from rlgrasp.evaluation.enjoy import PacedActor, no_display_reason, play, regist
 from rlgrasp.evaluation.episodes import run_episode
 from rlgrasp.evaluation.policies import build_policy
 from rlgrasp.evaluation.source import EvaluationError, prepare
-from tests.test_bad_input import our_lines
-from tests.test_eval import make_run
+from tests.helpers import make_run, our_lines
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -99,7 +98,7 @@ def test_bad_input_says_what(tmp_path: Path) -> None:
 @pytest.mark.parametrize("camera", [False, True])
 def test_the_gui_opens_on_a_virtual_display(tmp_path: Path, camera: bool) -> None:
     """The GUI path itself (its visualizer settings, the camera preview panes), on Xvfb's display."""
-    from tests.test_vision_eval import make_student
+    from tests.helpers import make_student
 
     ckpt = make_student(tmp_path) if camera else ROOT / "policies" / "grasp_ppo.pt"
     display = f":{90 + camera + os.getpid() % 50 * 2}"

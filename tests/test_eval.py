@@ -20,32 +20,13 @@ from rlgrasp.evaluation.episodes import run_episodes
 from rlgrasp.evaluation.metrics import summarize
 from rlgrasp.evaluation.plots import binned_success
 from rlgrasp.evaluation.source import prepare
-from rlgrasp.train.loop import Trainer
+from tests.helpers import make_run
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _cfg(*overrides: str):
     return compose_eval(list(overrides))
-
-
-def make_run(
-    tmp: Path, frames: int = 4096, obs_dim: int | None = None, overrides: tuple[str, ...] = ()
-) -> Path:
-    """A run directory whose checkpoints the training code wrote (random weights, fitted normalizer,
-    ``frames`` frames); ``obs_dim`` replaces the recorded observation size (a mismatched checkpoint),
-    ``overrides`` are the training config's."""
-    run = tmp / "run"
-    over = ["model.hidden_sizes=[16,16]", "logger=none", "experiment_name=unit", "seed=3", *overrides]
-    cfg = compose_train([f"paths.output_dir={run}", *over])
-    trainer = Trainer(cfg)
-    trainer.parts.norm.update(torch.randn(64, trainer.parts.spec["obs_dim"]) * 0.3)
-    trainer.frames, trainer.updates = frames, 2
-    if obs_dim is not None:
-        trainer.parts.spec["obs_dim"] = obs_dim
-    trainer.save(is_best=True)
-    trainer.logger.close()
-    return run
 
 
 def test_a_run_judged_on_other_ranges_is_evaluated_on_them(tmp_path: Path) -> None:

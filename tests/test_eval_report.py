@@ -13,7 +13,7 @@ from rlgrasp.evaluation.report import band, build_report, expand_runs, main, rea
 from rlgrasp.stats import iqm, wilson_interval
 from rlgrasp.train.checkpoint import load_checkpoint, save_checkpoint
 from rlgrasp.train.loop import train
-from tests.test_eval import make_run
+from tests.helpers import make_run
 
 
 def fake_run(root: Path, name: str, seed: int, final: float, experiment: str = "exp") -> Path:

@@ -15,8 +15,8 @@ import optuna
 import pytest
 
 from rlgrasp.sweep.study import ATTR_INTERRUPTED, ATTR_RETRY_OF
+from tests.helpers import make_run
 from tests.procs import in_group, wait_for
-from tests.test_eval import make_run
 
 QUIET_EVAL = ["video=false", "plots=false", "tensorboard=false"]
 

@@ -15,7 +15,7 @@ from omegaconf import OmegaConf
 
 from rlgrasp.compose import compose_config
 from rlgrasp.export import DeployPolicy, ExportError, export, register_export_config
-from tests.test_eval import make_run
+from tests.helpers import make_run
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -22,7 +22,7 @@ from rlgrasp.envs.objects import (
     random_urdf_numbers,
 )
 from rlgrasp.overrides import rewrite
-from tests.test_bad_input import run_entry
+from tests.helpers import run_entry
 
 SETS = list(SET_NAMES) + [["primitives", "random_urdfs_train"]]
 

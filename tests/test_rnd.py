@@ -15,7 +15,7 @@ from rlgrasp.train.models import RunningNorm, build_models
 from rlgrasp.train.ppo import PPOLearner
 from rlgrasp.train.resume import prepare_run
 from rlgrasp.train.rnd import INTRINSIC_REWARD, RND
-from tests.test_demos import SMOKE, _logged
+from tests.helpers import SMOKE_IN_PROCESS, logged_scalars
 
 OBS_DIM, ENVS, STEPS = 6, 4, 32
 
@@ -108,9 +108,9 @@ def test_the_learner_trains_rnd_and_checkpoints_round_trip() -> None:
 
 def test_a_run_with_rnd_logs_it_checkpoints_its_networks_and_resumes(tmp_path) -> None:
     run = tmp_path / "run"
-    args = [*SMOKE, "algo.rnd_coeff=0.5", f"paths.output_dir={run}"]
+    args = [*SMOKE_IN_PROCESS, "algo.rnd_coeff=0.5", f"paths.output_dir={run}"]
     trainer = Trainer(prepare_run(compose_train(args))[0])
-    seen = _logged(trainer)
+    seen = logged_scalars(trainer)
     trainer.run()
     assert len(seen["charts/intrinsic_reward"]) == 2 and len(seen["losses/rnd_loss"]) == 2
     state = torch.load(run / "checkpoints" / "last.pt", weights_only=True)

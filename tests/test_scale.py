@@ -76,25 +76,6 @@ def test_slurm_launcher_config_composes() -> None:
 # Ray
 
 
-@pytest.fixture(scope="module")
-def ray_cluster():
-    """Two Ray nodes (one CPU each) on 127.0.0.1, the driver connected; torn down after the module."""
-    pytest.importorskip("ray")  # conftest.py keeps Ray on loopback (must precede the first import)
-    import ray  # an optional extra, imported only once it is there
-    from ray.cluster_utils import Cluster
-
-    node = {"num_cpus": 1, "node_ip_address": "127.0.0.1"}
-    cluster = Cluster(initialize_head=True, head_node_args={**node, "include_dashboard": False})
-    try:
-        cluster.add_node(**node)
-        cluster.wait_for_nodes()
-        ray.init(address=cluster.address, log_to_driver=False)
-        yield cluster
-    finally:
-        ray.shutdown()
-        cluster.shutdown()
-
-
 def _cfg(tmp_path: Path, *overrides: str):
     return compose_train(["experiment=smoke", f"paths.output_dir={tmp_path}", *overrides])
 

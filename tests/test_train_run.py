@@ -10,12 +10,10 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import Any
 
 import pytest
 import torch
 from omegaconf import OmegaConf
-from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 from tensordict import TensorDict
 
 from rlgrasp.config import EnvConfig
@@ -23,6 +21,7 @@ from rlgrasp.train.checkpoint import load_checkpoint, policy_from_checkpoint, re
 from rlgrasp.train.loop import Trainer, TrainingError, train
 from rlgrasp.train.parts import build_parts
 from rlgrasp.utils import flatten
+from tests.helpers import record_differences, run_record, tensorboard_scalars, train_twice
 
 REQUIRED_TAGS = {
     "charts/episodic_return",
@@ -42,21 +41,13 @@ REQUIRED_TAGS = {
     "time/collect_s",
     "time/train_s",
 }
-#: Tags that measure the wall clock, not the run.
-WALL_CLOCK = ("charts/SPS", "time/")
-
-
-def _scalars(run_dir: Path) -> EventAccumulator:
-    acc = EventAccumulator(str(run_dir / "tensorboard"), size_guidance={"scalars": 0})
-    acc.Reload()
-    return acc
 
 
 def test_smoke_end_to_end_then_resume(tmp_path: Path, train_cfg) -> None:
     run_dir = tmp_path / "run"
     success = train(train_cfg("experiment=smoke", run_dir=run_dir))
     assert isinstance(success, float) and 0.0 <= success <= 1.0
-    tags = set(_scalars(run_dir).Tags()["scalars"])
+    tags = set(tensorboard_scalars(run_dir).Tags()["scalars"])
     assert REQUIRED_TAGS <= tags, REQUIRED_TAGS - tags
     ckpts = run_dir / "checkpoints"
     assert (ckpts / "last.pt").is_file() and (ckpts / "best.pt").is_file()
@@ -82,7 +73,7 @@ def test_smoke_end_to_end_then_resume(tmp_path: Path, train_cfg) -> None:
     # resume: same run dir, frames and curves continue
     train(train_cfg("experiment=smoke", f"resume={run_dir}", "total_frames=4096", run_dir=run_dir))
     assert load_checkpoint(run_dir)["frames"] == 4096
-    steps = [e.step for e in _scalars(run_dir).Scalars("losses/policy_loss")]
+    steps = [e.step for e in tensorboard_scalars(run_dir).Scalars("losses/policy_loss")]
     assert steps == sorted(steps) and steps[-1] == 4096 and 2048 in steps
 
 
@@ -114,41 +105,6 @@ def test_stand_in_env_from_tests_reaches_spawned_workers(tmp_path: Path, train_c
 
 
 # --- one seed, one run (on the machine the test runs on) -----------------------------------------
-def _record(run_dir: Path) -> dict[str, Any]:
-    """What a run's seed decides: every curve but the wall-clock ones, the checkpoints it wrote and
-    their frames, the final evaluation and the final weights. Floats as hex: equal means bit-identical."""
-    acc = _scalars(run_dir)
-    curves = {
-        tag: [(e.step, float(e.value).hex()) for e in acc.Scalars(tag)]
-        for tag in acc.Tags()["scalars"]
-        if not tag.startswith(WALL_CLOCK)
-    }
-    ckpts = {p.name: read_checkpoint(p)["frames"] for p in sorted((run_dir / "checkpoints").glob("*.pt"))}
-    last = load_checkpoint(run_dir)
-    final_eval = {k: float(v).hex() for k, v in last["last_eval"].items()}
-    weights = {k: v.numpy().tobytes() for k, v in last["actor"].items()}
-    return {"curves": curves, "checkpoints": ckpts, "final_eval": final_eval, "weights": weights}
-
-
-def _differences(a: dict[str, Any], b: dict[str, Any]) -> list[str]:
-    """Where two records differ: a curve's tag, ``checkpoints``, ``final_eval`` or a weight's name."""
-    out = [part for part in ("checkpoints", "final_eval") if a[part] != b[part]]
-    for part in ("curves", "weights"):
-        out += [key for key in sorted(set(a[part]) | set(b[part])) if a[part].get(key) != b[part].get(key)]
-    return out
-
-
-def _twice(train_cfg, tmp_path: Path, *overrides: str, env_target: str | None = None) -> list[dict[str, Any]]:
-    records = []
-    for name in ("first", "second"):
-        cfg = train_cfg("experiment=smoke", *overrides, run_dir=tmp_path / name)
-        if env_target:
-            cfg.env = OmegaConf.merge(OmegaConf.to_container(cfg.env), {"_target_": env_target})
-        train(cfg)
-        records.append(_record(tmp_path / name))
-    return records
-
-
 def test_a_seed_gives_one_run_on_this_machine(tmp_path: Path, train_cfg) -> None:
     """Twice the same seed on process workers that collect while the learner updates (four updates,
     each batch after the first one update late): the same curves, checkpoints, evaluation and weights,
@@ -157,10 +113,10 @@ def test_a_seed_gives_one_run_on_this_machine(tmp_path: Path, train_cfg) -> None
     cfg = train_cfg("experiment=smoke", *overrides)
     assert cfg.collector._target_ == "rlgrasp.train.collectors.ProcessCollector"
     assert cfg.collector.num_workers == 2 and cfg.collector.overlap
-    first, second = _twice(train_cfg, tmp_path, *overrides)
+    first, second = train_twice(train_cfg, tmp_path, *overrides)
     assert len(first["curves"]["losses/policy_loss"]) == 4 and len(first["checkpoints"]) >= 3
     assert {"eval/mean_reward", "losses/approx_kl", "charts/episodic_return"} <= set(first["curves"])
-    assert _differences(first, second) == []
+    assert record_differences(first, second) == []
 
 
 @pytest.mark.slow
@@ -173,22 +129,22 @@ def test_evaluating_in_the_background_gives_the_same_run(tmp_path: Path, train_c
     for background in ("false", "true"):
         run = tmp_path / background
         train(train_cfg("experiment=smoke", *overrides, f"eval.background={background}", run_dir=run))
-        records.append(_record(run))
+        records.append(run_record(run))
         ckpt = read_checkpoint(run / "checkpoints" / "best.pt")
         weights = {k: v.numpy().tobytes() for k, v in ckpt["actor"].items()}
         best.append((ckpt["frames"], ckpt["last_eval"], ckpt["best_eval_success"], weights))
     in_learner, in_background = records
     assert [step for step, _ in in_learner["curves"]["eval/mean_reward"]] == [512, 1024, 1536, 2048]
-    assert _differences(in_learner, in_background) == []
+    assert record_differences(in_learner, in_background) == []
     assert best[0][0] < 2048 and best[0] == best[1]  # a periodic evaluation's weights
 
 
 def test_the_seed_check_catches_an_unseeded_worker(tmp_path: Path, train_cfg) -> None:
     """The check above is not vacuous: workers that draw their torch seed from the OS (a forgotten
     worker seed) sample other actions each run, and the check names what moved."""
-    first, second = _twice(train_cfg, tmp_path, "collector.num_workers=1", "collector.steps_per_env=128",
+    first, second = train_twice(train_cfg, tmp_path, "collector.num_workers=1", "collector.steps_per_env=128",
                            "total_frames=512", env_target="tests.standins.unseeded_worker_grasp_env")
-    differ = _differences(first, second)
+    differ = record_differences(first, second)
     assert "losses/policy_loss" in differ and any(name.endswith("weight") for name in differ), differ
 
 

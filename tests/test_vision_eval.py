@@ -28,62 +28,12 @@ from rlgrasp.evaluation.source import prepare
 from rlgrasp.evaluation.teacher import prepare_teacher
 from rlgrasp.evaluation.views import beside, camera_view, depth_image, upscale
 from rlgrasp.export import ExportError, export, load_exported, record, register_export_config
-from rlgrasp.train.checkpoint import FORMAT, policy_from_checkpoint
-from rlgrasp.vision.models import actor_norm, build_vision_actor
-from rlgrasp.vision.spec import vision_spec
-from tests.test_eval import make_run
+from rlgrasp.train.checkpoint import policy_from_checkpoint
+from tests.helpers import STUDENT_MODEL, TEACHER, make_run, make_student
 
 ROOT = Path(__file__).resolve().parents[1]
-TEACHER = ROOT / "policies" / "grasp_ppo.pt"  # a joint_delta state policy: 49 values = the privileged state
-MODEL = {
-    "hidden_sizes": [32, 32],
-    "activation": "elu",
-    "channels": [8, 16, 16],
-    "image_features": 32,
-    "init_log_std": -0.5,
-    "min_std": 0.05,
-    "obs_norm": True,
-    "obs_clip": 10.0,
-}
+MODEL = STUDENT_MODEL
 KEYPOINTS = {**MODEL, "strides": [2, 2, 1], "pooling": "keypoints"}  # kernel sizes: the default 8, 4, 3
-
-
-def make_student(
-    tmp: Path, modality: str = "depth", mount: str = "wrist", visual: str = "default", spread: bool = True,
-    name: str = "student.pt", teacher: str | None = str(TEACHER), model: dict | None = None,
-) -> Path:
-    """A camera checkpoint laid out as ``Distiller.save`` writes it. ``spread``: weights that send
-    the actions over the whole box (a fresh actor acts near zero, which would hide a wrong squashing
-    or a wrong image scaling)."""
-    env_cfg = {**asdict(EnvConfig()), "control_mode": "joint_delta",
-               "camera": {"mount": mount, "modality": modality}, "visual": visual}
-    spec = vision_spec(env_factory(env_cfg))
-    torch.manual_seed(0)
-    model = model or MODEL
-    actor = build_vision_actor(spec, OmegaConf.create(model))
-    actor_norm(actor).update(torch.randn(256, spec["obs_dim"]) * 0.5 + 0.1)
-    if spread:  # unit-gain layers, the last one 8x: actions at the bounds on some entries
-        gen = torch.Generator().manual_seed(1)
-        weights = [(k, v) for k, v in actor.named_parameters() if k.endswith("weight") and v.dim() >= 2]
-        with torch.no_grad():
-            for i, (_, value) in enumerate(weights):
-                gain = 8.0 if i == len(weights) - 1 else 1.0
-                value.copy_(torch.randn(value.shape, generator=gen) * gain / value[0].numel() ** 0.5)
-    ckpt = {
-        "format": FORMAT,
-        "kind": "vision",
-        "actor": actor.state_dict(),
-        "spec": spec,
-        "config": {"env": env_cfg, "model": model, "algo": {"name": "dagger", "teacher": teacher},
-                   "experiment_name": "student", "seed": 0},
-        "frames": 1234,
-        "last_eval": None,
-        "versions": {},
-        "run_dir": str(tmp),
-    }
-    path = tmp / name
-    torch.save(ckpt, path)
-    return path
 
 
 @pytest.fixture(scope="module")
@@ -381,21 +331,6 @@ def test_enjoy_plays_a_camera_policy_headless(student: Path) -> None:
     assert 0.75 <= results[0].randomization["visual_object_hue"] <= 0.95
     with pytest.raises(EvaluationError, match="is a camera policy .* and the env has no camera"):
         play(_enjoy_cfg(f"ckpt={student}", "render=none", "cameras=none"), out=lines.append)
-
-
-def bad_input_files(root: Path) -> dict[str, str]:
-    """Camera checkpoints for tests/test_bad_input.py: a good one, one whose recorded teacher is
-    gone, one whose spec asks for images its env does not give."""
-    folder = root / "vision"
-    folder.mkdir(exist_ok=True)
-    student = make_student(folder, spread=False)
-    orphan = make_student(folder, spread=False, name="orphan.pt", teacher=str(folder / "moved.pt"))
-    mismatched = make_student(folder, spread=False, name="mismatched.pt")
-    ckpt = torch.load(mismatched, weights_only=True)
-    ckpt["spec"]["images"] = {"rgb": [3, 64, 64]}
-    torch.save(ckpt, mismatched)
-    return {"student": str(student), "orphan": str(orphan), "mismatched": str(mismatched),
-            "teacher": str(TEACHER)}
 
 
 @pytest.mark.slow
