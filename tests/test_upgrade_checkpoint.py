@@ -12,8 +12,7 @@ import numpy as np
 import torch
 
 from rlgrasp.train.checkpoint import read_checkpoint
-
-from .test_eval import make_run
+from tests.helpers import make_run
 
 ROOT = Path(__file__).resolve().parents[1]
 
