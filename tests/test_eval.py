@@ -124,6 +124,7 @@ def test_random_baseline_rarely_succeeds(tmp_path: Path) -> None:
     assert m["success_at_end"]["successes"] == 0
 
 
+@pytest.mark.full  # three evaluations, two with worker processes
 def test_one_and_two_workers_identical_stochastic_policy(tmp_path: Path) -> None:
     """Episodes are seeded one by one: the split across processes must not change anything."""
     source = prepare("checkpoint", str(make_run(tmp_path)))
@@ -181,6 +182,7 @@ def test_layout_mismatch(tmp_path: Path) -> None:
     )
 
 
+@pytest.mark.full  # two interpreters; quick set: test_bad_input's eval cases
 def test_cli_errors_exit_cleanly(tmp_path: Path) -> None:
     """Bad input: one line on stderr and exit code 2; an unknown key: Hydra's own error."""
     script = str(ROOT / "scripts" / "evaluate.py")

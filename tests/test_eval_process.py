@@ -65,6 +65,7 @@ def test_the_background_process_gives_the_learners_numbers_for_the_submitted_wei
     assert _eval_children() == []
 
 
+@pytest.mark.full  # a second evaluation process
 def test_a_failing_evaluation_says_why_and_the_process_ends(parts) -> None:
     parts, evaluator = parts
     crashing = {"_target_": "tests.standins.crashing_grasp_env", "crash_after": 5}

@@ -21,6 +21,7 @@ from tests.procs import in_group, wait_for
 QUIET_EVAL = ["video=false", "plots=false", "tensorboard=false"]
 
 
+@pytest.mark.full  # quick set: test_eval_stopped_midway_exits_and_leaves_nothing[sigint-to-group]
 def test_eval_runs_to_the_end_and_exits(tmp_path: Path, script) -> None:
     run = make_run(tmp_path)
     done = script("evaluate", f"ckpt={run}", "episodes=4", "workers=2", "name=done", *QUIET_EVAL)
@@ -31,7 +32,8 @@ def test_eval_runs_to_the_end_and_exits(tmp_path: Path, script) -> None:
 
 @pytest.mark.parametrize(
     ("sig", "to_group"),
-    [(signal.SIGTERM, False),  # `kill <pid>`, a scheduler: the main process only; its pool must end too
+    # `kill <pid>`, a scheduler: the main process only; its pool must end too
+    [pytest.param(signal.SIGTERM, False, marks=pytest.mark.full),
      (signal.SIGINT, True)],  # Ctrl-C at a terminal: the whole group gets it
     ids=["sigterm-to-main", "sigint-to-group"],
 )
@@ -54,6 +56,7 @@ def test_eval_stopped_midway_exits_and_leaves_nothing(
     assert stopped.left() == []
 
 
+@pytest.mark.full  # waits for the progress line of a 2,000-episode evaluation
 def test_eval_whose_worker_is_killed_exits_with_one_line_and_leaves_nothing(tmp_path: Path, script) -> None:
     run = make_run(tmp_path)
     hit = script("evaluate", f"ckpt={run}", "episodes=2000", "workers=2", "name=hit", *QUIET_EVAL)
@@ -75,6 +78,7 @@ def _trials(root: Path) -> list[optuna.trial.FrozenTrial]:
     return optuna.load_study(study_name="smoke", storage=storage).get_trials()
 
 
+@pytest.mark.full  # two sweep processes, one trial of 8,192 frames
 def test_sweep_stops_on_sigterm_then_the_same_command_finishes(tmp_path: Path, script) -> None:
     """SIGTERM during a trial (collector workers running): the trial saves, the sweep stops with 130 and
     is resumable; the same command then runs to the end. Training hands the SIGTERM on: kept to itself,

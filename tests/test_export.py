@@ -133,6 +133,7 @@ def test_bad_input_says_what(tmp_path: Path) -> None:
         export(_cfg(f"ckpt={tmp_path / 'junk.pt'}"))
 
 
+@pytest.mark.full  # three interpreters; quick set: test_exits' export
 def test_cli_and_example_run_without_training_code(tmp_path: Path) -> None:
     """``scripts/export.py`` writes where ``out=`` says; the example drives the env with the file and
     imports neither rlgrasp's training code nor TorchRL."""

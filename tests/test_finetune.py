@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 import torch
 from tensordict import TensorDict
 from torchrl.envs import ExplorationType, set_exploration_type
@@ -43,6 +44,7 @@ def test_the_shipped_depth_student_starts_a_camera_ppo_run(tmp_path: Path, train
     assert not torch.equal(fresh.actor.state_dict()[first_layer], shipped[first_layer])  # a real load
 
 
+@pytest.mark.full  # a smoke run on process workers
 def test_during_the_critic_warm_up_only_the_critic_learns(tmp_path: Path, train_cfg) -> None:
     start = tmp_path / "start"
     Trainer(train_cfg(*SMOKE, run_dir=start)).save()

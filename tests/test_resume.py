@@ -225,6 +225,7 @@ def _train(args: list[str], cwd: Path, **kw) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **kw)
 
 
+@pytest.mark.full  # three training processes per signal
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGUSR1])
 def test_stop_signal_saves_then_resume_auto_finishes_and_exits(tmp_path: Path, sig: int) -> None:
     """A stop signal saves a checkpoint and exits 0; the same command (resume=auto) continues the run

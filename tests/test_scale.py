@@ -41,6 +41,7 @@ def _multirun(tmp_path: Path, *overrides: str) -> list[Path]:
     return jobs
 
 
+@pytest.mark.full  # two training jobs through submitit
 def test_two_seed_multirun_through_submitit_local(tmp_path: Path) -> None:
     """submitit_local shares submitit_slurm's code path: jobs pickled, run in their own processes,
     their return value (the final eval success) sent back to Hydra."""
@@ -80,6 +81,7 @@ def _cfg(tmp_path: Path, *overrides: str):
     return compose_train(["experiment=smoke", f"paths.output_dir={tmp_path}", *overrides])
 
 
+@pytest.mark.full  # a two-node Ray cluster
 def test_ray_collector_runs_on_both_nodes(ray_cluster, tmp_path: Path) -> None:
     """One collector actor per node, each collecting its share; the data match the process backend's
     (same env seeds and worker RNG seeds, same initial policy)."""

@@ -77,7 +77,7 @@ def test_smoke_end_to_end_then_resume(tmp_path: Path, train_cfg) -> None:
     assert steps == sorted(steps) and steps[-1] == 3072 and 2048 in steps
 
 
-@pytest.mark.parametrize("collector", ["process", "single"])
+@pytest.mark.parametrize("collector", [pytest.param("process", marks=pytest.mark.full), "single"])
 def test_crashing_env_stops_with_a_clear_error(tmp_path: Path, collector: str, train_cfg) -> None:
     cfg = train_cfg("experiment=smoke", f"collector={collector}", "total_frames=100000")
     cfg.env = OmegaConf.merge(
@@ -105,6 +105,7 @@ def test_stand_in_env_from_tests_reaches_spawned_workers(tmp_path: Path, train_c
 
 
 # --- one seed, one run (on the machine the test runs on) -----------------------------------------
+@pytest.mark.full  # two smoke runs on process workers
 def test_a_seed_gives_one_run_on_this_machine(tmp_path: Path, train_cfg) -> None:
     """Twice the same seed on process workers that collect while the learner updates (four updates,
     each batch after the first one update late): the same curves, checkpoints, evaluation and weights,
@@ -139,6 +140,7 @@ def test_evaluating_in_the_background_gives_the_same_run(tmp_path: Path, train_c
     assert best[0][0] < 2048 and best[0] == best[1]  # a periodic evaluation's weights
 
 
+@pytest.mark.full  # two runs on process workers
 def test_the_seed_check_catches_an_unseeded_worker(tmp_path: Path, train_cfg) -> None:
     """The check above is not vacuous: workers that draw their torch seed from the OS (a forgotten
     worker seed) sample other actions each run, and the check names what moved."""
@@ -222,6 +224,7 @@ def test_guard_the_spec_and_the_seeded_initial_networks(tmp_path: Path, train_cf
     assert all(not params[k].any() for k in params if k.endswith(".bias"))
 
 
+@pytest.mark.full  # starts the process collector's workers
 def test_guard_the_first_observations_of_the_seeded_workers(tmp_path: Path, train_cfg) -> None:
     """The first batch's first step, through the configured process collector: each worker's envs
     reset with their own seeds, whatever the policy then does."""

@@ -275,6 +275,7 @@ SMALL_DISTILL = (
 )
 
 
+@pytest.mark.full  # camera distillation on workers, resumed
 def test_distillation_trains_checkpoints_resumes_and_evaluates(tmp_path, train_cfg):
     from rlgrasp.train.checkpoint import load_checkpoint, policy_from_checkpoint
     from rlgrasp.vision.distill import distill

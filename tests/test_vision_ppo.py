@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 import torch
 from tensordict import TensorDict
 
@@ -52,6 +53,7 @@ def test_a_state_run_keeps_one_shared_normalizer(train_cfg) -> None:
     assert parts.critic.in_keys == ["observation"] and parts.norms["observation"] is parts.norm
 
 
+@pytest.mark.full  # camera PPO, rendered images on workers
 def test_vision_ppo_checkpoints_a_camera_policy_and_resumes(tmp_path: Path, train_cfg) -> None:
     run = tmp_path / "run"
     success = train(train_cfg(*SMALL_VISION_PPO, run_dir=run))
