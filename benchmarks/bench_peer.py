@@ -87,7 +87,7 @@ def sb3_kwargs(cfg: Any) -> dict[str, Any]:
 
 def ppo_kwargs(cfg: Any) -> dict[str, Any]:
     """SB3 ``PPO`` keywords for a composed rlgrasp PPO config."""
-    from rlgrasp.train.models import ACTIVATIONS
+    from rlgrasp.models.mlp import ACTIVATIONS
 
     a, m = cfg.algo, cfg.model
     if a.loss_critic_type != "l2":
@@ -126,7 +126,7 @@ def gradient_steps(cfg: Any) -> int:
 def sac_kwargs(cfg: Any) -> dict[str, Any]:
     """SB3 ``SAC`` keywords for a composed rlgrasp SAC config: one rollout per rlgrasp batch, the
     same update-to-data ratio, replay, temperature and networks."""
-    from rlgrasp.train.models import ACTIVATIONS
+    from rlgrasp.models.mlp import ACTIVATIONS
 
     a, m = cfg.algo, cfg.model
     if a.get("demos"):

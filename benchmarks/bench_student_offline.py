@@ -28,11 +28,11 @@ from torchrl.envs import ExplorationType, set_exploration_type
 from rlgrasp.compose import compose_train
 from rlgrasp.demos.bc import mse_bc_loss
 from rlgrasp.envs.factory import env_factory
+from rlgrasp.models.cnn import actor_norm, build_vision_actor
+from rlgrasp.models.spec import vision_spec
 from rlgrasp.train.checkpoint import resolve_policy_path
 from rlgrasp.vision.augment import augment
 from rlgrasp.vision.dagger import load_teacher
-from rlgrasp.vision.models import actor_norm, build_vision_actor
-from rlgrasp.vision.spec import vision_spec
 
 # The RGB experiment with the flat encoder (model=cnn), which the docs' tables call "base"; a variant
 # adds "model.pooling=keypoints ..." for the experiment's own keypoint encoder.

@@ -85,7 +85,7 @@ def sac_step_ms(cfg: Any, batch: Any, threads: int, steps: int) -> float:
     """ms per gradient step of a fresh ``SAC`` whose replay holds ``batch`` (and whose normalizer
     has seen it), after a few untimed steps."""
     from rlgrasp.algos.sac import SAC, TRANSITION_KEYS
-    from rlgrasp.train.models import OBS_KEY
+    from rlgrasp.models.mlp import OBS_KEY
 
     torch.set_num_threads(threads)
     torch.manual_seed(0)

@@ -24,9 +24,8 @@ from hydra.utils import instantiate
 from omegaconf import MISSING, OmegaConf
 
 from rlgrasp.envs.randomization import Randomizer
-from rlgrasp.train.rundir import register_resolvers
+from rlgrasp.rundir import register_resolvers
 from rlgrasp.utils import plain
-from rlgrasp.vision.augment import AUGMENTATIONS
 
 #: The Hydra config tree (``configs/`` next to the package in a source checkout).
 CONFIG_DIR = os.environ.get("RLGRASP_CONFIG_DIR", str(Path(__file__).resolve().parents[1] / "configs"))
@@ -265,7 +264,7 @@ class CNNConfig:
     kernel_sizes: list[int] = field(default_factory=lambda: [8, 4, 3])
     strides: list[int] = field(default_factory=lambda: [4, 2, 1])
     # flat: the last feature map flattened into the projection; keypoints: each channel's expected
-    # image position (x, y) under a softmax over its pixels (rlgrasp/vision/models.py, SpatialSoftmax)
+    # image position (x, y) under a softmax over its pixels (rlgrasp/models/cnn.py, SpatialSoftmax)
     pooling: str = "flat"
     image_features: int = 256
     hidden_sizes: list[int] = field(default_factory=lambda: [256, 256])
@@ -524,6 +523,10 @@ def _sum(*values: int) -> int:
     return sum(values)
 
 
+#: The colour augmentations a camera student can train with (``algo.augment``), named here so that the
+#: schema needs no import of ``rlgrasp.vision.augment``, which implements them.
+AUGMENTATIONS = ("none", "colour")
+
 class ConfigError(ValueError):
     """A bad training input; the message is one line naming the key, its value and what is allowed."""
 
@@ -531,7 +534,7 @@ class ConfigError(ValueError):
 def register_configs() -> None:
     """Register every schema (idempotent) and the resolvers the YAML files call: ``rlgrasp_sum``
     (OmegaConf has no arithmetic; the SLURM launcher asks for workers + 1 CPUs) and the run
-    directory's (``rlgrasp.train.rundir``)."""
+    directory's (``rlgrasp.rundir``)."""
     if not OmegaConf.has_resolver("rlgrasp_sum"):
         OmegaConf.register_new_resolver("rlgrasp_sum", _sum)
     register_resolvers()

@@ -16,9 +16,9 @@ from typing import Any
 import torch
 from torch import nn
 
+from rlgrasp.models.cnn import ImageEncoder, SpatialSoftmax, image_specs
+from rlgrasp.models.mlp import squashes
 from rlgrasp.train.checkpoint import policy_from_checkpoint
-from rlgrasp.train.models import squashes
-from rlgrasp.vision.models import ImageEncoder, SpatialSoftmax, image_specs
 
 
 class DeployPolicy(nn.Module):

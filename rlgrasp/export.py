@@ -45,10 +45,10 @@ from rlgrasp.evaluation.source import (
     load_checked_checkpoint,
     resolve_checkpoint_path,
 )
+from rlgrasp.models.cnn import image_specs
+from rlgrasp.models.mlp import squashes
 from rlgrasp.overrides import entry_point, unwritable
 from rlgrasp.train.checkpoint import package_versions
-from rlgrasp.train.models import squashes
-from rlgrasp.vision.models import image_specs
 
 log = logging.getLogger("rlgrasp.export")
 

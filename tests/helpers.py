@@ -28,10 +28,10 @@ from rlgrasp.compose import compose_train
 from rlgrasp.config import EnvConfig
 from rlgrasp.demos.dataset import layout_of, write_demos
 from rlgrasp.envs.factory import env_factory
+from rlgrasp.models.cnn import actor_norm, build_vision_actor
+from rlgrasp.models.spec import vision_spec
 from rlgrasp.train.checkpoint import FORMAT, load_checkpoint, read_checkpoint
 from rlgrasp.train.loop import Trainer, train
-from rlgrasp.vision.models import actor_norm, build_vision_actor
-from rlgrasp.vision.spec import vision_spec
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -95,7 +95,7 @@ def test_every_algorithm_is_named_by_its_target_and_an_unknown_one_is_refused() 
 
 def test_a_second_process_on_a_run_directory_is_refused_in_one_line(tmp_path: Path) -> None:
     from rlgrasp.config import ConfigError
-    from rlgrasp.train.rundir import run_lock
+    from rlgrasp.rundir import run_lock
 
     run = tmp_path / "run"
     trainer = _trainer("ppo", run)

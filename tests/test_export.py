@@ -81,7 +81,7 @@ def test_bounds_other_than_unit_box_match_tanh_normal() -> None:
     from tensordict import TensorDict
     from torchrl.envs import ExplorationType, set_exploration_type
 
-    from rlgrasp.train.models import RunningNorm, build_actor
+    from rlgrasp.models.mlp import RunningNorm, build_actor
 
     model = OmegaConf.create({"hidden_sizes": [8], "activation": "tanh", "min_std": 0.05,
                               "init_log_std": -0.5})
@@ -104,7 +104,7 @@ def test_a_gaussian_policy_exports_its_mean_clipped_to_the_bounds() -> None:
     from tensordict import TensorDict
     from torchrl.envs import ExplorationType, set_exploration_type
 
-    from rlgrasp.train.models import RunningNorm, build_actor
+    from rlgrasp.models.mlp import RunningNorm, build_actor
 
     model = OmegaConf.create({"hidden_sizes": [8], "activation": "tanh", "min_std": 0.05,
                               "init_log_std": -0.5, "distribution": "normal"})

@@ -10,7 +10,7 @@ from omegaconf import OmegaConf
 from tensordict import TensorDict
 
 from rlgrasp.config import MLPConfig, PPOConfig
-from rlgrasp.train.models import LOC_BOUND, build_models
+from rlgrasp.models.mlp import LOC_BOUND, build_models
 from rlgrasp.train.ppo import LOG_RATIO_BOUND, PPOLearner
 
 OBS_DIM, ACT_DIM, ENVS, STEPS = 5, 2, 4, 32

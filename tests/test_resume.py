@@ -21,10 +21,10 @@ import rlgrasp
 from rlgrasp.compose import compose_train
 from rlgrasp.config import ConfigError, validate_train
 from rlgrasp.evaluation.source import EvaluationError, load_checked_checkpoint
+from rlgrasp.rundir import remove_refused_start, run_dir
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.loop import Trainer
 from rlgrasp.train.resume import command_line_keys, merged_config, prepare_run
-from rlgrasp.train.rundir import remove_refused_start, run_dir
 from tests.procs import wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -176,7 +176,7 @@ def test_a_truncated_last_falls_back_with_a_warning(tmp_path: Path, run: Path, c
 
 
 def test_run_dirs_are_unique_per_process_and_name_the_seed(tmp_path: Path) -> None:
-    code = "from rlgrasp.train.rundir import run_dir; print(run_dir(None, 'base', 7))"
+    code = "from rlgrasp.rundir import run_dir; print(run_dir(None, 'base', 7))"
     names = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
                             check=True).stdout.strip() for _ in range(2)}
     assert len(names) == 2

@@ -10,8 +10,8 @@ from tensordict import TensorDict
 
 from rlgrasp.compose import compose_train
 from rlgrasp.config import MLPConfig, PPOConfig
+from rlgrasp.models.mlp import RunningNorm, build_models
 from rlgrasp.train.loop import Trainer
-from rlgrasp.train.models import RunningNorm, build_models
 from rlgrasp.train.ppo import PPOLearner
 from rlgrasp.train.resume import prepare_run
 from rlgrasp.train.rnd import INTRINSIC_REWARD, RND

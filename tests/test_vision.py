@@ -10,11 +10,11 @@ from torchrl.envs import ExplorationType, set_exploration_type
 from torchrl.objectives import BCLoss
 
 from rlgrasp.config import ConfigError
+from rlgrasp.models.cnn import SpatialSoftmax, actor_norm, average_weights, build_vision_actor
 from rlgrasp.train.checkpoint import CheckpointError
 from rlgrasp.vision.augment import augment, random_shift, recolour
 from rlgrasp.vision.auxiliary import ObjectFromImages
 from rlgrasp.vision.dagger import LABEL_KEY, DAggerPolicy, LabelledFrames, PrivilegedTeacher, load_teacher
-from rlgrasp.vision.models import SpatialSoftmax, actor_norm, average_weights, build_vision_actor
 
 MODEL = OmegaConf.create(
     dict(

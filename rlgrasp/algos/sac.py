@@ -25,8 +25,8 @@ from torch import nn
 from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.objectives import SACLoss, SoftUpdate
 
+from rlgrasp.models.mlp import ACTIVATIONS, OBS_KEY, RunningNorm
 from rlgrasp.train.algorithm import Algorithm, finite_or_raise
-from rlgrasp.train.models import ACTIVATIONS, OBS_KEY, RunningNorm
 
 #: The entries a transition keeps in the replay buffer (the collector's batch has more).
 TRANSITION_KEYS = (OBS_KEY, "action", ("next", OBS_KEY), ("next", "reward"), ("next", "done"),

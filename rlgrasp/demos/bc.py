@@ -24,7 +24,7 @@ from torchrl.envs import ExplorationType, set_exploration_type
 from torchrl.objectives import BCLoss
 
 from rlgrasp.demos.dataset import Demos
-from rlgrasp.train.models import OBS_KEY, RunningNorm
+from rlgrasp.models.mlp import OBS_KEY, RunningNorm
 
 VALUE_TARGET = "value_target"
 

@@ -8,8 +8,11 @@ from typing import Any
 from hydra.utils import instantiate
 from omegaconf import DictConfig
 
+#: What builds one env per call (``env_factory``'s result; collectors, evaluation and specs take it).
+EnvFactory = Callable[[], Any]
 
-def env_factory(env_cfg: DictConfig | Mapping[str, Any]) -> Callable[[], Any]:
+
+def env_factory(env_cfg: DictConfig | Mapping[str, Any]) -> EnvFactory:
     """A picklable partial that builds one env per call.
 
     Used by the collector workers, training's evaluation, ``rlgrasp-eval``, export and the

@@ -36,7 +36,7 @@ from rlgrasp.evaluation.tb_log import log_to_tensorboard
 from rlgrasp.evaluation.teacher import prepare_teacher
 from rlgrasp.evaluation.video import video_format, write_video
 from rlgrasp.overrides import entry_point, unwritable
-from rlgrasp.train.rundir import name_problem
+from rlgrasp.rundir import name_problem
 from rlgrasp.utils import Progress, WorkerDiedError, plain, sigterm_as_interrupt
 
 log = logging.getLogger("rlgrasp.eval")

@@ -20,8 +20,8 @@ from torchrl.envs import ExplorationType, set_exploration_type
 
 from rlgrasp.envs import ScriptedExpert
 from rlgrasp.envs.factory import env_factory
+from rlgrasp.models.cnn import IMAGE_KEYS
 from rlgrasp.train.checkpoint import policy_from_checkpoint
-from rlgrasp.vision.models import IMAGE_KEYS
 
 POLICIES = ("checkpoint", "scripted", "random")
 

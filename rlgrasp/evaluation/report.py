@@ -25,9 +25,9 @@ import numpy as np
 from omegaconf import OmegaConf
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
+from rlgrasp.rundir import CHECKPOINTS
 from rlgrasp.stats import iqm, stratified_bootstrap_ci, wilson_interval
 from rlgrasp.train.checkpoint import CheckpointError, read_checkpoint
-from rlgrasp.train.rundir import CHECKPOINTS
 from rlgrasp.utils import markdown_table, pyplot
 
 SUCCESS_TAGS = ("eval/success_rate", "charts/success_rate")

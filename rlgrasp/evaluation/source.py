@@ -24,12 +24,12 @@ from omegaconf.errors import OmegaConfBaseException
 from rlgrasp.config import EnvConfig
 from rlgrasp.envs.robot import robot_label
 from rlgrasp.evaluation.policies import POLICIES, PolicySource, build_policy
+from rlgrasp.models.cnn import image_specs
 from rlgrasp.overrides import explain
 from rlgrasp.targets import UntrustedConfigError, check_received_config
 from rlgrasp.train.checkpoint import FORMAT as CHECKPOINT_FORMAT
 from rlgrasp.train.checkpoint import unpickler_reason
 from rlgrasp.train.legacy import upgrade_config
-from rlgrasp.vision.models import image_specs
 
 CKPT_KINDS = ("best", "last")
 # What a checkpoint must hold for evaluation (see rlgrasp.train.checkpoint's docstring).

@@ -22,8 +22,8 @@ from rlgrasp.evaluation.source import (
     load_checked_checkpoint,
     resolve_checkpoint_path,
 )
+from rlgrasp.models.cnn import image_specs
 from rlgrasp.train.checkpoint import resolve_policy_path
-from rlgrasp.vision.models import image_specs
 
 #: Env keys a teacher must share with the student's env beyond the layout (same sizes, other meaning).
 SAME_ENV_KEYS = ("control_mode", "ee_yaw")

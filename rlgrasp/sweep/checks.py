@@ -17,11 +17,11 @@ from rlgrasp.config import ConfigError, validate_train
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.evaluation.source import ENV_ERRORS
 from rlgrasp.overrides import CommandLineError, check, unwritable
+from rlgrasp.rundir import name_problem
 from rlgrasp.sweep.objective import schedule_overrides, trial_overrides
 from rlgrasp.sweep.score import KINDS
 from rlgrasp.sweep.space import Space, to_overrides
 from rlgrasp.sweep.study import PRUNERS, SAMPLERS, open_study, study_dir
-from rlgrasp.train.rundir import name_problem
 from rlgrasp.utils import flatten
 
 #: What training reports to ``on_eval`` (``rlgrasp.train.evaluate.Evaluator.run``): the metrics a

@@ -48,11 +48,11 @@ from omegaconf import OmegaConf
 from tensordict.nn import TensorDictModuleBase
 
 from rlgrasp.config import CONFIG_DIR
+from rlgrasp.models.cnn import vision_policy
+from rlgrasp.models.mlp import OBS_KEY, RunningNorm, build_actor
+from rlgrasp.rundir import CHECKPOINTS
 from rlgrasp.targets import UntrustedConfigError, check_received_config
 from rlgrasp.train.legacy import upgrade_config
-from rlgrasp.train.models import OBS_KEY, RunningNorm, build_actor
-from rlgrasp.train.rundir import CHECKPOINTS
-from rlgrasp.vision.models import vision_policy
 
 FORMAT = 2
 _NUMBERED = re.compile(r"ckpt_(\d+)\.pt$")

@@ -17,10 +17,10 @@ from omegaconf import DictConfig
 
 from rlgrasp.config import CONFIG_DIR, ConfigError, register_configs
 from rlgrasp.overrides import entry_point
+from rlgrasp.rundir import remove_refused_start
 from rlgrasp.train.checkpoint import CheckpointError
 from rlgrasp.train.loop import TrainingError, train
 from rlgrasp.train.resume import command_line_keys
-from rlgrasp.train.rundir import remove_refused_start
 
 register_configs()
 log = logging.getLogger("rlgrasp.train")

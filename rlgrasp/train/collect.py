@@ -11,7 +11,6 @@ import functools
 import os
 import re
 import traceback
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -23,15 +22,13 @@ from torchrl.data import Composite, Unbounded
 from torchrl.envs import EnvBase, GymWrapper, default_info_dict_reader
 from torchrl.envs.transforms import Compose, RewardSum, StepCounter, TransformedEnv
 
+from rlgrasp.envs.factory import EnvFactory
 from rlgrasp.utils import die_with_parent
 
 ERROR_FILE_PREFIX = "env_error_"
 # Info entries copied into the tensordict (those the env provides).
 INFO_DTYPES = {"is_success": torch.bool, "grasped": torch.bool, "lift_height": torch.float32,
                "adr_boundary": torch.int64}  # rlgrasp.adr: the episode's boundary code (ADR runs only)
-
-#: Builds one gymnasium env: what ``rlgrasp.envs.factory.env_factory`` returns (a picklable partial).
-EnvFactory = Callable[[], Any]
 
 
 def env_spec(make_env: EnvFactory) -> dict[str, Any]:

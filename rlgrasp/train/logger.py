@@ -16,7 +16,7 @@ from typing import Any
 
 from torch.utils.tensorboard import SummaryWriter
 
-from rlgrasp.train.rundir import TENSORBOARD, TEXT_LOG
+from rlgrasp.rundir import TENSORBOARD, TEXT_LOG
 
 log = logging.getLogger("rlgrasp.train")
 

@@ -24,6 +24,7 @@ from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDictBase
 
 from rlgrasp.config import ConfigError
+from rlgrasp.rundir import CHECKPOINTS, ENV_ERRORS, RunLockedError, run_lock
 from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.adr_sync import AdrSync
@@ -38,7 +39,6 @@ from rlgrasp.train.metrics import Due, Throughput, finished_episodes
 from rlgrasp.train.parts import build_parts
 from rlgrasp.train.preemption import StopSignals
 from rlgrasp.train.resume import prepare_run
-from rlgrasp.train.rundir import CHECKPOINTS, ENV_ERRORS, RunLockedError, run_lock
 from rlgrasp.train.warm_start import warm_start
 from rlgrasp.utils import flatten
 

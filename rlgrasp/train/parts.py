@@ -11,11 +11,11 @@ import torch
 from torchrl.collectors import BaseCollector
 
 from rlgrasp.envs.factory import env_factory
+from rlgrasp.models.cnn import actor_norm, build_vision_actor
+from rlgrasp.models.mlp import OBS_KEY, RunningNorm, build_critic, build_models
+from rlgrasp.models.spec import PRIVILEGED_KEY, vision_spec
 from rlgrasp.train.collect import EnvFactory, env_spec
 from rlgrasp.train.collectors import CollectorBackend, collector_backend
-from rlgrasp.train.models import OBS_KEY, RunningNorm, build_critic, build_models
-from rlgrasp.vision.models import actor_norm, build_vision_actor
-from rlgrasp.vision.spec import PRIVILEGED_KEY, vision_spec
 
 
 @dataclass

@@ -27,8 +27,8 @@ from torchrl.data import LazyTensorStorage, ReplayBuffer, SamplerWithoutReplacem
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
+from rlgrasp.models.mlp import OBS_KEY, RunningNorm
 from rlgrasp.train.algorithm import NonFiniteError
-from rlgrasp.train.models import OBS_KEY, RunningNorm
 
 __all__ = ["NonFiniteError", "PPOLearner", "explained_variance"]
 

@@ -5,7 +5,7 @@ resolved config is the base and only what the command line changes is applied on
 ``MUTABLE`` may change (and are logged); any other change is refused with one line naming the key
 and both values, before any worker starts. A ``_target_`` node whose class changes (``collector=ray``
 on a process run) keeps only the keys of its new class. ``resume=auto`` continues the run directory's newest
-readable checkpoint when there is one and starts fresh otherwise (``rlgrasp.train.rundir.run_dir`` picks
+readable checkpoint when there is one and starts fresh otherwise (``rlgrasp.rundir.run_dir`` picks
 the newest run of the same experiment and seed as the run directory). A job SLURM runs again after a
 requeue (``SLURM_RESTART_COUNT`` > 0) resumes as with ``resume=auto`` when no ``resume`` was given.
 """
@@ -26,9 +26,9 @@ from omegaconf import DictConfig, OmegaConf
 
 from rlgrasp.compose import compose_train
 from rlgrasp.config import CONFIG_DIR, ConfigError, validate_train
+from rlgrasp.rundir import CHECKPOINTS
 from rlgrasp.targets import trusted_targets
 from rlgrasp.train import checkpoint as ckpt_lib
-from rlgrasp.train.rundir import CHECKPOINTS
 from rlgrasp.utils import flatten
 
 log = logging.getLogger("rlgrasp.train")

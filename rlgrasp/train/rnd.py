@@ -27,7 +27,7 @@ from torchrl.modules import MLP
 from torchrl.objectives.rnd import RNDLoss
 from torchrl.objectives.value.functional import generalized_advantage_estimate
 
-from rlgrasp.train.models import OBS_KEY, RunningNorm
+from rlgrasp.models.mlp import OBS_KEY, RunningNorm
 
 INTRINSIC_REWARD = "intrinsic_reward"
 INTRINSIC_TARGET = "intrinsic_value_target"

@@ -22,7 +22,6 @@ from __future__ import annotations
 import torch
 from tensordict import TensorDictBase
 
-AUGMENTATIONS = ("none", "colour")
 PERMUTATIONS = torch.tensor([[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]])
 LUMINANCE = torch.tensor([0.299, 0.587, 0.114])  # ITU-R BT.601 weights, as PIL's convert("L")
 

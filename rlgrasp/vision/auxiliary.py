@@ -17,8 +17,8 @@ from tensordict import TensorDictBase
 from torch import nn
 
 from rlgrasp.config import ConfigError
-from rlgrasp.train.models import RunningNorm
-from rlgrasp.vision.spec import PRIVILEGED_KEY
+from rlgrasp.models.mlp import RunningNorm
+from rlgrasp.models.spec import PRIVILEGED_KEY
 
 
 class FeatureTap:

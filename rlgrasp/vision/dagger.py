@@ -14,9 +14,9 @@ from torchrl.data.replay_buffers import RandomSampler
 from torchrl.envs import ExplorationType, set_exploration_type
 
 from rlgrasp.envs.robot import robot_label
+from rlgrasp.models.mlp import OBS_KEY
+from rlgrasp.models.spec import PRIVILEGED_KEY
 from rlgrasp.train.checkpoint import CheckpointError, load_checkpoint, policy_from_checkpoint
-from rlgrasp.train.models import OBS_KEY
-from rlgrasp.vision.spec import PRIVILEGED_KEY
 
 LABEL_KEY = "teacher_action"
 

@@ -1,7 +1,7 @@
 """Teacher-student distillation by DAgger: a camera policy learns to act as a state policy would.
 
 The workers step camera envs; the teacher (a state checkpoint) reads each frame's privileged state
-and labels it with its action; the student (``rlgrasp.vision.models``) sees only proprioception and
+and labels it with its action; the student (``rlgrasp.models.cnn``) sees only proprioception and
 the images. Early on the teacher acts (``beta`` near 1) so the data shows what success looks like;
 ``beta`` decays each batch so that the student soon acts and the teacher labels the states the
 student itself visits (Ross et al. 2011). Every labelled frame is kept (up to ``algo.buffer_frames``)
@@ -25,14 +25,14 @@ from torchrl.envs import ExplorationType, set_exploration_type
 
 from rlgrasp.config import ConfigError
 from rlgrasp.demos.bc import mse_bc_loss
+from rlgrasp.models.cnn import actor_norm, average_weights
+from rlgrasp.models.spec import PRIVILEGED_KEY
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.algorithm import Algorithm
 from rlgrasp.train.loop import train
 from rlgrasp.vision.augment import augment
 from rlgrasp.vision.auxiliary import ObjectFromImages
 from rlgrasp.vision.dagger import LABEL_KEY, DAggerPolicy, LabelledFrames, load_teacher
-from rlgrasp.vision.models import actor_norm, average_weights
-from rlgrasp.vision.spec import PRIVILEGED_KEY
 
 
 class DAgger(Algorithm):

@@ -20,8 +20,8 @@ from torch import nn
 from torchrl.envs import ExplorationType, set_exploration_type
 
 from rlgrasp.demos.bc import mse_bc_loss
+from rlgrasp.models.spec import PRIVILEGED_KEY
 from rlgrasp.vision.dagger import PrivilegedTeacher
-from rlgrasp.vision.spec import PRIVILEGED_KEY
 
 
 def teacher_weight(algo: Any, updates: int) -> float:

@@ -17,7 +17,7 @@ from torch import nn
 from torchrl.modules import ConvNet, ProbabilisticActor, TanhNormal
 
 from rlgrasp.config import POOLINGS
-from rlgrasp.train.models import ACTIVATIONS, OBS_KEY, RunningNorm, _bound, _mlp, bounded_loc
+from rlgrasp.models.mlp import ACTIVATIONS, OBS_KEY, RunningNorm, _bound, _mlp, bounded_loc
 
 IMAGE_KEYS = ("depth", "rgb")
 

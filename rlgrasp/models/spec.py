@@ -7,8 +7,8 @@ from typing import Any
 import gymnasium as gym
 
 from rlgrasp.config import ConfigError
-from rlgrasp.train.collect import EnvFactory
-from rlgrasp.vision.models import IMAGE_KEYS
+from rlgrasp.envs.factory import EnvFactory
+from rlgrasp.models.cnn import IMAGE_KEYS
 
 #: The entry holding the full state no robot senses: what a teacher or an asymmetric critic reads.
 PRIVILEGED_KEY = "privileged"
