@@ -179,6 +179,10 @@ class SACConfig:
     # with it; false: a resumed run starts with an empty one.
     save_replay: bool = True
     init_from: str | None = None  # a state checkpoint whose actor starts this run (warm start)
+    # With a camera (DrQ-v2): each replayed image shifted by up to this many pixels each way (0: none),
+    # and the critics given the privileged state beside the images' features (never deployed).
+    image_shift: int = 4
+    critic_privileged: bool = True
 
 
 @dataclass
@@ -647,7 +651,7 @@ def _algo_checks(a: Any, batch: int, camera: Any) -> list[tuple[str, Any, bool, 
     if a.name == "distill":
         return [*_learning_checks(a), *_distill_checks(a)]
     if a.name == "sac":
-        return _sac_checks(a, camera)
+        return _sac_checks(a)
     return [
         ("algo.name", a.name, False, "must be ppo, sac or distill (the algo group: algo=ppo|sac|distill)")
     ]
@@ -662,8 +666,8 @@ def _learning_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
     ]
 
 
-def _sac_checks(a: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
-    """SAC's keys: a ratio > 0, a buffer that holds a minibatch, rates > 0, a state policy."""
+def _sac_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
+    """SAC's keys: a ratio > 0, a buffer that holds a minibatch, rates > 0."""
     rates = [(f"algo.{k}", a[k], _positive(a[k]) and math.isfinite(a[k]), "must be finite and > 0")
              for k in ("actor_lr", "critic_lr", "alpha_lr", "alpha_init")]
     return [
@@ -682,7 +686,7 @@ def _sac_checks(a: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
         ("algo.critic_activation", a.critic_activation, a.critic_activation in ("tanh", "relu", "elu"),
          "must be tanh, relu or elu"),
         ("algo.demo_ratio", a.demo_ratio, 0 < a.demo_ratio < 1, "must be in (0, 1)"),
-        ("algo", "sac", not camera, "learns from the state for now: use cameras=none (or algo=distill)"),
+        ("algo.image_shift", a.image_shift, a.image_shift >= 0, "must be >= 0 (pixels)"),
         *rates,
     ]
 

@@ -128,7 +128,7 @@ def test_a_ppo_checkpoint_is_not_resumed_as_sac(tmp_path: Path) -> None:
 @pytest.mark.parametrize(("override", "message"), [
     ("algo.utd_ratio=0", "algo.utd_ratio=0.0: must be > 0"),
     ("algo.buffer_frames=16", "algo.buffer_frames=16: must be >= algo.batch_size (32)"),
-    ("cameras=wrist_depth", "algo='sac': learns from the state for now"),
+    ("algo.image_shift=-1", "algo.image_shift=-1: must be >= 0 (pixels)"),
 ])
 def test_bad_sac_input_is_one_line(tmp_path: Path, override: str, message: str) -> None:
     with pytest.raises(ConfigError) as info:
@@ -152,6 +152,70 @@ def test_a_short_sac_run_evaluates_and_exports_like_ppo(tmp_path: Path) -> None:
     results = export(compose_config("export", [f"ckpt={run}", "ckpt_kind=last", "format=torchscript",
                                                f"out={tmp_path / 'policy.pt'}"]))
     assert results["torchscript"]["max_abs_action_diff"] < 1e-5 and (tmp_path / "policy.pt").is_file()
+
+
+#: A camera SAC run small enough for a test (the wrist depth camera at 64x64).
+CAMERA = ["experiment=grasp_vision_sac", "model.channels=[4,4,4]", "model.image_features=8",
+          "algo.buffer_frames=1024"]
+
+
+def _camera_batch(sac: SAC, n: int) -> TensorDict:
+    """``_batch`` with depth images and the privileged state, as a camera env's collector gives them."""
+    spec = sac.parts.spec
+    batch = _batch(sac, n).squeeze(0)
+    for td in (batch, batch["next"]):
+        td["depth"] = torch.rand(n, *spec["images"]["depth"])
+        td["privileged"] = torch.randn(n, spec["privileged_dim"])
+    return batch.unsqueeze(0)
+
+
+def test_from_pixels_the_critic_trains_the_encoder_and_the_actor_reads_its_features_detached(
+    tmp_path: Path,
+) -> None:
+    from rlgrasp.algos.sac import FEATURES_KEY
+    from rlgrasp.models.cnn import vision_net
+
+    sac = _sac(tmp_path, *CAMERA, "algo.learning_starts=0", "algo.utd_ratio=1")
+    encoder = vision_net(sac.actor).encoders
+    before = [p.detach().clone() for p in encoder.parameters()]
+    sac.update(_camera_batch(sac, 32), 0)
+    assert sac.updates == 32
+    assert any(not torch.equal(a, b) for a, b in zip(before, encoder.parameters()))  # the encoder learned
+    stored = sac.replay[:]
+    assert stored["depth"].dtype == torch.float16 and stored["next", "depth"].dtype == torch.float16
+    for_critic, for_actor = sac._inputs(sac._sample())
+    assert for_critic[FEATURES_KEY].requires_grad and not for_actor[FEATURES_KEY].requires_grad
+    assert not for_critic["next", FEATURES_KEY].requires_grad  # the target: no gradient
+
+
+def test_an_image_replay_buffer_larger_than_the_memory_is_refused_in_one_line(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError) as info:
+        _sac(tmp_path, *CAMERA, "algo.buffer_frames=1000000000")
+    message = str(info.value)
+    assert message.startswith("algo.buffer_frames=1,000,000,000: the image replay buffer would take ")
+    assert message.endswith("lower algo.buffer_frames") and "\n" not in message
+
+
+def test_a_short_camera_sac_run_resumes_evaluates_and_exports(tmp_path: Path) -> None:
+    from rlgrasp.evaluation.cli import evaluate
+    from rlgrasp.export import export, register_export_config
+
+    run = tmp_path / "run"
+    train(compose_train([*SMALL, *CAMERA, "total_frames=128", f"paths.output_dir={run}"]))
+    last = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
+    assert last["kind"] == "vision" and last["updates"] > 0
+    cfg, resumed = prepare_run(compose_train([*SMALL, *CAMERA, "total_frames=128", f"paths.output_dir={run}",
+                                              f"resume={run}"]))
+    again = Trainer(cfg, resumed=resumed)
+    assert len(again.algo.replay) == 128 and again.algo.replay[:]["depth"].dtype == torch.float16
+    again.logger.close()
+    metrics = evaluate(compose_config("eval", [f"ckpt={run}", "ckpt_kind=last", "episodes=1", "video=false",
+                                               "plots=false", f"out_dir={tmp_path / 'eval'}"]))
+    assert metrics["episodes"] == 1
+    register_export_config()
+    results = export(compose_config("export", [f"ckpt={run}", "ckpt_kind=last", "format=torchscript",
+                                               f"out={tmp_path / 'policy.pt'}"]))
+    assert results["torchscript"]["max_abs_action_diff"] < 1e-4
 
 
 def _resumed(run: Path) -> Trainer:

@@ -7,6 +7,12 @@ batches of any size, symmetric sampling of demonstrations beside online data (Ba
 each minibatch half and half), critics that read the actor's running observation normalizer, and a
 replay buffer that a resumed run continues with.
 
+With a camera (``cameras=wrist_depth`` and the like) it learns from pixels the DrQ-v2 way (Yarats et
+al. 2021): the camera actor's image encoders are trained by the critics' loss alone, the actor gets
+their features detached, each replayed image is shifted by a few pixels (random shift), and the
+critics may also read the privileged state no robot senses (asymmetric actor-critic; they are not
+deployed). Replayed images are kept compact: RGB as uint8, depth as float16.
+
 The actor is the parts' TanhNormal policy, so evaluation, export, enjoy and sweeps take a SAC
 checkpoint as they take a PPO one. The workers keep collecting the next batch while the learner
 updates on this one (``collector.overlap``): off-policy, one batch of lag costs nothing.
@@ -25,14 +31,23 @@ from torch import nn
 from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.objectives import SACLoss, SoftUpdate
 
+from rlgrasp.config import ConfigError
+from rlgrasp.models.cnn import head_actor, image_specs, vision_net
 from rlgrasp.models.mlp import ACTIVATIONS, OBS_KEY, RunningNorm
+from rlgrasp.models.spec import PRIVILEGED_KEY
 from rlgrasp.train.algorithm import Algorithm, finite_or_raise
+from rlgrasp.vision.augment import random_shift
 
 #: The entries a transition keeps in the replay buffer (the collector's batch has more).
 TRANSITION_KEYS = (OBS_KEY, "action", ("next", OBS_KEY), ("next", "reward"), ("next", "done"),
                    ("next", "terminated"))
 #: The replay buffer's file in the run directory (plain tensors, read with ``weights_only=True``).
 REPLAY_FILE = "replay.pt"
+#: Where a camera learner puts the images' features in a minibatch (the actor head and critics read it).
+FEATURES_KEY = "image_features"
+#: What a replayed image is stored as: RGB arrives as uint8; depth (metres) loses nothing a 64-pixel
+#: policy reads at half precision.
+STORED_DTYPES = {"rgb": torch.uint8, "depth": torch.float16}
 
 
 class QNet(nn.Module):
@@ -43,12 +58,12 @@ class QNet(nn.Module):
     critic's parameters and buffers into its ensemble, and a copied normalizer would stop following
     the running statistics the actor (and so the deployed policy) uses."""
 
-    def __init__(self, norm: RunningNorm, obs_dim: int, act_dim: int, hidden: list[int], activation: str,
+    def __init__(self, norm: RunningNorm, in_dim: int, hidden: list[int], activation: str,
                  layer_norm: bool) -> None:
         super().__init__()
         object.__setattr__(self, "norm", norm)  # a reference, not a submodule (see above)
         layers: list[nn.Module] = []
-        width = obs_dim + act_dim
+        width = in_dim
         for size in hidden:
             layers += [nn.Linear(width, size), *([nn.LayerNorm(size)] if layer_norm else []),
                        ACTIVATIONS[activation]()]
@@ -56,14 +71,15 @@ class QNet(nn.Module):
         layers.append(nn.Linear(width, 1))
         self.mlp = nn.Sequential(*layers)
 
-    def forward(self, observation: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
-        return self.mlp(torch.cat([self.norm(observation), action], dim=-1))
+    def forward(self, observation: torch.Tensor, *rest: torch.Tensor) -> torch.Tensor:
+        """Q of the observation and the rest of the inputs (image features, if any, then the action)."""
+        return self.mlp(torch.cat([self.norm(observation), *rest], dim=-1))
 
 
-def build_qvalue(norm: RunningNorm, spec: dict[str, Any], algo_cfg: Any) -> TensorDictModule:
-    net = QNet(norm, spec["obs_dim"], len(spec["action_low"]), list(algo_cfg.critic_hidden_sizes),
-               algo_cfg.critic_activation, algo_cfg.critic_layer_norm)
-    return TensorDictModule(net, in_keys=[OBS_KEY, "action"], out_keys=["state_action_value"])
+def build_qvalue(norm: RunningNorm, in_keys: list[Any], in_dim: int, algo_cfg: Any) -> TensorDictModule:
+    net = QNet(norm, in_dim, list(algo_cfg.critic_hidden_sizes), algo_cfg.critic_activation,
+               algo_cfg.critic_layer_norm)
+    return TensorDictModule(net, in_keys=in_keys, out_keys=["state_action_value"])
 
 
 class SAC(Algorithm):
@@ -75,9 +91,11 @@ class SAC(Algorithm):
         super().__init__(cfg, parts, device)
         a = cfg.algo
         self.norm = parts.norm
+        self.images = image_specs(parts.spec)  # key -> shape; empty: a state policy
+        self.transition_keys = _transition_keys(self.images, a.get("critic_privileged", False))
         act_dim = len(parts.spec["action_low"])
         self.loss = SACLoss(
-            self.actor, build_qvalue(self.norm, parts.spec, a).to(device),
+            self._loss_actor(), self._qvalue(act_dim).to(device),
             num_qvalue_nets=a.num_critics, loss_function="l2", alpha_init=a.alpha_init,
             target_entropy=a.target_entropy if a.target_entropy is not None else -float(act_dim),
             delay_qvalue=True,
@@ -89,11 +107,35 @@ class SAC(Algorithm):
             "critic": torch.optim.Adam(_trainable(self.loss.qvalue_network_params), lr=a.critic_lr),
             "alpha": torch.optim.Adam([self.loss.log_alpha], lr=a.alpha_lr),
         }
+        if self.images:  # the encoders learn from the critics' loss (their own optimizer, its rate)
+            self.optimizers["encoder"] = torch.optim.Adam(self._encoder().parameters(), lr=a.critic_lr)
+            _check_replay_memory(a, parts.spec, self.transition_keys)
         self.demos = self._demos() if a.get("demos") else None
         online = a.batch_size - (self.demos.batch_size if self.demos is not None else 0)
         self.replay = _buffer(a.buffer_frames, online, device)
         self.owed = 0.0  # gradient steps due but not yet taken (the ratio is kept across batches)
         self.replay_file: Path | None = None
+
+    def _encoder(self) -> nn.Module:
+        return vision_net(self.actor).encoders
+
+    def _loss_actor(self) -> nn.Module:
+        """What the loss trains as the actor: the whole actor on the state; with a camera, the actor
+        after its encoders, reading their features (detached in the actor's loss)."""
+        return head_actor(self.actor, FEATURES_KEY) if self.images else self.actor
+
+    def _qvalue(self, act_dim: int) -> TensorDictModule:
+        """The critics' template: on the state and the action; with a camera, on the state (the
+        privileged one with ``algo.critic_privileged``), the images' features and the action."""
+        a, spec = self.cfg.algo, self.parts.spec
+        if not self.images:
+            return build_qvalue(self.norm, [OBS_KEY, "action"], spec["obs_dim"] + act_dim, a)
+        features = sum(e.project[0].out_features for e in self._encoder().values())
+        if a.critic_privileged:
+            key, norm, dim = PRIVILEGED_KEY, self.parts.norms[PRIVILEGED_KEY], spec["privileged_dim"]
+        else:
+            key, norm, dim = OBS_KEY, self.norm, spec["obs_dim"]
+        return build_qvalue(norm, [key, FEATURES_KEY, "action"], dim + features + act_dim, a)
 
     def _demos(self) -> TensorDictReplayBuffer:
         """The demonstrations as transitions in a buffer of their own (read, and refused, before any
@@ -114,7 +156,9 @@ class SAC(Algorithm):
         t0 = time.perf_counter()
         flat = batch.reshape(-1)
         self.norm.update(flat[OBS_KEY])
-        self.replay.extend(flat.select(*TRANSITION_KEYS).to(self.device))
+        if PRIVILEGED_KEY in self.transition_keys:
+            self.parts.norms[PRIVILEGED_KEY].update(flat[PRIVILEGED_KEY])
+        self.replay.extend(_compact(flat.select(*self.transition_keys)).to(self.device))
         if len(self.replay) < a.learning_starts:
             return {"charts/replay_frames": float(len(self.replay))}
         self.owed += a.utd_ratio * flat.numel()
@@ -137,24 +181,51 @@ class SAC(Algorithm):
         return torch.cat([self.replay.sample(), self.demos.sample()])
 
     def _step(self) -> dict[str, float]:
-        """One gradient step of the critics, the actor (every ``actor_every`` steps) and the
-        temperature, then the target critics' soft update."""
+        """One gradient step of the critics (and a camera's encoders), the actor (every
+        ``actor_every`` steps) and the temperature, then the target critics' soft update."""
         a = self.cfg.algo
-        losses = self.loss(self._sample())
+        for_critic, for_actor = self._inputs(self._sample())
+        loss_qvalue, _ = self.loss.qvalue_v2_loss(for_critic)
+        loss_actor, actor_info = self.loss.actor_loss(for_actor)
+        loss_alpha = self.loss.alpha_loss(actor_info["log_prob"]).mean()
         self.updates += 1
         actor_step = self.updates % a.actor_every == 0
-        total = losses["loss_qvalue"] + (losses["loss_actor"] + losses["loss_alpha"] if actor_step else 0.0)
+        total = loss_qvalue + (loss_actor + loss_alpha if actor_step else 0.0)
         finite_or_raise(total.detach(), "SAC loss")
         for opt in self.optimizers.values():
             opt.zero_grad(set_to_none=True)
         total.backward()
         self.optimizers["critic"].step()
+        if "encoder" in self.optimizers:
+            self.optimizers["encoder"].step()
         if actor_step:
             self.optimizers["actor"].step()
             self.optimizers["alpha"].step()
         self.target_update.step()
-        keys = ("loss_qvalue", "loss_actor", "alpha", "entropy")
-        return {key: float(losses[key].detach()) for key in keys}
+        return {"loss_qvalue": float(loss_qvalue.detach()), "loss_actor": float(loss_actor.detach()),
+                "alpha": float(self.loss.log_alpha.detach().exp()),
+                "entropy": float(-actor_info["log_prob"].mean())}
+
+    def _inputs(self, sample: TensorDictBase) -> tuple[TensorDictBase, TensorDictBase]:
+        """The minibatch as the critics' loss reads it and as the actor's does. With a camera: each
+        image shifted at random (its own shift, and the next image another), encoded; the
+        critics' loss trains the encoders, the actor's sees the features detached, and the next
+        images are encoded without gradient (the target)."""
+        if not self.images:
+            return sample, sample
+        pad = self.cfg.algo.image_shift
+        net = vision_net(self.actor)
+
+        def encode(td: TensorDictBase) -> torch.Tensor:
+            return net.encode(*(random_shift(td[k], pad) if pad else td[k] for k in self.images))
+
+        for_critic = sample.clone(False)
+        for_critic[FEATURES_KEY] = encode(sample)
+        with torch.no_grad():
+            for_critic["next", FEATURES_KEY] = encode(sample["next"])
+        for_actor = for_critic.clone(False)
+        for_actor[FEATURES_KEY] = for_critic[FEATURES_KEY].detach()
+        return for_critic, for_actor
 
     def trained_parameters(self) -> list[torch.nn.Parameter]:
         return [*self.actor.parameters(), *_trainable(self.loss.qvalue_network_params)]
@@ -201,6 +272,59 @@ class SAC(Algorithm):
         data = TensorDict(saved["data"], batch_size=[saved["frames"]])
         self.replay.extend(data.to(self.device))
         log.info("replay buffer: %s frames from %s", f"{len(self.replay):,}", path)
+
+
+def _transition_keys(images: dict[str, Any], privileged: bool) -> tuple[Any, ...]:
+    """What a transition keeps: the state's, and a camera's images (and, for a privileged critic,
+    the privileged state), each with its next."""
+    extra = [*images, *([PRIVILEGED_KEY] if images and privileged else [])]
+    return (*TRANSITION_KEYS, *extra, *(("next", k) for k in extra))
+
+
+def _compact(transitions: TensorDictBase) -> TensorDictBase:
+    """Images in their stored dtype (``STORED_DTYPES``)."""
+    for key in transitions.keys(True, True):
+        name = key[-1] if isinstance(key, tuple) else key
+        if name in STORED_DTYPES:
+            transitions[key] = transitions[key].to(STORED_DTYPES[name])
+    return transitions
+
+
+def replay_bytes_per_frame(spec: dict[str, Any], keys: tuple[Any, ...]) -> int:
+    """What one transition takes in the replay buffer (images in their stored dtype, the rest float32)."""
+    size = 0
+    for key in keys:
+        name = key[-1] if isinstance(key, tuple) else key
+        if name in spec.get("images", {}):
+            numel = int(torch.Size(spec["images"][name]).numel())
+            size += numel * STORED_DTYPES[name].itemsize
+        else:
+            dims = {OBS_KEY: spec["obs_dim"], PRIVILEGED_KEY: spec.get("privileged_dim", 0),
+                    "action": len(spec["action_low"])}
+            size += 4 * dims.get(name, 1)
+    return size
+
+
+def _check_replay_memory(algo_cfg: Any, spec: dict[str, Any], keys: tuple[Any, ...]) -> None:
+    """Refuse, before any worker starts, an image replay buffer larger than the memory available."""
+    need = algo_cfg.buffer_frames * replay_bytes_per_frame(spec, keys)
+    available = _available_memory()
+    if available is not None and need > 0.8 * available:
+        raise ConfigError(
+            f"algo.buffer_frames={algo_cfg.buffer_frames:,}: the image replay buffer would take "
+            f"{need / 2**30:.1f} GiB and {available / 2**30:.1f} GiB are available; lower algo.buffer_frames"
+        )
+
+
+def _available_memory() -> int | None:
+    """The memory available for new allocations (Linux's ``MemAvailable``), or None where unknown."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return None
 
 
 def _trainable(params: TensorDictBase) -> list[torch.Tensor]:

@@ -104,8 +104,31 @@ class VisionActorNet(nn.Module):
         )
 
     def forward(self, state: torch.Tensor, *images: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        parts = [self.norm(state)] + [enc(img) for enc, img in zip(self.encoders.values(), images)]
-        return self.scale(bounded_loc(self.mlp(torch.cat(parts, -1)), squash=True))
+        return self.act(state, self.encode(*images))
+
+    def encode(self, *images: torch.Tensor) -> torch.Tensor:
+        """The images' features, joined (one encoder per image, in ``encoders``' order)."""
+        return torch.cat([enc(img) for enc, img in zip(self.encoders.values(), images)], -1)
+
+    def act(self, state: torch.Tensor, features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(loc, scale) from the state and the images' features."""
+        return self.scale(bounded_loc(self.mlp(torch.cat([self.norm(state), features], -1)), squash=True))
+
+
+class VisionActorHead(nn.Module):
+    """The part of a ``VisionActorNet`` after its encoders: (state, image features) -> (loc, scale).
+
+    An off-policy learner from pixels trains the encoders through the critic only and gives the
+    actor their features detached (DrQ-v2, Yarats et al. 2021); this head holds the actor's own
+    modules (normalizer, MLP, scale), shared with the whole net, which stays what acts and is exported."""
+
+    def __init__(self, net: VisionActorNet) -> None:
+        super().__init__()
+        self.norm, self.mlp, self.scale = net.norm, net.mlp, net.scale
+        self._act = VisionActorNet.act
+
+    def forward(self, state: torch.Tensor, features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self._act(self, state, features)
 
 
 def image_specs(spec: Mapping[str, Any]) -> dict[str, tuple[int, ...]]:
@@ -153,9 +176,31 @@ def build_vision_actor(
     )
 
 
+def vision_net(actor: ProbabilisticActor) -> VisionActorNet:
+    """The network inside a vision actor (``build_vision_actor``)."""
+    return actor.module[0].module
+
+
+def head_actor(actor: ProbabilisticActor, features_key: str) -> ProbabilisticActor:
+    """``actor``'s TanhNormal policy over (state, ``features_key``) instead of (state, images): the
+    same modules after the encoders (``VisionActorHead``), the same distribution."""
+    net = vision_net(actor)
+    head = VisionActorHead(net)
+    module = TensorDictModule(head, in_keys=[OBS_KEY, features_key], out_keys=["loc", "scale"])
+    dist = actor.module[-1]  # the ProbabilisticTensorDictModule: its distribution and bounds
+    return ProbabilisticActor(
+        module,
+        in_keys=["loc", "scale"],
+        distribution_class=dist.distribution_class,
+        distribution_kwargs=dict(dist.distribution_kwargs),
+        return_log_prob=True,
+        default_interaction_type=InteractionType.RANDOM,
+    )
+
+
 def actor_norm(actor: ProbabilisticActor) -> RunningNorm:
     """The state normalizer inside a vision actor (the learner updates it from each batch)."""
-    return actor.module[0].module.norm
+    return vision_net(actor).norm
 
 
 @torch.no_grad()
