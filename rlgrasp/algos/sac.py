@@ -146,7 +146,7 @@ class SAC(Algorithm):
         frames = demo_transitions(demos_for(a.demos, self.parts.make_env, self.cfg.env), self.cfg.env)
         demos = _buffer(frames.numel(), min(a.batch_size - 1, max(1, round(a.batch_size * a.demo_ratio))),
                         self.device)
-        demos.extend(frames.to(self.device))
+        demos.extend(_compact(frames.select(*self.transition_keys)).to(self.device))
         return demos
 
     def update(self, batch: TensorDictBase, frames: int) -> dict[str, float]:

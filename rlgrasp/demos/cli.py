@@ -80,8 +80,6 @@ def _check(cfg: DictConfig) -> None:
     for key, value, ok, allowed in checks:
         if not ok:
             raise DemosInputError(f"{key}={value}: {allowed}")
-    if cfg.env.get("camera"):
-        raise DemosInputError("cameras: demonstrations record the state vector (use cameras=none)")
     where = Path(cfg.out) / "demos"
     if where.exists():
         raise DemosInputError(f"out={cfg.out}: {where} exists already (choose another out)")

@@ -13,10 +13,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import torch
 from tensordict import TensorDict
 
 from rlgrasp.config import ConfigError
+from rlgrasp.models.cnn import IMAGE_KEYS
+from rlgrasp.models.spec import PRIVILEGED_KEY
 from rlgrasp.targets import UntrustedConfigError, check_plain_memmap
 
 FORMAT = 1
@@ -54,11 +57,15 @@ class Demos:
 
 
 def layout_of(env: Any, env_cfg: dict[str, Any]) -> dict[str, Any]:
-    """What an observation and an action mean in ``env``: part slices, sizes, control keys."""
+    """What an observation and an action mean in ``env``: part slices, sizes, control keys, and a
+    camera's images (``images``: key -> shape; none without a camera)."""
+    space = env.observation_space
+    camera = isinstance(space, gym.spaces.Dict)
     return {
-        "obs_dim": int(env.observation_space.shape[-1]),
+        "obs_dim": int((space["state"] if camera else space).shape[-1]),
         "action_dim": int(env.action_space.shape[0]),
-        "obs_slices": {k: [s.start, s.stop] for k, s in env.obs_slices.items()},
+        "obs_slices": {k: [s.start, s.stop] for k, s in env.unwrapped.obs_slices.items()},
+        "images": {k: list(space[k].shape) for k in IMAGE_KEYS if camera and k in space.spaces},
         **{k: env_cfg.get(k) for k in LAYOUT_KEYS},
     }
 
@@ -91,6 +98,11 @@ def load_demos(path: str | Path, layout: dict[str, Any]) -> Demos:
     recorded with another observation layout or control than ``layout`` (``layout_of``)."""
     path = Path(path).expanduser()
     meta = _meta(path)
+    if meta.get("images", {}) != layout.get("images", {}):  # first: the sizes differ too
+        raise DemoError(
+            f"algo.demos={path}: recorded with the images {meta.get('images', {})}, this run's camera gives "
+            f"{layout.get('images', {})} (record them with the run's cameras= and image size)"
+        )
     for key in (*LAYOUT_KEYS, "obs_dim", "action_dim", "obs_slices"):
         if meta.get(key) != layout.get(key):
             raise DemoError(
@@ -167,8 +179,11 @@ def demo_transitions(demos: Demos, env_cfg: Any) -> TensorDict:
     nxt = {"observation": next_obs[keep], "reward": f["reward"][keep].reshape(n, 1),
            "done": f["done"][keep].reshape(n, 1) | terminated[keep].reshape(n, 1),
            "terminated": terminated[keep].reshape(n, 1)}
-    return TensorDict({"observation": f["observation"][keep], "action": f["action"][keep], "next": nxt},
-                      batch_size=[n])
+    now = {"observation": f["observation"][keep], "action": f["action"][keep]}
+    for key in (*IMAGE_KEYS, PRIVILEGED_KEY):  # a camera's entries (recorded with their next_)
+        if key in f.keys():
+            now[key], nxt[key] = f[key][keep], f[f"next_{key}"][keep]
+    return TensorDict({**now, "next": nxt}, batch_size=[n])
 
 
 def demos_for(path: str, make_env: Any, env_cfg: Any) -> Demos:

@@ -28,29 +28,46 @@ def _init(source: PolicySource) -> None:
     _WORKER.update(env=env, actor=build_policy(source, env, deterministic=True))
 
 
+#: A camera env's observation entries under the names a TorchRL tensordict gives them (``state`` is
+#: the gym wrapper's ``observation``); the state env's flat vector is ``observation`` too.
+ENTRY_NAMES = {"state": "observation"}
+
+
+def _entries(obs: Any) -> dict[str, np.ndarray]:
+    """An observation as named arrays: a camera env's dict entry by entry (images in their own
+    dtype), a state env's vector as ``observation``."""
+    if isinstance(obs, dict):
+        return {ENTRY_NAMES.get(k, k): np.asarray(v) for k, v in obs.items()}
+    return {"observation": np.asarray(obs, np.float32)}
+
+
 def record_episode(env: Any, actor: Any, seed: int) -> dict[str, Any]:
-    """One episode from ``env.reset(seed=seed)``: its arrays and outcome."""
+    """One episode from ``env.reset(seed=seed)``: its arrays and outcome. Each observation entry
+    ``k`` (``observation``; with a camera also the images and ``privileged``) comes with
+    ``next_<k>``, the step's successor, for an off-policy learner's transitions."""
     obs, info = env.reset(seed=seed)
     actor.reset(seed)
-    observations, actions, rewards, next_observations, terminal = [], [], [], [], []
+    steps: dict[str, list[np.ndarray]] = {}
+    actions, rewards, terminal = [], [], []
     success = False
     while True:
         action = actor(obs)
-        observations.append(np.asarray(obs, np.float32))
+        for key, value in _entries(obs).items():
+            steps.setdefault(key, []).append(value)
         actions.append(np.asarray(action, np.float32))
         obs, reward, terminated, truncated, info = env.step(action)
         rewards.append(float(reward))
-        next_observations.append(np.asarray(obs, np.float32))  # an off-policy learner's transitions
+        for key, value in _entries(obs).items():
+            steps.setdefault(f"next_{key}", []).append(value)
         terminal.append(bool(terminated))
         success = bool(info.get("is_success", False))
         if terminated or truncated:
             break
     return {
         "seed": seed,
-        "observation": np.stack(observations),
+        **{key: np.stack(values) for key, values in steps.items()},
         "action": np.stack(actions),
         "reward": np.asarray(rewards, np.float32),
-        "next_observation": np.stack(next_observations),
         "terminated": np.asarray(terminal, np.bool_),
         "length": len(rewards),
         "success": success,
@@ -102,14 +119,11 @@ def to_frames(episodes: list[dict[str, Any]]) -> TensorDict:
         n = e["length"]
         done = torch.zeros(n, dtype=torch.bool)
         done[-1] = True
+        arrays = {k: torch.from_numpy(v) for k, v in e.items() if isinstance(v, np.ndarray)}
         parts.append(
             TensorDict(
                 {
-                    "observation": torch.from_numpy(e["observation"]),
-                    "action": torch.from_numpy(e["action"]),
-                    "reward": torch.from_numpy(e["reward"]),
-                    "next_observation": torch.from_numpy(e["next_observation"]),
-                    "terminated": torch.from_numpy(e["terminated"]),
+                    **arrays,  # observation entries and their next_, action, reward, terminated
                     "done": done,
                     "episode": torch.full((n,), index, dtype=torch.int64),
                     "success": torch.full((n,), e["success"], dtype=torch.bool),
