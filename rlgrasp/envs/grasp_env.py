@@ -296,7 +296,8 @@ class GraspEnv(gym.Env):
         """Every step's readings; the episode's object and draws only at its first and last step.
 
         A vector env stacks every key of every env's info at each step: the 20-odd draws every step
-        cost training 2-5% of its frames/s, for values that change only at a reset.
+        cost training frames/s, for values that change only at a reset
+        (docs/benchmarks/throughput.md#the-episodes-draws-out-of-every-steps-info).
         """
         info = {**self.task.info(readings, success), **self.randomizer.info()}
         if episode:

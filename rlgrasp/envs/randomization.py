@@ -78,8 +78,8 @@ _TASK = {
     "object_yaw": Range(-math.pi, math.pi),
 }
 
-# Ranges within which the scripted grasp of the cube still succeeds nearly always (98/100 episodes
-# at `default`, docs/BENCHMARKS.md), plus modest sensing noise.
+# Ranges within which the scripted grasp of the cube still succeeds nearly always
+# (docs/benchmarks/objects.md#the-scripted-expert), plus modest sensing noise.
 _DEFAULT = {
     **_TASK,
     "object_size_scale": Range(0.8, 1.2),
