@@ -246,3 +246,26 @@ def recorded_demos(tmp_path_factory) -> Path:
     info = record_demos(compose_config("demos", ["episodes=2", f"out={out}", "workers=1", "keep=all"]))
     assert info["kept"] == 2
     return out / "demos"
+
+
+def test_camera_demonstrations_fill_a_camera_learners_minibatch_and_others_are_refused(
+    tmp_path: Path,
+) -> None:
+    """rlgrasp-demos with a camera records each step's images and privileged state with their
+    successors; a camera SAC samples them beside online data; a state run, or a camera run with
+    another image size, refuses them naming the images."""
+    out = tmp_path / "cam"
+    record_demos(compose_config("demos", ["episodes=1", f"out={out}", "workers=1", "keep=all",
+                                          "cameras=wrist_depth", "env.ee_yaw=true"]))
+    sac = _sac(tmp_path, *CAMERA, f"algo.demos={out / 'demos'}", "algo.batch_size=8")
+    demos = sac.demos[:]
+    assert demos["depth"].shape[1:] == (1, 64, 64) and demos["depth"].dtype == torch.float16
+    assert not torch.equal(demos["depth"][1], demos["next", "depth"][1])  # the arm moved between them
+    assert torch.equal(demos["depth"][1:5], demos["next", "depth"][:4])  # within the episode
+    sac.update(_camera_batch(sac, 16), 0)
+    assert sac._sample()["privileged"].shape == (8, sac.parts.spec["privileged_dim"])
+    with pytest.raises(DemoError, match=r"recorded with the images \{'depth': \[1, 64, 64\]\}, this run's "):
+        _sac(tmp_path, f"algo.demos={out / 'demos'}")
+    with pytest.raises(DemoError, match=r"this run's camera gives \{'depth': \[1, 48, 48\]\}"):
+        _sac(tmp_path, *CAMERA, f"algo.demos={out / 'demos'}", "+env.camera.width=48",
+             "+env.camera.height=48")
