@@ -149,8 +149,8 @@ def bad_input_files(root: Path) -> dict[str, str]:
 # --- entry points in-process ---------------------------------------------------------------------
 #: What PyBullet prints on stderr when it is imported, whatever the command: not one of our lines.
 PYBULLET_BANNER = "pybullet build time:"
-SCRIPTS = {"train": "train.py", "eval": "evaluate.py", "export": "export.py", "enjoy": "enjoy.py",
-           "sweep": "sweep.py", "demos": "demos.py", "report": "report.py"}
+SCRIPTS = {"train": "train.py", "train_sac": "train.py", "eval": "evaluate.py", "export": "export.py",
+           "enjoy": "enjoy.py", "sweep": "sweep.py", "demos": "demos.py", "report": "report.py"}
 
 
 def our_lines(stderr: str) -> list[str]:

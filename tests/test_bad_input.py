@@ -37,6 +37,7 @@ SMOKE = ["experiment=smoke", "logger=none"]
 #: Each entry point's command before a case's arguments (placeholders filled by _fill).
 BASE = {
     "train": [*SMOKE, "paths.root_dir={root}"],
+    "train_sac": ["experiment=grasp_sac", "logger=none", "paths.root_dir={root}"],
     "eval": ["ckpt={run}", "ckpt_kind=last", "episodes=2", "video=false", "plots=false"],
     "export": ["ckpt={run}", "ckpt_kind=last", "verify_obs=20"],
     "enjoy": ["ckpt={run}", "ckpt_kind=last"],
@@ -47,6 +48,7 @@ BASE = {
 }
 COMMANDS = {
     "train": "scripts/train.py experiment=smoke logger=none",
+    "train_sac": "scripts/train.py experiment=grasp_sac logger=none",
     "eval": "rlgrasp-eval ckpt=<run> ckpt_kind=last episodes=2 video=false plots=false",
     "export": "rlgrasp-export ckpt=<run> ckpt_kind=last verify_obs=20",
     "enjoy": "rlgrasp-enjoy ckpt=<run> ckpt_kind=last (no display)",
@@ -385,10 +387,25 @@ DEMOS = [
     ("a policy checkpoint of a newer format", ["policy={newer}"],
      f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)"),
 ]
+TRAIN_SAC = [
+    ("no gradient steps", ["algo.utd_ratio=0"],
+     "algo.utd_ratio=0.0: must be > 0 (gradient steps per env frame)"),
+    ("a buffer smaller than a minibatch", ["algo.buffer_frames=100"],
+     "algo.buffer_frames=100: must be >= algo.batch_size (256): the buffer must hold a minibatch"),
+    ("demonstrations as the whole minibatch", ["algo.demo_ratio=1"],
+     "algo.demo_ratio=1.0: must be in (0, 1)"),
+    ("a negative image shift", ["algo.image_shift=-1"], "algo.image_shift=-1: must be >= 0 (pixels)"),
+    ("an image replay buffer larger than the memory", ["cameras=wrist_depth", "model=cnn",
+                                                        "algo.buffer_frames=1000000000"],
+     "algo.buffer_frames=1,000,000,000: the image replay buffer would take 15"),
+    ("no time for a batch", ["collector.worker_timeout_s=0"],
+     "collector.worker_timeout_s=0.0: must be > 0 (seconds a batch may take)"),
+]
 REPORT = [
     ("no bootstrap resamples", ["--reps", "0"], "--reps 0: must be at least 1 (bootstrap resamples)"),
 ]
-CASES = [(entry, *case) for entry, cases in (("train", TRAIN), ("eval", EVAL), ("export", EXPORT),
+CASES = [(entry, *case) for entry, cases in (("train", TRAIN), ("train_sac", TRAIN_SAC), ("eval", EVAL),
+                                              ("export", EXPORT),
                                               ("enjoy", ENJOY), ("sweep", SWEEP), ("demo", DEMO),
                                               ("demos", DEMOS), ("report", REPORT))
          for case in cases]
