@@ -27,7 +27,7 @@ class Run:
     def __init__(self, model: str, objects: str, randomization: str):
         self.model = model
         self.env = PandaGraspEnv(collision_model=model, objects=objects, randomization=randomization)
-        self.expert = ScriptedExpert(self.env.obs_slices, action_dim=self.env.action_dim)
+        self.expert = ScriptedExpert.for_env(self.env)
         self.raw_step = self.env.client.stepSimulation
         self.env.client.stepSimulation = self._timed_step  # an instance attribute wins
         self.physics = self.step = self.bare = 0.0

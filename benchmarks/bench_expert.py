@@ -33,7 +33,7 @@ def run(preset: str, objects, episodes: int, ee_yaw: bool, robot: str = "panda",
         collision_model: str = "mesh") -> dict:
     env = PandaGraspEnv(randomization=preset, objects=objects, ee_yaw=ee_yaw, robot=robot,
                         collision_model=collision_model)
-    expert = ScriptedExpert(env.obs_slices, action_dim=env.action_dim)
+    expert = ScriptedExpert.for_env(env)
     successes, steps_to_success, reasons, failed = 0, [], collections.Counter(), []
     for seed in range(first_seed, first_seed + episodes):
         obs, info = env.reset(seed=seed)

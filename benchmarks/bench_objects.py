@@ -39,7 +39,7 @@ def reset_ms(env: PandaGraspEnv, seeds: range) -> float:
 
 
 def steps_per_second(env: PandaGraspEnv, steps: int) -> float:
-    expert = ScriptedExpert(env.obs_slices, action_dim=env.action_dim)
+    expert = ScriptedExpert.for_env(env)
     obs, _ = env.reset(seed=0)
     start = time.perf_counter()
     for i in range(steps):

@@ -35,7 +35,7 @@ def make_env(randomization: str, objects: str) -> PandaGraspEnv:
 def run(episodes: int, randomization: str, out: Path, seed: int = 0, objects: str = "cube") -> float:
     """Play and render ``episodes`` episodes, then write ``expert.gif`` and ``expert.png`` into ``out``."""
     env = make_env(randomization, objects)
-    expert = ScriptedExpert(env.obs_slices, action_dim=env.action_dim)
+    expert = ScriptedExpert.for_env(env)
     frames, successes = [], []
     for episode in range(episodes):
         obs, _ = env.reset(seed=seed + episode)

@@ -16,6 +16,7 @@ from gymnasium.utils.env_checker import check_env
 from omegaconf import OmegaConf
 
 from rlgrasp.envs import PandaGraspEnv, ScriptedExpert, grasp_env
+from rlgrasp.envs import expert as expert_module
 from rlgrasp.envs.render_model import mesh_bounds
 from rlgrasp.envs.robot import ROBOTS, robot_label
 from rlgrasp.envs.robot_spec import BUILTIN_DIR, BUILTIN_ROBOTS, builtin_spec, spec_from_file
@@ -169,7 +170,7 @@ def test_mesh_bounds_read_binary_stl_with_a_solid_header_and_obj():
 @pytest.mark.parametrize("robot", ARMS)
 def test_each_arms_expert_lifts_the_cube(robot, arm_env):
     env = arm_env(robot)
-    expert = ScriptedExpert(env.obs_slices, action_dim=env.action_dim)
+    expert = ScriptedExpert.for_env(env)
     successes = 0
     for seed in range(10):
         obs, info = env.reset(seed=seed)
@@ -252,6 +253,14 @@ BAD_ARMS = [
                   {**PANDA_FINGERS[1], "mimic": "panda_finger_joint1"}]},
      ValueError, "robot.fingers: panda_finger_joint1 mimics 'panda_finger_joint2', which must be a finger "
      "joint with a motor of its own"),
+    ("an unknown expert setting", {"expert": {"reach": 0.05}}, ValueError,
+     "robot.expert.reach: unknown key; the expert's settings: finger_reach, floor_clearance, hover"),
+    ("an expert setting out of range", {"expert": {"finger_reach": -0.01}}, ValueError,
+     r"robot.expert.finger_reach=-0.01: must be a number of metres in \[0.0, 0.2\]"),
+    ("an expert setting that is not a number", {"expert": {"floor_clearance": "low"}}, ValueError,
+     r"robot.expert.floor_clearance='low': must be a number of metres"),
+    ("expert settings that are not a mapping", {"expert": [0.05]}, ValueError,
+     "robot.expert=\\[0.05\\]: must be a mapping of finger_reach, floor_clearance, hover"),
 ]
 
 
@@ -261,6 +270,26 @@ def test_a_bad_arm_fails_in_one_line_naming_the_key(what, changes, error, match)
     with pytest.raises(error, match=match) as info:
         PandaGraspEnv(robot=mapping)
     assert "\n" not in str(info.value)
+
+
+def test_an_arms_expert_settings_reach_its_expert(tmp_path, arm_env):
+    """The description's ``expert`` key sets where the expert grasps; an arm without one (the Panda)
+    keeps the defaults, and a user's YAML file sets it as a shipped arm's does."""
+    panda = ScriptedExpert.for_env(arm_env("panda"))
+    assert (panda.finger_reach, panda.floor_clearance, panda.hover) == (
+        expert_module.FINGER_REACH, expert_module.FLOOR_CLEARANCE, 0.06)
+    xarm = ScriptedExpert.for_env(arm_env("xarm6"))
+    assert (xarm.finger_reach, xarm.floor_clearance) == (XARM6.expert["finger_reach"],
+                                                         XARM6.expert["floor_clearance"])
+    mine = arm_env(_yaml_arm(tmp_path, PANDA, expert={"finger_reach": 0.05, "hover": 0.08}))
+    expert = ScriptedExpert.for_env(mine, hover=0.1)  # an explicit setting wins over the arm's
+    assert (expert.finger_reach, expert.floor_clearance, expert.hover) == (
+        0.05, expert_module.FLOOR_CLEARANCE, 0.1)
+    # the grasp height follows: a 10 cm tall upright box resting on the floor (centre at 5 cm)
+    upright, extents = np.array([0.0, 0.0, 0.0, 1.0]), np.array([0.04, 0.06, 0.10])
+    assert expert_module.grasp_plan(upright, extents, 0.05)[1] == pytest.approx(0.1 - 0.035)
+    assert expert_module.grasp_plan(upright, extents, 0.05, 0.055, 0.006)[1] == pytest.approx(0.1 - 0.055)
+    assert expert_module.grasp_plan(upright, extents, 0.05, 0.2, 0.006)[1] == pytest.approx(0.006)
 
 
 def test_a_missing_key_is_named():

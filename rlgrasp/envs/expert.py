@@ -3,13 +3,15 @@
 It proves the task solvable for each object set and randomization preset and is the baseline a
 learned policy is compared with. It grasps top-down across the object's narrowest horizontal
 extent; with ``ee_yaw`` (action_dim 5) it turns the hand to that direction, without it the hand
-keeps yaw 0.
+keeps yaw 0. Where the grasp point goes on the object is the gripper's: an arm's description may
+set ``expert: {finger_reach, floor_clearance, hover}`` (``ScriptedExpert.for_env`` reads it).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -34,8 +36,10 @@ def _wrap_half_turn(angle: float) -> float:
     return (angle + math.pi / 2) % math.pi - math.pi / 2
 
 
-def grasp_plan(quat: np.ndarray, extents: np.ndarray, centre_z: float) -> tuple[float, float, float]:
-    """(hand yaw, grasp-point height, width across the fingers) for a top-down grasp.
+def grasp_plan(quat: np.ndarray, extents: np.ndarray, centre_z: float, finger_reach: float = FINGER_REACH,
+               floor_clearance: float = FLOOR_CLEARANCE) -> tuple[float, float, float]:
+    """(hand yaw, grasp-point height, width across the fingers) for a top-down grasp: the grasp
+    point ``finger_reach`` below the object's top, at least ``floor_clearance`` above its bottom.
 
     The fingers close along the hand's y axis, which at yaw ``t`` points along (-sin t, cos t);
     they must close along the object's narrower horizontal axis.
@@ -51,7 +55,7 @@ def grasp_plan(quat: np.ndarray, extents: np.ndarray, centre_z: float) -> tuple[
         candidates.append((round(float(extents[i]) / 0.003), abs(yaw), yaw, float(extents[i])))
     _, _, yaw, width = min(candidates)  # narrowest first; near-equal widths: the smaller turn
     bottom, top = centre_z - half_height, centre_z + half_height
-    return yaw, max(bottom + FLOOR_CLEARANCE, top - FINGER_REACH), width
+    return yaw, max(bottom + floor_clearance, top - finger_reach), width
 
 
 class ScriptedExpert:
@@ -67,14 +71,27 @@ class ScriptedExpert:
         lift_to: float = 0.15,
         close_steps: int = 4,
         gain: float = 0.8,
+        finger_reach: float = FINGER_REACH,
+        floor_clearance: float = FLOOR_CLEARANCE,
     ):
         self.s = obs_slices
+        self.finger_reach, self.floor_clearance = finger_reach, floor_clearance
         self.action_dim = action_dim
         self.use_yaw = action_dim == 5
         self.ee_step, self.yaw_step = ee_step, yaw_step
         self.hover, self.lift_to = hover, lift_to
         self.close_steps, self.gain = close_steps, gain
         self.reset()
+
+    @classmethod
+    def for_env(cls, env: Any, **settings: Any) -> ScriptedExpert:
+        """The expert of ``env`` (a grasp env, or a wrapper of one), with its arm's grasp settings
+        (the description's ``expert`` key) unless ``settings`` give them."""
+        base = getattr(env, "unwrapped", env)
+        spec = getattr(getattr(base, "robot", None), "spec", None)
+        arm = dict(getattr(spec, "expert", None) or {})
+        slices = env.obs_slices if hasattr(env, "obs_slices") else base.obs_slices
+        return cls(slices, action_dim=int(env.action_space.shape[0]), **{**arm, **settings})
 
     def reset(self) -> None:
         self.phase = "approach"
@@ -95,7 +112,8 @@ class ScriptedExpert:
         s = self.s
         grasp = obs[s["grasp_pos"]].astype(float)
         centre = grasp + obs[s["object_minus_grasp"]]
-        yaw, grasp_z, _ = grasp_plan(obs[s["object_quat"]], obs[s["object_extents"]], centre[2])
+        yaw, grasp_z, _ = grasp_plan(obs[s["object_quat"]], obs[s["object_extents"]], centre[2],
+                                     self.finger_reach, self.floor_clearance)
         yaw = yaw if self.use_yaw else 0.0
         target = np.array([centre[0], centre[1], grasp_z])
         flat = np.linalg.norm(target[:2] - grasp[:2])

@@ -76,6 +76,10 @@ class RobotSpec:
     #: Whether joint torques are a meaningful action: false for a model whose masses and inertias
     #: are placeholders (control_mode=joint_torque is then refused).
     torque_control: bool = True
+    #: The scripted expert's grasp for this gripper (``rlgrasp.envs.expert.EXPERT_KEYS``): where the
+    #: grasp point goes on the object, e.g. ``{finger_reach: 0.055, floor_clearance: 0.006}`` for
+    #: fingertips that end at the grasp point; empty: the defaults, tuned on the Panda.
+    expert: Mapping[str, float] = field(default_factory=dict)
 
     @property
     def label(self) -> str:
@@ -85,6 +89,7 @@ class RobotSpec:
         """The spec as the YAML of a user's arm would write it."""
         out = asdict(self)
         out["fingers"] = [asdict(f) for f in self.fingers]
+        out["expert"] = dict(self.expert)
         return out
 
 
@@ -122,6 +127,7 @@ def spec_from_mapping(mapping: Mapping[str, Any]) -> RobotSpec:
             raise ValueError(f"robot.{key}={list(value)!r}: must have {_LENGTHS[key]} entries")
     data["fingers"] = _fingers(data["fingers"])
     data["hold_joints"] = dict(data.get("hold_joints") or {})
+    data["expert"] = _expert(data.get("expert"))
     for key in ("neutral_pose", "grasp_offset", "gripper_down", "base_position", "base_orientation"):
         if key in data and not all(_number(v) for v in data[key]):
             raise ValueError(f"robot.{key}={list(data[key])!r}: must be numbers")
@@ -132,6 +138,30 @@ def spec_from_mapping(mapping: Mapping[str, Any]) -> RobotSpec:
 
 def _number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+#: The scripted expert's settings an arm may set, with the values each allows (m): how far below
+#: the object's top the grasp point goes, how far above its bottom at least, and how high above
+#: the grasp height the hand turns before it descends.
+EXPERT_KEYS = {"finger_reach": (0.0, 0.2), "floor_clearance": (0.0, 0.1), "hover": (0.01, 0.2)}
+
+
+def _expert(value: Any) -> dict[str, float]:
+    """``{finger_reach: m, floor_clearance: m, hover: m}``, any subset; ``ValueError`` naming the key."""
+    if value is None:
+        return {}
+    if not isinstance(value, Mapping):
+        raise ValueError(f"robot.expert={value!r}: must be a mapping of {', '.join(EXPERT_KEYS)} (m)")
+    out = {}
+    for key, v in value.items():
+        if key not in EXPERT_KEYS:
+            raise ValueError(f"robot.expert.{key}: unknown key; the expert's settings: "
+                             f"{', '.join(EXPERT_KEYS)}")
+        low, high = EXPERT_KEYS[key]
+        if not (_number(v) and low <= v <= high):
+            raise ValueError(f"robot.expert.{key}={v!r}: must be a number of metres in [{low}, {high}]")
+        out[str(key)] = float(v)
+    return out
 
 
 def _fingers(value: Any) -> tuple[FingerJoint, ...]:

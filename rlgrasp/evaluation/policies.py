@@ -93,7 +93,7 @@ class ScriptedActor(Actor):
     """The env package's scripted expert (deterministic)."""
 
     def __init__(self, env: Any) -> None:
-        self.expert = ScriptedExpert(env.obs_slices, action_dim=env.action_space.shape[0])
+        self.expert = ScriptedExpert.for_env(env)
 
     def reset(self, seed: int) -> None:
         self.expert.reset()
