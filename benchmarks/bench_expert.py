@@ -7,7 +7,11 @@ Each failure gets one reason, read from the episode's info by the rules the eval
 ``slipped`` or ``held, not lifted``.
 
     python benchmarks/bench_expert.py [--episodes 100] [--presets none default wide] [--objects cube]
-        [--robot panda kuka_iiwa xarm6] [--collision-model mesh|primitive]
+        [--robot panda kuka_iiwa xarm6 configs/robot/my_arm.yaml] [--collision-model mesh|primitive]
+
+``--robot`` takes built-in arms by name and arm descriptions by file (a ``robot`` config group
+file, e.g. a copy of ``rlgrasp/envs/robots/xarm6.yaml`` with one key changed: the guide "When your
+arm slips" in docs/robots.md measures each change so).
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ import collections
 import itertools
 
 from rlgrasp.envs import PandaGraspEnv, ScriptedExpert
+from rlgrasp.envs.robot_spec import spec_from_file
 from rlgrasp.evaluation.outcomes import failure_reason as classify
 from rlgrasp.stats import wilson_interval
 
@@ -31,7 +36,8 @@ def failure_reason(infos: list[dict]) -> str:
 
 def run(preset: str, objects, episodes: int, ee_yaw: bool, robot: str = "panda", first_seed: int = 0,
         collision_model: str = "mesh") -> dict:
-    env = PandaGraspEnv(randomization=preset, objects=objects, ee_yaw=ee_yaw, robot=robot,
+    arm = spec_from_file(robot) if robot.endswith((".yaml", ".yml")) else robot
+    env = PandaGraspEnv(randomization=preset, objects=objects, ee_yaw=ee_yaw, robot=arm,
                         collision_model=collision_model)
     expert = ScriptedExpert.for_env(env)
     successes, steps_to_success, reasons, failed = 0, [], collections.Counter(), []
@@ -63,7 +69,8 @@ def main() -> None:
     parser.add_argument("--presets", nargs="+", default=["none", "default", "wide"])
     parser.add_argument("--objects", nargs="+", default=["cube"], help="object sets, one row each")
     parser.add_argument("--no-yaw", action="store_true", help="keep the hand at yaw 0 (ee_yaw=False)")
-    parser.add_argument("--robot", nargs="+", default=["panda"], help="arms (configs/robot), one row each")
+    parser.add_argument("--robot", nargs="+", default=["panda"],
+                        help="arms, one row each: built-in names or YAML files of a robot config group")
     parser.add_argument("--first-seed", type=int, default=0,
                         help="seeds first-seed.. (a long measurement in parts: their counts add up)")
     parser.add_argument("--list-failures", action="store_true", help="print seed:object:reason")
