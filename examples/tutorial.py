@@ -80,7 +80,7 @@ def env() -> None:
     print("observation", env.observation_space.shape, "parts", list(env.obs_slices))
     print("action", env.action_space)
 
-    expert = ScriptedExpert(env.obs_slices, action_dim=env.action_space.shape[0])
+    expert = ScriptedExpert.for_env(env)  # the grasp the arm's description sets
     obs, info = env.reset(seed=0)
     episode_return, steps = 0.0, 0
     for _ in range(env.max_episode_steps):
