@@ -5,6 +5,7 @@ what failed, and a process that always ends."""
 from __future__ import annotations
 
 import multiprocessing
+import time
 
 import pytest
 import torch
@@ -12,7 +13,7 @@ from omegaconf import OmegaConf
 
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.train.eval_process import BackgroundEvaluator, EvalProcessError
-from rlgrasp.train.evaluate import periodic_evaluator
+from rlgrasp.train.evaluate import periodic_evaluator, summarize
 from rlgrasp.train.loop import seed_everything
 from rlgrasp.train.parts import build_parts
 
@@ -60,6 +61,28 @@ def test_the_background_process_gives_the_learners_numbers_for_the_submitted_wei
             assert (pending.frames, pending.episodes, pending.keep) == (frames, episodes, "snapshot")
             assert got == want  # bit for bit, on this machine
         assert evaluator.run(actor, episodes) != want  # the perturbation changes the numbers: not vacuous
+    finally:
+        background.close()
+    assert _eval_children() == []
+
+
+def test_an_evaluation_shared_with_the_process_gives_one_processs_numbers(parts) -> None:
+    """The final evaluation's split: the process plays the later rounds (its result can be looked at
+    before ``wait`` without waiting), the learner the first ones; joined in order they are
+    ``Evaluator.run``'s figures."""
+    parts, evaluator = parts
+    actor, episodes = parts.actor, 7  # 2 rounds of 4 envs, the last one cut to 3 episodes
+    want = evaluator.run(actor, episodes)
+    background = BackgroundEvaluator(evaluator, actor)
+    try:
+        assert not background.running and background.ready() is None
+        background.submit(2048, actor.state_dict(), episodes, part=(1, 1))
+        mine = evaluator.play(actor, episodes, 0, 1)
+        while background.ready() is None:
+            time.sleep(0.05)
+        pending, theirs = background.wait()
+        assert pending.part == (1, 1) and len(mine["return"]) == len(theirs["return"]) == 4
+        assert summarize([mine, theirs], episodes) == want
     finally:
         background.close()
     assert _eval_children() == []

@@ -52,6 +52,11 @@ class Pending:
     frames: int
     episodes: int
     keep: Any = None
+    #: ``(first_round, rounds)`` when the process plays only those rounds of the evaluation (its
+    #: answer is then ``Evaluator.play``'s per-episode figures, not the metrics); None: all of it.
+    part: tuple[int, int] | None = None
+    #: The metrics as logged when the result arrived (``Trainer.peek_eval``); None: not yet logged.
+    logged: dict[str, float] | None = None
 
 
 def _to_bytes(obj: Any) -> bytes:
@@ -63,9 +68,10 @@ def _to_bytes(obj: Any) -> bytes:
 
 
 def _serve(conn: Connection) -> None:
-    """The process: for each request ``(weights bytes, episodes)``, ``evaluator.run`` on the policy
-    with those weights; answers ``("ok", metrics, seconds)`` or ``("error", message, traceback)``. Ends on
-    ``None`` or when the learner's end of the pipe closes."""
+    """The process: for each request ``(weights bytes, episodes, part)``, ``evaluator.run`` on the
+    policy with those weights (or, ``part`` = ``(first_round, rounds)``, ``evaluator.play`` of those
+    rounds); answers ``("ok", metrics or figures, seconds)`` or ``("error", message, traceback)``. Ends
+    on ``None`` or when the learner's end of the pipe closes."""
     # Born ignoring Ctrl-C (it reaches the whole process group): the learner decides when this
     # process ends, or its death does. The evaluator and the policy come through the pipe.
     die_with_parent()
@@ -77,11 +83,15 @@ def _serve(conn: Connection) -> None:
     policy.eval()
     try:
         while (request := conn.recv()) is not None:
-            weights, episodes = request
+            weights, episodes, part = request
             t0 = time.perf_counter()
             try:
                 policy.load_state_dict(torch.load(io.BytesIO(weights), weights_only=True))
-                answer = ("ok", evaluator.run(policy, episodes), time.perf_counter() - t0)
+                if part is None:
+                    result = evaluator.run(policy, episodes)
+                else:
+                    result = evaluator.play(policy, episodes, *part)
+                answer = ("ok", result, time.perf_counter() - t0)
             except Exception as exc:  # noqa: BLE001 - reported to the learner, which stops training
                 answer = ("error", f"{type(exc).__name__}: {exc}", traceback.format_exc())
             conn.send(answer)
@@ -106,6 +116,12 @@ class BackgroundEvaluator:
         self.seconds = 0.0  # the last evaluation's duration in its process
         self._proc: multiprocessing.process.BaseProcess | None = None
         self._conn: Connection | None = None
+        self._answer: Any = None  # an answer ``ready`` received before ``wait``
+
+    @property
+    def running(self) -> bool:
+        """Whether the process has been started (it is, from the first ``submit`` on)."""
+        return self._proc is not None
 
     def _start(self) -> None:
         ctx = SpawnContextIgnoringCtrlC()  # a forked child would share PyBullet and torch state
@@ -116,18 +132,24 @@ class BackgroundEvaluator:
         self._conn.send((self.evaluator, self.policy, self.threads))
         log.info("periodic evaluations run in process %d", self._proc.pid)
 
-    def submit(self, frames: int, weights: dict[str, torch.Tensor], episodes: int, keep: Any = None) -> None:
-        """Evaluate ``weights`` (the actor's ``state_dict`` at ``frames``) on ``episodes`` episodes."""
+    def submit(
+        self, frames: int, weights: dict[str, torch.Tensor], episodes: int, keep: Any = None,
+        part: tuple[int, int] | None = None,
+    ) -> None:
+        """Evaluate ``weights`` (the actor's ``state_dict`` at ``frames``) on ``episodes`` episodes, or
+        play only rounds ``part`` = ``(first_round, rounds)`` of that evaluation (the learner plays
+        the others: ``Evaluator.play``)."""
         if self.pending is not None:
             raise RuntimeError("an evaluation is pending: wait() for it first")
         if self._proc is None:
             self._start()
         payload = _to_bytes({k: v.detach().cpu() for k, v in weights.items()})
         try:
-            self._conn.send((payload, episodes))
+            self._conn.send((payload, episodes, part))
         except OSError as exc:
             raise EvalProcessError(f"the evaluation process is gone ({self._exit()})") from exc
-        self.pending = Pending(frames, episodes, keep)
+        self.pending = Pending(frames, episodes, keep, part)
+        self._answer = None
 
     def submit_state(self, frames: int, state: dict[str, Any], episodes: int) -> None:
         """``submit`` the actor of a copy of the whole training ``state``, kept with the evaluation:
@@ -135,19 +157,39 @@ class BackgroundEvaluator:
         snapshot = copy.deepcopy(state)
         self.submit(frames, snapshot["actor"], episodes, keep=snapshot)
 
-    def wait(self, stop: Callable[[], bool] = lambda: False) -> tuple[Pending, dict[str, float]] | None:
-        """Block until the pending evaluation's result arrives: ``(pending, metrics)``; None as soon as
-        ``stop()`` is true (a stop signal: the evaluation is left to ``close``)."""
+    def ready(self) -> tuple[Pending, dict[str, float]] | None:
+        """The pending evaluation's ``(pending, metrics)`` if its result has arrived, without waiting
+        (it stays pending: ``wait`` still hands it over); None if it has not, or none is pending."""
+        if self.pending is None:
+            return None
+        if self._answer is None:
+            try:
+                if not self._conn.poll(0):
+                    return None
+                self._answer = self._conn.recv()
+            except (EOFError, OSError):
+                return None  # ``wait`` says the process died
+        if self._answer[0] != "ok":
+            return None
+        self.seconds = self._answer[2]
+        return self.pending, self._answer[1]
+
+    def wait(self, stop: Callable[[], bool] = lambda: False) -> tuple[Pending, Any] | None:
+        """Block until the pending evaluation's result arrives: ``(pending, metrics)`` (``part``: the
+        rounds' figures); None as soon as ``stop()`` is true (a stop signal: the evaluation is left to
+        ``close``)."""
         if self.pending is None:
             raise RuntimeError("no evaluation is pending")
         try:
-            while not self._conn.poll(POLL_S):
-                if stop():
-                    return None
-            answer = self._conn.recv()
+            if self._answer is None:
+                while not self._conn.poll(POLL_S):
+                    if stop():
+                        return None
+                self._answer = self._conn.recv()
         except (EOFError, OSError) as exc:
             self.pending = None
             raise EvalProcessError(f"the evaluation process died ({self._exit()})") from exc
+        answer, self._answer = self._answer, None
         pending, self.pending = self.pending, None
         if answer[0] == "error":
             log.warning("the evaluation process failed:\n%s", answer[2])
@@ -167,8 +209,8 @@ class BackgroundEvaluator:
         it has closed its envs."""
         if self._proc is None:
             return
-        busy = self.pending is not None
-        self.pending = None
+        busy = self.pending is not None and self._answer is None
+        self.pending = self._answer = None
         try:
             if not busy:
                 self._conn.send(None)

@@ -55,6 +55,20 @@ class Evaluator:
         """Mean return and success over ``episodes`` (default: the constructor's); the first
         episodes are the same whatever the count, so a longer evaluation extends a shorter one."""
         episodes = episodes or self.episodes
+        return summarize(self.play(policy, episodes), episodes)
+
+    def rounds(self, episodes: int) -> int:
+        """How many rounds of ``num_envs`` episodes ``episodes`` take."""
+        return math.ceil(episodes / self.num_envs)
+
+    @torch.no_grad()
+    def play(
+        self, policy, episodes: int, first_round: int = 0, rounds: int | None = None
+    ) -> dict[str, torch.Tensor]:
+        """Each episode's return (and success) of rounds ``first_round`` to ``first_round + rounds``
+        of an evaluation of ``episodes`` (default: to its last round); round r plays the episodes
+        seeded ``seed + r * num_envs + i``, so the rounds of one evaluation may be played in several
+        processes and concatenated in order (``summarize``)."""
         if self._env is None:
             self._env = make_batched_env(
                 self.make_env,
@@ -64,19 +78,19 @@ class Evaluator:
                 episode_stats=False,
                 seed_torch=False,
             )
+        last = self.rounds(episodes) if rounds is None else min(first_round + rounds, self.rounds(episodes))
         returns, successes = [], []
-        rounds = math.ceil(episodes / self.num_envs)
         with set_exploration_type(ExplorationType.DETERMINISTIC):
-            for r in range(rounds):
+            for r in range(first_round, last):
                 self._env.set_seed(self.seed + r * self.num_envs)
                 td = self._env.rollout(self.max_steps, policy, break_when_any_done=False)
                 stats = episode_stats(td)
                 returns.append(stats["return"])
                 if "success" in stats:
                     successes.append(stats["success"])
-        out = {"mean_reward": float(torch.cat(returns)[:episodes].mean())}
+        out = {"return": torch.cat(returns)}
         if successes:
-            out["success_rate"] = float(torch.cat(successes)[:episodes].mean())
+            out["success"] = torch.cat(successes)
         return out
 
     def __getstate__(self) -> dict[str, Any]:
@@ -87,6 +101,19 @@ class Evaluator:
         if self._env is not None and not self._env.is_closed:
             self._env.close()
         self._env = None
+
+
+def summarize(
+    played: dict[str, torch.Tensor] | list[dict[str, torch.Tensor]], episodes: int
+) -> dict[str, float]:
+    """Mean return and success of the first ``episodes`` of ``Evaluator.play``'s episodes (a list:
+    the parts of one evaluation in round order, concatenated)."""
+    parts = played if isinstance(played, list) else [played]
+    returns = torch.cat([p["return"] for p in parts])
+    out = {"mean_reward": float(returns[:episodes].mean())}
+    if all("success" in p for p in parts):
+        out["success_rate"] = float(torch.cat([p["success"] for p in parts])[:episodes].mean())
+    return out
 
 
 def periodic_evaluator(make_env: EnvFactory, cfg: Any) -> Evaluator:
