@@ -75,3 +75,25 @@ def test_a_hanging_worker_ends_the_wait_with_one_line(overlap: bool) -> None:
         next(batches)
     batches.close()  # does not wait for the hung batch either
     assert time.monotonic() - started < 5
+
+
+def test_nothing_is_collected_after_the_last_batch() -> None:
+    """``ahead = False`` before the run's last batch: the workers are idle once it has arrived, so
+    they can end while the learner does its final evaluation (no batch to drain and drop)."""
+    behaviour = torch.nn.Linear(1, 1, bias=False)
+    collector = RecordingCollector(behaviour)
+    started = []
+
+    def counting():
+        while True:
+            started.append(len(started))
+            yield 0.0
+
+    batches = Batches(collector, torch.nn.Linear(1, 1, bias=False), behaviour, overlap=True)
+    batches._iterator = counting()  # counts the batches asked of the workers
+    next(batches)
+    batches.ahead = False
+    next(batches)
+    time.sleep(0.05)
+    assert len(started) == 2 and batches._thread is None
+    batches.close()

@@ -53,6 +53,8 @@ class Batches(Iterator[TensorDictBase]):
         self.collector, self.actor, self.behaviour, self.overlap = collector, actor, behaviour, overlap
         self.env_sync, self.timeout_s = env_sync, timeout_s
         self.timed_out = False
+        #: False before the last batch of a run: nothing is collected after it (it would be dropped).
+        self.ahead = True
         self._iterator = iter(collector)
         self._thread: threading.Thread | None = None
         self._result: tuple[Any, BaseException | None] = (None, None)
@@ -70,7 +72,8 @@ class Batches(Iterator[TensorDictBase]):
             self._start()
         batch = self._arrived(self._wait())
         self._push_weights()
-        self._start()
+        if self.ahead:
+            self._start()
         return batch
 
     def _arrived(self, batch: TensorDictBase) -> TensorDictBase:

@@ -163,6 +163,21 @@ def collector_backend(node: Any) -> CollectorBackend:
     return instantiate(node, _convert_="all")
 
 
+def begin_shutdown(collector: BaseCollector) -> None:
+    """Ask idle process workers to end, without waiting for them (``shut_down`` waits): the learner
+    does its last work (the final evaluation) while they close their envs and exit. Nothing for a
+    collector without process workers."""
+    procs, pipes = getattr(collector, "procs", None), getattr(collector, "pipes", None)
+    if not procs or not pipes:
+        return
+    for proc, pipe in zip(procs, pipes):
+        try:
+            if proc.is_alive():
+                pipe.send((None, "close"))  # TorchRL's own message (its ``shutdown`` sends the same)
+        except (EOFError, OSError, ValueError):
+            pass
+
+
 def shut_down(collector: BaseCollector) -> None:
     """Stop the workers, then the weight-sync schemes: left to ``__del__`` at interpreter exit, a
     scheme's shutdown starts a queue feeder thread during finalization and the process never ends."""
