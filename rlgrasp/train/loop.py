@@ -31,11 +31,11 @@ from rlgrasp.train.adr_sync import AdrSync
 from rlgrasp.train.algorithm import Algorithm, NonFiniteError, algorithm_class
 from rlgrasp.train.batches import Batches
 from rlgrasp.train.collect import read_env_errors
-from rlgrasp.train.collectors import shut_down
+from rlgrasp.train.collectors import begin_shutdown, shut_down
 from rlgrasp.train.eval_process import EvalProcessError, background_evaluator
-from rlgrasp.train.evaluate import periodic_evaluator
+from rlgrasp.train.evaluate import periodic_evaluator, summarize
 from rlgrasp.train.logger import log, progress_line, setup_text_log
-from rlgrasp.train.metrics import Due, Throughput, finished_episodes
+from rlgrasp.train.metrics import Due, Phases, Throughput, finished_episodes
 from rlgrasp.train.parts import build_parts
 from rlgrasp.train.preemption import StopSignals
 from rlgrasp.train.resume import prepare_run
@@ -85,6 +85,7 @@ class Trainer:
     ) -> None:
         """``cfg`` as ``rlgrasp.train.resume.prepare_run`` returns it, ``resumed`` the checkpoint."""
         self.cfg, self.on_eval = cfg, on_eval
+        self.phases = Phases()  # where the wall clock goes, from the launch: train.log's last line
         self.run_dir = Path(cfg.paths.output_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
         setup_text_log(self.run_dir)
@@ -185,6 +186,10 @@ class Trainer:
             self.adr.state.load_state_dict(state["adr"])
 
     def save(self, is_best: bool = False) -> None:
+        with self.phases("checkpoints"):
+            self._save(is_best)
+
+    def _save(self, is_best: bool) -> None:
         path = ckpt_lib.write_checkpoints(
             self.ckpt_dir, self.state_dict(), self.cfg.checkpoint.keep_last, is_best
         )
@@ -216,6 +221,7 @@ class Trainer:
                 self.parts.spec,
             )
             self.start = time.monotonic()  # the time budget includes the workers' start-up
+            self.phases.mark("start-up")  # from the launch: the interpreter, imports, env spec, networks
             cleanup.enter_context(self.signals)
             if self.updates == 0 and self.frames == 0:
                 self.algo.start(self.logger.scalars)
@@ -225,6 +231,10 @@ class Trainer:
                 if self.frames < self.cfg.total_frames and self.algo.collects:
                     with self._collector() as batches:
                         self._loop(batches)
+                        with self.phases("shutdown"):
+                            batches.close()  # a batch in flight (a time budget's end) arrives
+                            begin_shutdown(batches.collector)  # the workers end during the final eval
+                        return self.finish()
                 return self.finish()
             except (KeyboardInterrupt, _Stopped):
                 stopped_by = self.signals.received
@@ -264,21 +274,23 @@ class Trainer:
             raise _Stopped
 
     @contextlib.contextmanager
-    def _collector(self) -> Iterator[Iterator[TensorDictBase]]:
+    def _collector(self) -> Iterator[Batches]:
         """The collector's batches (``rlgrasp.train.batches``); its workers are shut down however the
         loop ends."""
         behaviour = copy.deepcopy(self.algo.behaviour)
-        collector = self.parts.make_collector(self.generation, str(self.error_dir), behaviour)
+        with self.phases("first batch"):  # the workers' start-up: spawned, imports, envs built
+            collector = self.parts.make_collector(self.generation, str(self.error_dir), behaviour)
         backend = self.parts.collector
         batches = Batches(collector, self.algo.behaviour, behaviour, backend.collects_ahead, self.adr,
                           timeout_s=None if backend.in_process else backend.worker_timeout_s)
         try:
             yield batches
         finally:
-            batches.close()
-            shut_down(collector)
+            with self.phases("shutdown"):
+                batches.close()
+                shut_down(collector)
 
-    def _loop(self, batches: Iterator[TensorDictBase]) -> None:
+    def _loop(self, batches: Batches) -> None:
         cfg = self.cfg
         budget_s = cfg.time_budget_min * 60 if cfg.time_budget_min else math.inf
         eval_due = Due(cfg.eval.interval_frames, self.frames)
@@ -288,24 +300,32 @@ class Trainer:
         start = self.start
         while self.frames < cfg.total_frames and time.monotonic() - start < budget_s:
             self._check_stop()
+            batches.ahead = self.frames + self.parts.frames_per_batch < cfg.total_frames  # else: the last
             t0 = time.perf_counter()
-            batch = self.collect(batches)
+            with self.phases("first batch" if throughput.t0 is None else "collection"):
+                batch = self.collect(batches)
             self._check_stop()  # a batch collected while stopping is neither trained on nor counted
             self.frames += batch.numel()
             metrics = {"time/collect_s": time.perf_counter() - t0, **self.episode_metrics(batch)}
-            metrics.update(self.update(batch))
+            with self.phases("updates"):
+                metrics.update(self.update(batch))
             if self.adr is not None:
                 metrics.update(self.adr.scalars())
             metrics["charts/SPS"] = sps = throughput(batch.numel(), t0)
-            self.logger.scalars(metrics, self.frames)
+            with self.phases("logging"):
+                self.logger.scalars(metrics, self.frames)
+                self.peek_eval()
 
             is_best = False
             if eval_due(self.frames) and self.frames < cfg.total_frames:  # the final eval runs at the end
-                is_best = self.periodic_eval()
+                with self.phases("periodic evaluations"):
+                    is_best = self.periodic_eval()
             if ckpt_due(self.frames) or is_best:
                 self.save(is_best)
-            self.logger.progress(self.progress(sps, budget_s - (time.monotonic() - start)))
-        self.pick_up_eval()  # the one still in the background, before the final one
+            with self.phases("logging"):
+                self.logger.progress(self.progress(sps, budget_s - (time.monotonic() - start)))
+        with self.phases("periodic evaluations"):
+            self.pick_up_eval()  # the one still in the background, before the final one
 
     def collect(self, batches: Iterator[TensorDictBase]) -> TensorDictBase:
         """The next batch, flattened to ``[envs * workers, time]`` (not yet counted in ``frames``: the
@@ -356,7 +376,8 @@ class Trainer:
         )
 
     def evaluate(self, final: bool = False) -> bool:
-        """Deterministic evaluation in this process, of the current weights; logs it, reports it to
+        """Deterministic evaluation of the current weights in this process (the final one shared with
+        the evaluation process when there is one: ``_play_final``); logs it, reports it to
         ``on_eval``; returns whether it is the best.
 
         An exception from ``on_eval`` (a sweep's pruner) saves a checkpoint and propagates.
@@ -364,11 +385,37 @@ class Trainer:
         t0 = time.perf_counter()
         episodes = self.final_episodes if final else self.cfg.eval.episodes
         self.actor.eval()
-        result = self.evaluator.run(self.actor, episodes)
-        self.actor.train()
+        try:
+            result = self._play_final(episodes) if final else None
+            if result is None:
+                result = self.evaluator.run(self.actor, episodes)
+        finally:
+            self.actor.train()
         is_best = self.record_eval(result, self.frames, episodes, time.perf_counter() - t0, final)
         self.report_eval(result, self.frames, lambda: self.save(is_best))
         return is_best
+
+    def _play_final(self, episodes: int) -> dict[str, float] | None:
+        """The final evaluation split with the evaluation process, if ``eval.background`` started one:
+        it plays the later rounds on a copy of the weights while this process plays the first ones,
+        and the episodes are joined in order, so the figures are those of one process (the collector's
+        workers are gone by then: the process has a core to itself). None: no process to share with."""
+        bg, rounds = self.background, self.evaluator.rounds(episodes)
+        if bg is None or not bg.running or bg.pending is not None or rounds < 2:
+            return None
+        mine = (rounds + 1) // 2
+        try:
+            bg.submit(self.frames, self.actor.state_dict(), episodes, part=(mine, rounds - mine))
+        except EvalProcessError as exc:
+            self._eval_process_failed(exc)
+        played = self.evaluator.play(self.actor, episodes, 0, mine)
+        try:
+            done = bg.wait(stop=lambda: self.signals.received is not None)
+        except EvalProcessError as exc:
+            self._eval_process_failed(exc)
+        if done is None:
+            raise _Stopped
+        return summarize([played, done[1]], episodes)
 
     def periodic_eval(self) -> bool:
         """The evaluation due now; returns whether the checkpoint to save now is the best.
@@ -386,6 +433,16 @@ class Trainer:
             self._eval_process_failed(exc)
         return False
 
+    def peek_eval(self) -> None:
+        """Log the background evaluation's figures as soon as they have arrived (the learner checks
+        after each batch), so a curve against the wall clock shows them when they were known; what
+        depends on them (``last_eval``, ``best.pt``, ``on_eval``) waits for ``pick_up_eval``, at a fixed
+        point of the loop."""
+        done = None if self.background is None else self.background.ready()
+        if done is not None and done[0].logged is None and done[0].part is None:
+            pending, result = done
+            pending.logged = self.log_eval(result, pending.frames, pending.episodes, self.background.seconds)
+
     def pick_up_eval(self) -> None:
         """Wait for the background evaluation, if one is under way, and record it at the frames of
         the weights it evaluated: a fixed point of the loop, so one seed still gives one run."""
@@ -401,7 +458,9 @@ class Trainer:
             raise _Stopped
         pending, result = done
         self.logger.scalars({"time/eval_wait_s": time.perf_counter() - t0}, self.frames)
-        is_best = self.record_eval(result, pending.frames, pending.episodes, bg.seconds)
+        if pending.logged is None:
+            pending.logged = self.log_eval(result, pending.frames, pending.episodes, bg.seconds)
+        is_best = self.keep_eval(pending.logged, pending.frames, pending.episodes)
         if is_best:  # the weights that were evaluated, with this evaluation's bookkeeping
             pending.keep.update(last_eval=self.last_eval, best_eval_success=self.best_success)
             path = ckpt_lib.save_checkpoint(self.ckpt_dir / "best.pt", pending.keep)
@@ -419,19 +478,29 @@ class Trainer:
     ) -> bool:
         """Log an evaluation of the weights of ``frames`` at ``frames``; keep it as ``last_eval``;
         returns whether it is the best so far."""
+        return self.keep_eval(self.log_eval(result, frames, episodes, seconds, final), frames, episodes)
+
+    def log_eval(
+        self, result: dict[str, float], frames: int, episodes: int, seconds: float, final: bool = False
+    ) -> dict[str, float]:
+        """Log an evaluation at ``frames`` (with the algorithm's extras); returns what was logged."""
         result = {**result, **self.algo.eval_extras(result, self.evaluator.run, episodes)}
-        self.last_eval = {**result, "frames": frames, "episodes": episodes}
         self.logger.scalars({f"eval/{k}": v for k, v in result.items()}, frames)
         self.logger.scalars({"time/eval_s": seconds}, frames)
-        score = result.get("success_rate", result["mean_reward"])
-        is_best = score > self.best_success
-        if is_best:
-            self.best_success = score
         log.info("eval at %s frames: %s", f"{frames:,}", {k: round(v, 3) for k, v in result.items()})
         if final and "success_rate" in result:
             wins = round(result["success_rate"] * episodes)
             low, high = wilson_interval(wins, episodes)
             log.info("final eval: success %d/%d [95%% Wilson %.3f, %.3f]", wins, episodes, low, high)
+        return result
+
+    def keep_eval(self, result: dict[str, float], frames: int, episodes: int) -> bool:
+        """Keep a logged evaluation as ``last_eval``; returns whether it is the best so far."""
+        self.last_eval = {**result, "frames": frames, "episodes": episodes}
+        score = result.get("success_rate", result["mean_reward"])
+        is_best = score > self.best_success
+        if is_best:
+            self.best_success = score
         return is_best
 
     def report_eval(self, result: dict[str, float], frames: int, save: Callable[[], None]) -> None:
@@ -451,7 +520,9 @@ class Trainer:
         """Final evaluation (unless the last one is current) and checkpoint; hparams; the result."""
         last = self.last_eval
         if last is None or last["frames"] != self.frames or self.final_episodes > self.cfg.eval.episodes:
-            self.save(self.evaluate(final=True))
+            with self.phases("final evaluation"):
+                is_best = self.evaluate(final=True)
+            self.save(is_best)
         elif (
             not (self.ckpt_dir / "last.pt").exists()
             or ckpt_lib.load_checkpoint(self.run_dir)["frames"] != self.frames
@@ -467,6 +538,7 @@ class Trainer:
             },
         )
         log.info("finished at %s frames: eval %s", f"{self.frames:,}", result)
+        log.info(self.phases.line())
         return success
 
 
