@@ -350,7 +350,8 @@ class PeriodicEvalConfig:
     # The periodic evaluations in a process of their own (rlgrasp.train.eval_process) while training
     # goes on; each result is logged at the frames of the weights it evaluated, and picked up when the
     # next one is due (so a sweep's pruner hears of it one interval later). false: in the learner's
-    # process, training waits. The final evaluation always runs in the learner's process.
+    # process, training waits. The final evaluation runs in the learner's process, shared with the
+    # evaluation process when this one started it (the later rounds there, the same figures).
     background: bool = False
     # null: the training env's randomization. A preset, a ranges file or ranges over a preset, as
     # rlgrasp-eval's `randomization` (e.g. eval.randomization=default): a run whose training ranges
