@@ -409,13 +409,18 @@ class Trainer:
         except EvalProcessError as exc:
             self._eval_process_failed(exc)
         played = self.evaluator.play(self.actor, episodes, 0, mine)
+        return summarize([played, self._wait_for_background()[1]], episodes)
+
+    def _wait_for_background(self) -> tuple[Any, Any]:
+        """The evaluation process's pending evaluation and its result, once it has arrived; a stop
+        signal meanwhile ends the wait (``_Stopped``), a failed process ends the run."""
         try:
-            done = bg.wait(stop=lambda: self.signals.received is not None)
+            done = self.background.wait(stop=lambda: self.signals.received is not None)
         except EvalProcessError as exc:
             self._eval_process_failed(exc)
         if done is None:
             raise _Stopped
-        return summarize([played, done[1]], episodes)
+        return done
 
     def periodic_eval(self) -> bool:
         """The evaluation due now; returns whether the checkpoint to save now is the best.
@@ -450,13 +455,7 @@ class Trainer:
         if bg is None or bg.pending is None:
             return
         t0 = time.perf_counter()
-        try:
-            done = bg.wait(stop=lambda: self.signals.received is not None)
-        except EvalProcessError as exc:
-            self._eval_process_failed(exc)
-        if done is None:
-            raise _Stopped
-        pending, result = done
+        pending, result = self._wait_for_background()
         self.logger.scalars({"time/eval_wait_s": time.perf_counter() - t0}, self.frames)
         if pending.logged is None:
             pending.logged = self.log_eval(result, pending.frames, pending.episodes, bg.seconds)
