@@ -175,6 +175,9 @@ class SACConfig:
     # A demonstrations directory (rlgrasp-demos): this share of each minibatch is drawn from it.
     demos: str | None = None
     demo_ratio: float = 0.5
+    # With demos: the actor's loss also pulls its deterministic action towards the demonstrated one on
+    # the demonstrations' rows of each minibatch, weighted this much (0: RLPD alone).
+    bc_coeff: float = 0.0
     # The replay buffer is written beside the checkpoints (replay.pt), so a resumed run continues
     # with it; false: a resumed run starts with an empty one.
     save_replay: bool = True
@@ -687,6 +690,8 @@ def _sac_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
         ("algo.critic_activation", a.critic_activation, a.critic_activation in ("tanh", "relu", "elu"),
          "must be tanh, relu or elu"),
         ("algo.demo_ratio", a.demo_ratio, 0 < a.demo_ratio < 1, "must be in (0, 1)"),
+        ("algo.bc_coeff", a.bc_coeff, a.bc_coeff >= 0 and math.isfinite(a.bc_coeff),
+         "must be finite and >= 0"),
         ("algo.image_shift", a.image_shift, a.image_shift >= 0, "must be >= 0 (pixels)"),
         *rates,
     ]

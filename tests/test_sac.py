@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 import torch
 from tensordict import TensorDict
+from torchrl.envs import ExplorationType, set_exploration_type
 
 from rlgrasp.algos.sac import REPLAY_FILE, SAC
 from rlgrasp.compose import compose_config, compose_train
@@ -79,6 +80,27 @@ def test_demonstrations_fill_their_share_of_each_minibatch(tmp_path: Path, recor
     assert from_demos == 8
 
 
+def test_the_bc_term_pulls_the_actor_to_the_demonstrated_actions(
+    tmp_path: Path, recorded_demos: Path
+) -> None:
+    """``algo.bc_coeff`` > 0: after the same updates on the same data, the actor's deterministic
+    action on the demonstrations' observations is nearer the demonstrated actions than without it."""
+    def distance_after(bc_coeff: float) -> tuple[float, dict[str, float]]:
+        sac = _sac(tmp_path, f"algo.demos={recorded_demos}", f"algo.bc_coeff={bc_coeff}", "env.ee_yaw=false",
+                   "algo.utd_ratio=1", "algo.learning_starts=0", "algo.actor_lr=3e-3")
+        demos = demo_transitions(load_demos(recorded_demos, _layout_of(sac)), sac.cfg.env)
+        torch.manual_seed(1)
+        metrics = [sac.update(_batch(sac, 40), 0) for _ in range(5)][-1]
+        with set_exploration_type(ExplorationType.DETERMINISTIC):
+            acted = sac.actor(demos.select("observation").clone())["action"]
+        return float((acted - demos["action"]).pow(2).mean()), metrics
+
+    without, metrics_without = distance_after(0.0)
+    with_bc, metrics_with = distance_after(10.0)
+    assert with_bc < 0.7 * without
+    assert "loss_bc" in metrics_with and "loss_bc" not in metrics_without
+
+
 def test_demonstrations_become_transitions_with_their_successors(recorded_demos: Path) -> None:
     demos = load_demos(recorded_demos, _layout_of_env(ee_yaw=False))
     frames, transitions = demos.frames, demo_transitions(demos, {"reward": "dense"})
@@ -129,6 +151,7 @@ def test_a_ppo_checkpoint_is_not_resumed_as_sac(tmp_path: Path) -> None:
     ("algo.utd_ratio=0", "algo.utd_ratio=0.0: must be > 0"),
     ("algo.buffer_frames=16", "algo.buffer_frames=16: must be >= algo.batch_size (32)"),
     ("algo.image_shift=-1", "algo.image_shift=-1: must be >= 0 (pixels)"),
+    ("algo.bc_coeff=-1", "algo.bc_coeff=-1.0: must be finite and >= 0"),
 ])
 def test_bad_sac_input_is_one_line(tmp_path: Path, override: str, message: str) -> None:
     with pytest.raises(ConfigError) as info:

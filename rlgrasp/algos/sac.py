@@ -29,9 +29,12 @@ from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModule
 from torch import nn
 from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
+from torchrl.envs import ExplorationType, set_exploration_type
 from torchrl.objectives import SACLoss, SoftUpdate
 
 from rlgrasp.config import ConfigError
+from rlgrasp.demos.bc import mse_bc_loss
+from rlgrasp.demos.dataset import demo_transitions, demos_for
 from rlgrasp.models.cnn import head_actor, image_specs, vision_net
 from rlgrasp.models.mlp import ACTIVATIONS, OBS_KEY, RunningNorm
 from rlgrasp.models.spec import PRIVILEGED_KEY
@@ -111,6 +114,7 @@ class SAC(Algorithm):
             self.optimizers["encoder"] = torch.optim.Adam(self._encoder().parameters(), lr=a.critic_lr)
             _check_replay_memory(a, parts.spec, self.transition_keys)
         self.demos = self._demos() if a.get("demos") else None
+        self.bc = mse_bc_loss(self._loss_actor()) if self.demos is not None and a.bc_coeff > 0 else None
         online = a.batch_size - (self.demos.batch_size if self.demos is not None else 0)
         self.replay = _buffer(a.buffer_frames, online, device)
         self.owed = 0.0  # gradient steps due but not yet taken (the ratio is kept across batches)
@@ -140,8 +144,6 @@ class SAC(Algorithm):
     def _demos(self) -> TensorDictReplayBuffer:
         """The demonstrations as transitions in a buffer of their own (read, and refused, before any
         worker starts)."""
-        from rlgrasp.demos.dataset import demo_transitions, demos_for  # demos sit above the algorithms
-
         a = self.cfg.algo
         frames = demo_transitions(demos_for(a.demos, self.parts.make_env, self.cfg.env), self.cfg.env)
         demos = _buffer(frames.numel(), min(a.batch_size - 1, max(1, round(a.batch_size * a.demo_ratio))),
@@ -187,6 +189,8 @@ class SAC(Algorithm):
         for_critic, for_actor = self._inputs(self._sample())
         loss_qvalue, _ = self.loss.qvalue_v2_loss(for_critic)
         loss_actor, actor_info = self.loss.actor_loss(for_actor)
+        loss_bc = self._bc_loss(for_actor)
+        loss_actor = loss_actor + a.bc_coeff * loss_bc if loss_bc is not None else loss_actor
         loss_alpha = self.loss.alpha_loss(actor_info["log_prob"]).mean()
         self.updates += 1
         actor_step = self.updates % a.actor_every == 0
@@ -202,9 +206,22 @@ class SAC(Algorithm):
             self.optimizers["actor"].step()
             self.optimizers["alpha"].step()
         self.target_update.step()
-        return {"loss_qvalue": float(loss_qvalue.detach()), "loss_actor": float(loss_actor.detach()),
-                "alpha": float(self.loss.log_alpha.detach().exp()),
-                "entropy": float(-actor_info["log_prob"].mean())}
+        metrics = {"loss_qvalue": float(loss_qvalue.detach()), "loss_actor": float(loss_actor.detach()),
+                   "alpha": float(self.loss.log_alpha.detach().exp()),
+                   "entropy": float(-actor_info["log_prob"].mean())}
+        if loss_bc is not None:
+            metrics["loss_bc"] = float(loss_bc.detach())
+        return metrics
+
+    def _bc_loss(self, for_actor: TensorDictBase) -> torch.Tensor | None:
+        """With ``algo.bc_coeff`` > 0: the squared distance between the actor's deterministic action
+        and the demonstrated one, on the demonstrations' rows of the minibatch (the last ones,
+        ``_sample``). It holds the actor near the expert while the critics are still wrong, which
+        RLPD alone leaves to the critics (Nair et al. 2018 add the same term to DDPG)."""
+        if self.bc is None:
+            return None
+        with set_exploration_type(ExplorationType.DETERMINISTIC):
+            return self.bc(for_actor[-self.demos.batch_size:])["loss_bc"]
 
     def _inputs(self, sample: TensorDictBase) -> tuple[TensorDictBase, TensorDictBase]:
         """The minibatch as the critics' loss reads it and as the actor's does. With a camera: each
