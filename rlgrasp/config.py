@@ -178,6 +178,9 @@ class SACConfig:
     # With demos: the actor's loss also pulls its deterministic action towards the demonstrated one on
     # the demonstrations' rows of each minibatch, weighted this much (0: RLPD alone).
     bc_coeff: float = 0.0
+    # With demos: this many epochs of behaviour cloning on them (at bc_lr) before the first frame.
+    bc_epochs: int = 0
+    bc_lr: float = 1e-3
     # The replay buffer is written beside the checkpoints (replay.pt), so a resumed run continues
     # with it; false: a resumed run starts with an empty one.
     save_replay: bool = True
@@ -673,7 +676,7 @@ def _learning_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
 def _sac_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
     """SAC's keys: a ratio > 0, a buffer that holds a minibatch, rates > 0."""
     rates = [(f"algo.{k}", a[k], _positive(a[k]) and math.isfinite(a[k]), "must be finite and > 0")
-             for k in ("actor_lr", "critic_lr", "alpha_lr", "alpha_init")]
+             for k in ("actor_lr", "critic_lr", "alpha_lr", "alpha_init", "bc_lr")]
     return [
         ("algo.utd_ratio", a.utd_ratio, _positive(a.utd_ratio), "must be > 0 (gradient steps per env frame)"),
         ("algo.batch_size", a.batch_size, a.batch_size >= 1, "must be >= 1"),
@@ -692,6 +695,9 @@ def _sac_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
         ("algo.demo_ratio", a.demo_ratio, 0 < a.demo_ratio < 1, "must be in (0, 1)"),
         ("algo.bc_coeff", a.bc_coeff, a.bc_coeff >= 0 and math.isfinite(a.bc_coeff),
          "must be finite and >= 0"),
+        ("algo.bc_epochs", a.bc_epochs, a.bc_epochs >= 0, "must be >= 0 (0: no pre-training)"),
+        ("algo.bc_epochs", a.bc_epochs, not a.bc_epochs or a.demos, "needs algo.demos=<demonstrations>"),
+        ("algo.bc_coeff", a.bc_coeff, not a.bc_coeff or a.demos, "needs algo.demos=<demonstrations>"),
         ("algo.image_shift", a.image_shift, a.image_shift >= 0, "must be >= 0 (pixels)"),
         *rates,
     ]

@@ -101,6 +101,23 @@ def test_the_bc_term_pulls_the_actor_to_the_demonstrated_actions(
     assert "loss_bc" in metrics_with and "loss_bc" not in metrics_without
 
 
+def test_pretraining_clones_the_demonstrations_before_the_first_frame(
+    tmp_path: Path, recorded_demos: Path
+) -> None:
+    sac = _sac(tmp_path, f"algo.demos={recorded_demos}", "algo.bc_epochs=30", "env.ee_yaw=false")
+    demos = demo_transitions(load_demos(recorded_demos, _layout_of(sac)), sac.cfg.env)
+
+    def distance() -> float:
+        with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
+            acted = sac.actor(demos.select("observation").clone())["action"]
+        return float((acted - demos["action"]).pow(2).mean())
+
+    before, logged = distance(), {}
+    sac.start(lambda metrics, frames: logged.update(metrics))
+    assert distance() < 0.5 * before
+    assert logged["pretrain/bc_loss_last"] < logged["pretrain/bc_loss_first"]
+
+
 def test_demonstrations_become_transitions_with_their_successors(recorded_demos: Path) -> None:
     demos = load_demos(recorded_demos, _layout_of_env(ee_yaw=False))
     frames, transitions = demos.frames, demo_transitions(demos, {"reward": "dense"})
@@ -152,6 +169,7 @@ def test_a_ppo_checkpoint_is_not_resumed_as_sac(tmp_path: Path) -> None:
     ("algo.buffer_frames=16", "algo.buffer_frames=16: must be >= algo.batch_size (32)"),
     ("algo.image_shift=-1", "algo.image_shift=-1: must be >= 0 (pixels)"),
     ("algo.bc_coeff=-1", "algo.bc_coeff=-1.0: must be finite and >= 0"),
+    ("algo.bc_epochs=3", "algo.bc_epochs=3: needs algo.demos=<demonstrations>"),
 ])
 def test_bad_sac_input_is_one_line(tmp_path: Path, override: str, message: str) -> None:
     with pytest.raises(ConfigError) as info:

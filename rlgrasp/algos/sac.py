@@ -151,6 +151,33 @@ class SAC(Algorithm):
         demos.extend(_compact(frames.select(*self.transition_keys)).to(self.device))
         return demos
 
+    def start(self, log_scalars: Any) -> None:
+        """With demonstrations and ``algo.bc_epochs``: behaviour cloning on them before the first
+        frame, so that the workers' first episodes explore around the expert (the ``bc_coeff`` term
+        then keeps the actor there while the critics learn). The observation normalizer starts from
+        the demonstrations' statistics, which online batches then continue, as PPO's pre-training."""
+        a = self.cfg.algo
+        if self.demos is None or not a.bc_epochs:
+            return
+        demos = self.demos[:]
+        self.norm.update(demos[OBS_KEY].float())
+        if PRIVILEGED_KEY in self.transition_keys:
+            self.parts.norms[PRIVILEGED_KEY].update(demos[PRIVILEGED_KEY].float())
+        bc = self.bc or mse_bc_loss(self._loss_actor())
+        optimizer = torch.optim.Adam(self.actor.parameters(), lr=a.bc_lr)
+        steps = a.bc_epochs * -(-len(demos) // self.demos.batch_size)
+        losses = []
+        for _ in range(steps):
+            _, for_actor = self._inputs(self.demos.sample())
+            with set_exploration_type(ExplorationType.DETERMINISTIC):
+                loss = bc(for_actor)["loss_bc"]
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+            losses.append(float(loss.detach()))
+        log_scalars({"pretrain/bc_loss_first": losses[0], "pretrain/bc_loss_last": losses[-1],
+                     "pretrain/steps": float(steps)}, 0)
+
     def update(self, batch: TensorDictBase, frames: int) -> dict[str, float]:
         """Store the batch, then take ``utd_ratio`` gradient steps per new frame once the buffer
         holds ``learning_starts`` frames (the steps not taken before are not made up)."""
