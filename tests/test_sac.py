@@ -305,6 +305,11 @@ def test_camera_demonstrations_fill_a_camera_learners_minibatch_and_others_are_r
     assert torch.equal(demos["depth"][1:5], demos["next", "depth"][:4])  # within the episode
     sac.update(_camera_batch(sac, 16), 0)
     assert sac._sample()["privileged"].shape == (8, sac.parts.spec["privileged_dim"])
+    # the bc term's gradient reaches the encoders (the actor's own loss reads them detached)
+    with_bc = _sac(tmp_path, *CAMERA, f"algo.demos={out / 'demos'}", "algo.batch_size=8", "algo.bc_coeff=1")
+    with_bc.update(_camera_batch(with_bc, 16), 0)
+    with_bc._bc_loss(with_bc._inputs(with_bc._sample())[0]).backward()
+    assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in with_bc._encoder().parameters())
     with pytest.raises(DemoError, match=r"recorded with the images \{'depth': \[1, 64, 64\]\}, this run's "):
         _sac(tmp_path, f"algo.demos={out / 'demos'}")
     with pytest.raises(DemoError, match=r"this run's camera gives \{'depth': \[1, 48, 48\]\}"):

@@ -168,9 +168,9 @@ class SAC(Algorithm):
         steps = a.bc_epochs * -(-len(demos) // self.demos.batch_size)
         losses = []
         for _ in range(steps):
-            _, for_actor = self._inputs(self.demos.sample())
+            with_features, _ = self._inputs(self.demos.sample())  # a camera's encoders learn too
             with set_exploration_type(ExplorationType.DETERMINISTIC):
-                loss = bc(for_actor)["loss_bc"]
+                loss = bc(with_features)["loss_bc"]
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()
@@ -216,7 +216,7 @@ class SAC(Algorithm):
         for_critic, for_actor = self._inputs(self._sample())
         loss_qvalue, _ = self.loss.qvalue_v2_loss(for_critic)
         loss_actor, actor_info = self.loss.actor_loss(for_actor)
-        loss_bc = self._bc_loss(for_actor)
+        loss_bc = self._bc_loss(for_critic)
         loss_actor = loss_actor + a.bc_coeff * loss_bc if loss_bc is not None else loss_actor
         loss_alpha = self.loss.alpha_loss(actor_info["log_prob"]).mean()
         self.updates += 1
@@ -240,15 +240,18 @@ class SAC(Algorithm):
             metrics["loss_bc"] = float(loss_bc.detach())
         return metrics
 
-    def _bc_loss(self, for_actor: TensorDictBase) -> torch.Tensor | None:
+    def _bc_loss(self, for_critic: TensorDictBase) -> torch.Tensor | None:
         """With ``algo.bc_coeff`` > 0: the squared distance between the actor's deterministic action
         and the demonstrated one, on the demonstrations' rows of the minibatch (the last ones,
         ``_sample``). It holds the actor near the expert while the critics are still wrong, which
-        RLPD alone leaves to the critics (Nair et al. 2018 add the same term to DDPG)."""
+        RLPD alone leaves to the critics (Nair et al. 2018 add the same term to DDPG). With a
+        camera it reads the features the critics' loss trains, not detached: the demonstrated
+        actions are a supervised signal, as a DAgger student's, and teach the encoders where the
+        object is long before the critics' loss does."""
         if self.bc is None:
             return None
         with set_exploration_type(ExplorationType.DETERMINISTIC):
-            return self.bc(for_actor[-self.demos.batch_size:])["loss_bc"]
+            return self.bc(for_critic[-self.demos.batch_size:])["loss_bc"]
 
     def _inputs(self, sample: TensorDictBase) -> tuple[TensorDictBase, TensorDictBase]:
         """The minibatch as the critics' loss reads it and as the actor's does. With a camera: each
