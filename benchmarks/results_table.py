@@ -5,11 +5,14 @@ says which command produced it).
     python benchmarks/results_table.py            # print every page's table
     python benchmarks/results_table.py --write    # rewrite the tables in the pages from the file
     python benchmarks/results_table.py --check    # exit 1 if a page's table differs from the file
+    python benchmarks/results_table.py --ids      # every row's PAGE/ID, for a script's --record
 
 A page holds its table between two comments, `<!-- results-table: NAME -->` and
 `<!-- /results-table -->`, NAME being the page's key in the file. To change a figure, change the
 file (with the command that produced it, and the section of the page that tells the story), then
-`--write`; tests/test_results_table.py fails while the two disagree.
+`--write`; tests/test_results_table.py fails while the two disagree. Each row has an `id`; a
+benchmark script given `--record PAGE/ID` writes its own row (benchmarks/results_file.py), and
+`--ids` lists them.
 """
 
 from __future__ import annotations
@@ -59,8 +62,8 @@ def render(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def page_path(name: str) -> Path:
-    return PAGES / f"{name}.md"
+def page_path(name: str, folder: Path = PAGES) -> Path:
+    return folder / f"{name}.md"
 
 
 def compare(pages: dict[str, list[dict]]) -> list[str]:
@@ -83,9 +86,10 @@ def compare(pages: dict[str, list[dict]]) -> list[str]:
     return problems
 
 
-def write(pages: dict[str, list[dict]]) -> None:
+def write(pages: dict[str, list[dict]], folder: Path = PAGES) -> None:
+    """Rewrite each page's table from its rows (the other text of the page is left as it is)."""
     for name, rows in pages.items():
-        path = page_path(name)
+        path = page_path(name, folder)
         text = path.read_text()
         table = render(rows)
 
@@ -95,7 +99,7 @@ def write(pages: dict[str, list[dict]]) -> None:
         new = BLOCK.sub(fill, text)
         if new != text:
             path.write_text(new)
-            print(f"wrote {path.relative_to(ROOT)}")
+            print(f"wrote {path.relative_to(ROOT) if path.is_relative_to(ROOT) else path}")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -103,8 +107,14 @@ def main(argv: list[str] | None = None) -> int:
     mode = parser.add_mutually_exclusive_group()
     mode.add_argument("--write", action="store_true", help="rewrite the pages' tables from the file")
     mode.add_argument("--check", action="store_true", help="exit 1 if a page's table differs from the file")
+    mode.add_argument("--ids", action="store_true", help="list PAGE/ID of every row (a script's --record)")
     args = parser.parse_args(argv)
     pages = load()
+    if args.ids:
+        for name, rows in pages.items():
+            for row in rows:
+                print(f"{name}/{row.get('id', '?')}: {row['target']}")
+        return 0
     if args.write:
         write(pages)
         return 0
