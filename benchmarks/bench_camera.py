@@ -5,15 +5,26 @@ in turn, round after round, so a drifting machine affects all of them alike (the
 figure to quote). Prints a table and each configuration's ratio to the state env.
 
     python benchmarks/bench_camera.py [--steps 1500] [--rounds 3] [--size 64]
+
+``--record PAGE/ID`` writes ``--record-camera``'s ratio to the state env (default: wrist depth) into
+that row of docs/benchmarks/results.json and its page's table (benchmarks/results_file.py), met when
+it is >= ``--target``:
+
+    python benchmarks/bench_camera.py --steps 1000 --rounds 3 --record cameras/camera-cost --target 0.5
 """
 
 from __future__ import annotations
 
 import argparse
 import statistics
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # results_file, also when loaded by path
+import results_file
 
 from rlgrasp.envs import GraspEnv
 
@@ -52,6 +63,10 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--size", type=int, default=64)
     parser.add_argument("--visual", default="default", help="visual preset of the camera envs")
+    results_file.add_options(parser)
+    parser.add_argument("--record-camera", default="wrist depth", choices=[c for c in CONFIGS if CONFIGS[c]],
+                        help="with --record: the camera whose ratio to the state env is written")
+    parser.add_argument("--target", type=float, help="with --record: the ratio to reach")
     args = parser.parse_args()
     rng = np.random.default_rng(0)
     envs = {}
@@ -71,6 +86,11 @@ def main() -> None:
         median = statistics.median(fps[name])
         print(f"{name:<14} {image:>9} {median:>9.0f} {median / base:>9.2f}")
         env.close()
+    if args.record:
+        rate = statistics.median(fps[args.record_camera])
+        met = "see page" if args.target is None else results_file.met_of([rate / base >= args.target])
+        results_file.record(*args.record, f"{rate / base:.2f} ({rate:,.0f} against {base:,.0f} frames/s)",
+                            met, load=args.record_load)
 
 
 if __name__ == "__main__":

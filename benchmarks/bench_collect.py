@@ -11,6 +11,12 @@
    ``collector.overlap=true`` (they collect the next batch meanwhile), one after the other.
 
 Prints frames/s and the ratios to raw (targets: collector >= 0.85, end to end >= 0.75).
+``--record PAGE/ID`` writes the collector's ratio into that row of docs/benchmarks/results.json and
+its page's table (benchmarks/results_file.py), ``--record-end-to-end PAGE/ID`` the end-to-end one
+(with ``--train-frames``), each met against its target above:
+
+    python benchmarks/bench_collect.py --train-frames 20480 --record throughput/collector \
+        --record-end-to-end throughput/end-to-end experiment=grasp_ppo
 """
 
 from __future__ import annotations
@@ -24,7 +30,9 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout, uninstalled
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # results_file, also when loaded by path
 import gymnasium as gym
+import results_file
 import torch
 from omegaconf import OmegaConf
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
@@ -119,7 +127,12 @@ def main() -> None:
     parser.add_argument("--procs", type=int, default=os.cpu_count(), help="raw processes (cores)")
     parser.add_argument("--train-frames", type=int, default=0, help="also train this many frames")
     parser.add_argument("overrides", nargs="*", help="Hydra overrides, e.g. experiment=grasp_ppo")
+    results_file.add_options(parser)
+    parser.add_argument("--record-end-to-end", type=results_file.row_spec, metavar="PAGE/ID",
+                        help="with --train-frames: the row the end-to-end ratio is written into")
     args = parser.parse_args()
+    if args.record_end_to_end and not args.train_frames:
+        parser.error("--record-end-to-end needs --train-frames")
 
     overrides = args.overrides or ["experiment=grasp_ppo"]
     cfg = compose_train([*overrides, "paths.output_dir=/tmp/unused"])
@@ -138,7 +151,10 @@ def main() -> None:
     row(f"gymnasium AsyncVectorEnv, {num_envs} envs", bench_async(make_env, args.seconds, num_envs))
     col = bench_collector(cfg, args.seconds)
     row("rlgrasp collector + PPO actor", col)
-    print(f"ratio collector/raw = {col / raw:.2f} (target >= 0.85)")
+    print(f"ratio collector/raw = {col / raw:.2f} (target >= {COLLECTOR_TARGET})")
+    if args.record:
+        met = results_file.met_of([col / raw >= COLLECTOR_TARGET])
+        results_file.record(*args.record, ratio_text(col, raw), met, load=args.record_load)
     if args.train_frames:
         sps = {}
         for overlap in ("false", "true"):
@@ -146,8 +162,20 @@ def main() -> None:
             row(f"end-to-end training, overlap={overlap} ({args.train_frames:,} frames)", sps[overlap])
         print(
             f"end to end: overlap/no overlap = {sps['true'] / sps['false']:.2f}; "
-            f"best/raw = {max(sps.values()) / raw:.2f} (target >= 0.75)"
+            f"best/raw = {max(sps.values()) / raw:.2f} (target >= {END_TO_END_TARGET})"
         )
+        if args.record_end_to_end:
+            best = max(sps.values())
+            results_file.record(*args.record_end_to_end, ratio_text(best, raw),
+                                results_file.met_of([best / raw >= END_TO_END_TARGET]), load=args.record_load)
+
+
+COLLECTOR_TARGET, END_TO_END_TARGET = 0.85, 0.75  # shares of raw stepping: docs/benchmarks/throughput.md
+
+
+def ratio_text(rate: float, raw: float) -> str:
+    """The results table's ``measured`` cell: a rate as a share of raw stepping, with both frames/s."""
+    return f"{rate / raw:.2f} ({rate:,.0f} against {raw:,.0f} raw frames/s)"
 
 
 if __name__ == "__main__":

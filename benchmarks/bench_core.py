@@ -18,6 +18,12 @@ A variant is ``NAME=OVERRIDES`` (space-separated Hydra overrides over the common
 to run another checkout's ``scripts/train.py`` (the commit before a change, from ``git worktree``);
 default: the experiment as shipped. Variants alternate within each round. Prints each round, then
 for each figure its minimum and median over the rounds and the ratios to raw of the medians.
+
+``--record PAGE/ID`` writes the whole runs' median ratios to raw into that row of
+docs/benchmarks/results.json and its page's table (benchmarks/results_file.py), met when the first
+variant's ratio is >= ``--target``:
+
+    python benchmarks/bench_core.py --rounds 2 --record throughput/end-to-end --target 0.75
 """
 
 from __future__ import annotations
@@ -33,6 +39,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout, uninstalled
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import results_file
 from bench_collect import bench_collector, bench_raw
 
 from rlgrasp.compose import compose_train
@@ -62,7 +69,7 @@ def whole_run(overrides: list[str], root: Path = ROOT) -> dict[str, float]:
     return out
 
 
-def main() -> None:
+def parse_args() -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -71,7 +78,13 @@ def main() -> None:
     parser.add_argument("--procs", type=int, default=2, help="raw processes (the cores)")
     parser.add_argument("--variant", action="append", default=[], help="NAME=OVERRIDES (repeatable)")
     parser.add_argument("overrides", nargs="*", help="Hydra overrides of every run")
-    args = parser.parse_args()
+    results_file.add_options(parser)
+    parser.add_argument("--target", type=float, help="with --record: the first variant's ratio to raw")
+    return parser.parse_args()
+
+
+def main() -> None:
+    args = parse_args()
 
     common = args.overrides or ["experiment=grasp_ppo_fast"]
     variants = {}
@@ -110,6 +123,22 @@ def main() -> None:
         keys = [k for k in rs[0] if k not in ("frames", "wall_s", "fps")]
         print(f"{name}: median seconds " + ", ".join(
             f"{k} {statistics.median(x.get(k, 0.0) for x in rs):.1f}" for k in keys))
+    if args.record:
+        medians = {name: statistics.median(figures[name]) for name in variants}
+        met = "see page" if args.target is None else results_file.met_of(
+            [next(iter(medians.values())) / raw_med >= args.target])
+        results_file.record(*args.record, record_text(medians, raw_med, args.rounds), met,
+                            load=args.record_load)
+
+
+def record_text(medians: dict[str, float], raw: float, rounds: int) -> str:
+    """The results table's ``measured`` cell: each variant's whole run as a share of raw stepping
+    (medians over the rounds), with the frames/s behind the ratio when there is one variant."""
+    if len(medians) == 1:
+        fps = next(iter(medians.values()))
+        return f"{fps / raw:.2f} ({fps:,.0f} against {raw:,.0f} raw frames/s, medians of {rounds} rounds)"
+    ratios = ", ".join(f"{name} {fps / raw:.2f}" for name, fps in medians.items())
+    return f"{ratios} of raw ({raw:,.0f} frames/s, medians of {rounds} rounds)"
 
 
 if __name__ == "__main__":

@@ -11,15 +11,27 @@ spent inside ``stepSimulation`` during the env run: 1 - that share is the env's 
 
 ``--cpu-time`` times with the process's CPU clock instead of the wall clock: on a shared machine
 (or at ``nice -n 19``) the wall clock counts the time other processes held the core.
+
+``--record PAGE/ID`` writes each mode's ratio to bare stepping into that row of
+docs/benchmarks/results.json and its page's table (benchmarks/results_file.py), met when every one
+is >= ``--target``:
+
+    python benchmarks/bench_env.py --steps 1000 --rounds 3 --modes ee_delta joint_delta joint_torque \
+        --record throughput/env-step --target 0.8
 """
 
 from __future__ import annotations
 
 import argparse
 import statistics
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # results_file, also when loaded by path
+import results_file
 
 from rlgrasp.envs import CONTROL_MODES, PandaGraspEnv, ScriptedExpert
 
@@ -74,6 +86,8 @@ def main() -> None:
                         help="control modes (random actions) and/or expert (ee_delta, scripted expert)")
     parser.add_argument("--collision-model", default="mesh", choices=["mesh", "primitive"])
     parser.add_argument("--cpu-time", action="store_true", help="time with the process's CPU clock")
+    results_file.add_options(parser)
+    parser.add_argument("--target", type=float, help="with --record: the ratio every mode must reach")
     args = parser.parse_args()
     global clock
     clock = time.process_time if args.cpu_time else time.perf_counter
@@ -90,6 +104,7 @@ def main() -> None:
     bare_env = PandaGraspEnv(**scene)
     PhysicsTimer(bare_env)
     cases = [("ee_delta", "expert") if m == "expert" else (m, "random") for m in args.modes]
+    ratios = {}
     for mode, policy_name in cases:
         env = PandaGraspEnv(control_mode=mode, **scene)
         PhysicsTimer(env)
@@ -109,6 +124,18 @@ def main() -> None:
         print(f"{mode:<14}{policy_name:<9}{e:>12.0f}{b:>13.0f}{e / b:>7.2f}"
               f"{share:>15.2f}{(1 - share) / e * 1e3:>15.3f}", flush=True)
         env.close()
+        ratios[mode if policy_name == "random" else f"{mode} {policy_name}"] = e / b
+    if args.record:
+        met = "see page" if args.target is None else results_file.met_of(
+            [r >= args.target for r in ratios.values()])
+        results_file.record(*args.record, record_text(ratios), met, load=args.record_load)
+
+
+def record_text(ratios: dict[str, float]) -> str:
+    """The results table's ``measured`` cell: env steps/s as a share of bare stepping per mode, in
+    the pages' form "0.64 / 0.72 (`ee_delta` / `joint_delta`)"."""
+    values = " / ".join(f"{r:.2f}" for r in ratios.values())
+    return f"{values} ({' / '.join(f'`{m}`' for m in ratios)})"
 
 
 if __name__ == "__main__":

@@ -12,6 +12,13 @@ Each failure gets one reason, read from the episode's info by the rules the eval
 ``--robot`` takes built-in arms by name and arm descriptions by file (a ``robot`` config group
 file, e.g. a copy of ``rlgrasp/envs/robots/xarm6.yaml`` with one key changed: the guide "When your
 arm slips" in docs/robots.md measures each change so).
+
+``--record PAGE/ID`` writes the successes per arm, object set and preset into that row of
+docs/benchmarks/results.json and its page's table (benchmarks/results_file.py), met when every one
+is >= ``--target`` (a rate):
+
+    python benchmarks/bench_expert.py --episodes 100 --presets default --record objects/expert-cube-default \
+        --target 0.85
 """
 
 from __future__ import annotations
@@ -19,6 +26,11 @@ from __future__ import annotations
 import argparse
 import collections
 import itertools
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # results_file, also when loaded by path
+import results_file
 
 from rlgrasp.envs import PandaGraspEnv, ScriptedExpert
 from rlgrasp.envs.robot_spec import spec_from_file
@@ -76,7 +88,10 @@ def main() -> None:
     parser.add_argument("--list-failures", action="store_true", help="print seed:object:reason")
     parser.add_argument("--collision-model", default="mesh", choices=["mesh", "primitive"],
                         help="the arm's collision shapes (rlgrasp.envs.collision_model)")
+    results_file.add_options(parser)
+    parser.add_argument("--target", type=float, help="with --record: the success rate every row must reach")
     args = parser.parse_args()
+    cases = []
     print(f"{'robot':<11}{'objects':<20}{'preset':<9}{'success at end':>16}{'95% Wilson':>16}"
           f"{'steps to success':>18}  failure reasons")
     for robot, objects, preset in itertools.product(args.robot, args.objects, args.presets):
@@ -87,6 +102,21 @@ def main() -> None:
               f"{f'[{low:.2f}, {high:.2f}]':>16}{r['mean_steps']:>18.1f}  {reasons}", flush=True)
         if args.list_failures:
             print("   ", " ".join(r["failed"]))
+        cases.append((robot, objects, preset, r["successes"], args.episodes))
+    if args.record:
+        met = "see page" if args.target is None else results_file.met_of(
+            [s >= args.target * n - 1e-9 for *_, s, n in cases])
+        results_file.record(*args.record, record_text(cases), met, load=args.record_load)
+
+
+def record_text(cases: list[tuple[str, str, str, int, int]]) -> str:
+    """The results table's ``measured`` cell from (robot, objects, preset, successes, episodes):
+    successes per preset, grouped by arm and object set, e.g. "panda cube: none 100/100, default 98/100"."""
+    groups: dict[tuple[str, str], list[str]] = {}
+    for robot, objects, preset, successes, episodes in cases:
+        groups.setdefault((robot, objects), []).append(f"{preset} {successes}/{episodes}")
+    return "; ".join(f"{robot} {objects}: {', '.join(parts)}" for (robot, objects), parts in groups.items())
+
 
 if __name__ == "__main__":
     main()

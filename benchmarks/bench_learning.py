@@ -12,6 +12,15 @@ start-up time is charged to the run.
 
 ``--eval-objects`` evaluates each run's last checkpoint after training with ``scripts/evaluate.py``
 on those object sets (config group ``objects``), e.g. the held-out ``random_urdfs_test``.
+
+``--record PAGE/ID`` writes the run's figures into that row of docs/benchmarks/results.json and its
+page's table (benchmarks/results_file.py): per seed the frames and minutes of the first evaluation
+>= ``--record-threshold`` and the final success (and each ``--eval-objects`` set's), met when every
+seed's final success (or ``--target-on``'s set) is >= ``--target`` and, with ``--target-frames``,
+its first evaluation >= the threshold came within those frames:
+
+    python benchmarks/bench_learning.py --experiment grasp_ppo_fast --seeds 0 1 2 --minutes 5 \
+        --tag grasp_ppo_fast --record learning/fast-final-097 --target 0.97 --record-load alone
 """
 
 from __future__ import annotations
@@ -28,6 +37,9 @@ from omegaconf import OmegaConf
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout, uninstalled
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # results_file, also when loaded by path
+import results_file
+
 from rlgrasp.stats import wilson_interval
 from rlgrasp.utils import pyplot
 
@@ -87,7 +99,7 @@ def eval_curve(run_dir: Path, start: float) -> list[tuple[float, int, float]]:
     return scalar_curve(run_dir, start, "eval/success_rate")
 
 
-def main() -> None:
+def parse_args() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--minutes", type=float, default=5.0)
@@ -97,13 +109,28 @@ def main() -> None:
     parser.add_argument("--eval-objects", nargs="*", default=[], help="sets to evaluate after training")
     parser.add_argument("--eval-episodes", type=int, default=200)
     parser.add_argument("overrides", nargs="*", help="extra training overrides, after --")
+    results_file.add_options(parser)
+    parser.add_argument("--record-threshold", type=float, default=0.9,
+                        help="with --record: the success of the 'first evaluation >=' figure")
+    parser.add_argument("--target", type=float, help="with --record: the final success each seed must reach")
+    parser.add_argument("--target-on", default="final",
+                        help="with --target: 'final' (training's final evaluation) or an --eval-objects set")
+    parser.add_argument("--target-frames", type=int,
+                        help="with --record: the frames within which the first evaluation >= the threshold")
     args = parser.parse_args()
+    if args.target_on != "final" and args.target_on not in args.eval_objects:
+        parser.error(f"--target-on {args.target_on}: not 'final' nor one of --eval-objects")
+    return args
+
+
+def main() -> None:
+    args = parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
 
-    rows, finals, held_out = [], [], []
+    rows, finals, held_out, curves = [], [], [], {}
     for seed in args.seeds:
         run = run_seed(args.out, args.tag, seed, args.minutes, args.experiment, args.overrides)
-        curve = eval_curve(run["run_dir"], run["start"])
+        curve = curves[seed] = eval_curve(run["run_dir"], run["start"])
         rows += [(args.tag, seed, round(m, 3), f, v) for m, f, v in curve]
         minutes, frames, success = curve[-1]
         first_90 = next(((m, f) for m, f, v in curve if v >= 0.9 - 1e-6), None)
@@ -139,6 +166,55 @@ def main() -> None:
         print(f"seed {seed} on {objects:>20}: {r['rate']:.3f} over {r['episodes']} episodes "
               f"[{r['ci95'][0]:.2f}, {r['ci95'][1]:.2f}]")
     print(f"wrote {csv_path} and {csv_path.with_suffix('.png')}")
+    if args.record:
+        met = record_met(curves, held_out, args.record_threshold, args.target, args.target_on,
+                         args.target_frames)
+        results_file.record(*args.record, record_text(curves, held_out, args.record_threshold), met,
+                            load=args.record_load)
+
+
+Curve = list[tuple[float, int, float]]  # (minutes from launch, frames, eval success)
+
+
+def first_at(curve: Curve, threshold: float) -> tuple[float, int] | None:
+    """(minutes, frames) of the first evaluation >= ``threshold`` (0.9 is 0.8999... in float32)."""
+    return next(((m, f) for m, f, v in curve if v >= threshold - 1e-6), None)
+
+
+def record_text(curves: dict[int, Curve], held_out: list[tuple[int, str, dict]], threshold: float) -> str:
+    """The results table's ``measured`` cell for these seeds: the frames and minutes of the first
+    evaluation >= ``threshold``, the final success, each evaluated object set's rate; one value per
+    seed, in the seeds' order, as the pages write them."""
+    seeds = sorted(curves)
+    firsts = [first_at(curves[s], threshold) for s in seeds]
+    frames = " / ".join("-" if p is None else f"{round(p[1] / 1000)}k" for p in firsts)
+    minutes = " / ".join("-" if p is None else f"{p[0]:.1f}" for p in firsts)
+    text = f"first >= {threshold:g} at {frames} frames ({minutes} min); final "
+    text += " / ".join(f"{curves[s][-1][2]:.2f}" for s in seeds)
+    for objects in dict.fromkeys(o for _, o, _ in held_out):
+        rates = {seed: r["rate"] for seed, o, r in held_out if o == objects}
+        text += f"; {objects} " + " / ".join(f"{rates[s]:.3f}" for s in seeds if s in rates)
+    return text + f" (seeds {' / '.join(map(str, seeds))})"
+
+
+def record_met(curves: dict[int, Curve], held_out: list[tuple[int, str, dict]], threshold: float,
+               target: float | None, target_on: str = "final", target_frames: int | None = None) -> str:
+    """The ``met`` cell: per seed, the final success (or ``target_on``'s object set) >= ``target``
+    and the first evaluation >= ``threshold`` within ``target_frames``; "see page" without either."""
+    if target is None and target_frames is None:
+        return "see page"
+    rates = {seed: r["rate"] for seed, o, r in held_out if o == target_on}
+    flags = []
+    for seed in sorted(curves):
+        ok = True
+        if target is not None:
+            value = curves[seed][-1][2] if target_on == "final" else rates.get(seed, float("nan"))
+            ok = value >= target - 1e-6
+        if target_frames is not None:
+            first = first_at(curves[seed], threshold)
+            ok = ok and first is not None and first[1] <= target_frames
+        flags.append(ok)
+    return results_file.met_of(flags)
 
 
 def first_reach(point: tuple[float, int] | None) -> str:

@@ -19,7 +19,13 @@ start-up is charged to both alike.
 
 Printed for each side: eval success against minutes, ``SPS`` (rlgrasp's console figure: frames/s
 from the end of the first update on, evaluations included) and frames/s from launch; then a table
-with the ratios rlgrasp/SB3. Module-level imports stay light (SB3's aside, which they load
+with the ratios rlgrasp/SB3. ``--record PAGE/ID`` writes the ratios into that row of
+docs/benchmarks/results.json and its page's table (benchmarks/results_file.py), met when the ratio
+``--target-on`` names reaches ``--target`` (SB3's time to the first 0.9: at most ``--target``):
+
+    python benchmarks/bench_peer.py --minutes 5 --seed 0 --record peer/ppo-fps --target 2.5
+
+Module-level imports stay light (SB3's aside, which they load
 anyway): SB3's spawned env workers run this file's top level again.
 """
 
@@ -394,7 +400,7 @@ def summary(evals: Curve, sps: list[tuple[float, int, float]]) -> dict[str, Any]
     first_90 = next((m for m, _, v, _ in evals if v >= 0.9 - 1e-6), None)
     return {"frames": frames, "sps": last_sps, "launch_fps": frames / max(minutes * 60, 1e-9),
             "success": success, "episodes": episodes, "ci": f"[{low:.2f}, {high:.2f}]",
-            "first_90": "-" if first_90 is None else f"{first_90:.1f} min"}
+            "first_90": "-" if first_90 is None else f"{first_90:.1f} min", "first_90_min": first_90}
 
 
 def print_curves(results: dict[str, dict[str, Any]], args: argparse.Namespace) -> Path:
@@ -432,6 +438,41 @@ def report(results: dict[str, dict[str, Any]], args: argparse.Namespace) -> None
     if "sb3" in results:
         print("\nNot matched on the SB3 side:\n  " + "\n  ".join(results["sb3"]["unmatched"]))
     print(f"\nwrote {csv_path}; logs in {args.out}")
+    if getattr(args, "record", None):
+        import results_file
+
+        met = record_met(sums["rlgrasp"], sums["sb3"], args.target_on, args.target)
+        results_file.record(*args.record, record_text(sums["rlgrasp"], sums["sb3"], args.seed), met,
+                            load=args.record_load)
+
+
+def record_text(a: dict[str, Any], b: dict[str, Any], seed: int) -> str:
+    """The results table's ``measured`` cell from both sides' summaries (rlgrasp ``a``, SB3 ``b``):
+    the frames/s ratios, the time to the first 0.9 as a share of SB3's, the two final successes."""
+    if a["first_90_min"] is not None and b["first_90_min"] is not None:
+        first = f"first >= 0.9 in {ratio(a['first_90_min'], b['first_90_min'])} of SB3's time"
+    else:
+        first = f"first >= 0.9 at {a['first_90']} against SB3's {b['first_90']}"
+    return (f"{ratio(a['sps'], b['sps'])}x SPS, {ratio(a['launch_fps'], b['launch_fps'])}x frames/s from "
+            f"launch; {first}; final {a['success']:.2f} against SB3's {b['success']:.2f} (seed {seed})")
+
+
+RECORD_FIGURES = ("launch-fps", "sps", "first-0.9", "final")
+
+
+def record_met(a: dict[str, Any], b: dict[str, Any], target_on: str, target: float | None) -> str:
+    """The ``met`` cell: the ratio rlgrasp/SB3 of ``target_on`` against ``target`` (at least it; for
+    the time to the first 0.9, at most it: less time is better); "see page" without a target."""
+    if target is None:
+        return "see page"
+    keys = {"launch-fps": "launch_fps", "sps": "sps", "first-0.9": "first_90_min", "final": "success"}
+    key = keys[target_on]
+    if a[key] is None or math.isnan(a[key]):
+        return "missed"  # rlgrasp never reached 0.9, or has no figure
+    if b[key] is None or math.isnan(b[key]) or not b[key]:
+        return "met" if target_on == "first-0.9" else "see page"  # SB3 never reached 0.9
+    value = a[key] / b[key]
+    return "met" if (value <= target if target_on == "first-0.9" else value >= target - 1e-9) else "missed"
 
 
 def ratio(a: float, b: float) -> str:
@@ -447,7 +488,16 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_peer")
     parser.add_argument("--sb3-child", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("overrides", nargs="*", help="training overrides for both sides, after --")
-    return parser.parse_args()
+    import results_file  # here, not at the top: SB3's env workers re-run the top level
+
+    results_file.add_options(parser)
+    parser.add_argument("--target", type=float, help="with --record: the ratio rlgrasp/SB3 to reach")
+    parser.add_argument("--target-on", choices=RECORD_FIGURES, default="launch-fps",
+                        help="with --target: which ratio (first-0.9: rlgrasp's share of SB3's time)")
+    args = parser.parse_args()
+    if args.record and args.only:
+        parser.error("--record compares both sides: not with --only")
+    return args
 
 
 def main() -> None:

@@ -6,7 +6,11 @@ cluster on loopback). Same env, MLP actor, batch layout (grasp_ppo: 2 workers x 
 
 Prints one markdown row per setup (and worker count, with ``--workers``): median and IQR of
 frames/s over the timed batches (each batch also pays the weight broadcast that training does after
-every update), and with ``--workers`` the ratio to the first count's rate.
+every update), and with ``--workers`` the ratio to the first count's rate. ``--record PAGE/ID``
+writes every other row's ratio to the first into that row of docs/benchmarks/results.json and its
+page's table (benchmarks/results_file.py; no target, so "no target"):
+
+    python benchmarks/bench_scale.py --batches 8 --warmup 2 --record scaling/ray
 """
 
 from __future__ import annotations
@@ -23,6 +27,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a check
 # Ray reads this when first imported (torchrl imports it with the collectors): without it a cluster
 # started on 127.0.0.1 advertises the machine's network address and the driver hangs connecting.
 os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # results_file, also when loaded by path
+import results_file  # noqa: E402
 
 from rlgrasp.compose import compose_train  # noqa: E402 - after the Ray setting above
 from rlgrasp.train.parts import build_parts  # noqa: E402
@@ -75,7 +82,9 @@ def main() -> None:
         "--workers", type=int, nargs="+", help="a curve over collector.num_workers (8 envs each by default)"
     )
     parser.add_argument("overrides", nargs="*", help="training overrides, e.g. collector.envs_per_worker=4")
+    results_file.add_options(parser)
     args = parser.parse_args()
+    medians = {}
     print("| backend | workers | frames/s median | IQR | batches | vs first row |")
     print("|---|---|---|---|---|---|")
     first = None
@@ -88,6 +97,19 @@ def main() -> None:
             first = first or med
             row = [setup, workers or "config", f"{med:,.0f}", f"{q[0]:,.0f}-{q[2]:,.0f}", len(rates)]
             print("| " + " | ".join(map(str, row)) + f" | {med / first:.2f} |", flush=True)
+            medians[setup if workers is None else f"{setup} x{workers}"] = med
+    if args.record:
+        results_file.record(*args.record, record_text(medians), "no target", load=args.record_load)
+
+
+def record_text(medians: dict[str, float]) -> str:
+    """The results table's ``measured`` cell: each later setup's median frames/s as a share of the
+    first's, e.g. "ray 0.94, ray_2nodes 0.89 of process's frames/s"."""
+    names = list(medians)
+    if len(names) == 1:
+        return f"{names[0]} {medians[names[0]]:,.0f} frames/s"
+    base = medians[names[0]]
+    return ", ".join(f"{n} {medians[n] / base:.2f}" for n in names[1:]) + f" of {names[0]}'s frames/s"
 
 
 if __name__ == "__main__":

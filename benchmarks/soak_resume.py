@@ -9,7 +9,10 @@ nothing); no process of the group is left; every file under ``checkpoints/`` loa
 learner had reached minus the newest checkpoint's) is at most one checkpoint interval. At the end:
 the final resume exits 0 at ``total_frames`` and the TensorBoard curves have no duplicated or
 backwards steps. Prints one line per cycle and a Markdown table (docs/benchmarks/reliability.md);
-exit code 1 if any check failed.
+exit code 1 if any check failed. ``--record PAGE/ID`` writes the cycles that passed and the most
+frames a kill lost into that row of docs/benchmarks/results.json and its page's table
+(benchmarks/results_file.py): ``nice -n 19 python benchmarks/soak_resume.py --cycles 10 --record
+reliability/soak --record-load shared``.
 """
 
 from __future__ import annotations
@@ -27,6 +30,9 @@ from pathlib import Path
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout, uninstalled
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # results_file, also when loaded by path
+import results_file
+
 from rlgrasp.train.checkpoint import CheckpointError, newest_readable, read_checkpoint
 from rlgrasp.utils import markdown_table
 from tests.procs import processes_in_group
@@ -146,7 +152,18 @@ def finish(cmd: list[str], out: Path, args: argparse.Namespace, rows: list, fail
     print(markdown_table(["cycle", "killed after (s)", "frames reached", "newest checkpoint", "lost",
                           "checks"], rows))
     print(f"run dir {run}; {'PASSED' if not failures else 'FAILED: ' + '; '.join(failures)}")
+    if getattr(args, "record", None):
+        results_file.record(*args.record, soak_text(rows), "missed (FAILED)" if failures else "met (PASSED)",
+                            load=args.record_load)
     return 1 if failures else 0
+
+
+def soak_text(rows: list[tuple]) -> str:
+    """The results table's ``measured`` cell from the cycles' rows (cycle, waited, frames reached,
+    newest checkpoint, lost, checks): how many passed every check, and the most one kill lost."""
+    passed = sum(row[-1] == "ok" for row in rows)
+    lost = max((row[4] for row in rows), default=0)
+    return f"{passed} of {len(rows)} cycles ok, at most {lost:,} frames lost per kill"
 
 
 def main() -> int:
@@ -158,6 +175,7 @@ def main() -> int:
     p.add_argument("--total-frames", type=int, default=None,
                    help="default: 16,384 per cycle, so that no cycle reaches the end")
     p.add_argument("--interval", type=int, default=2048, help="checkpoint.interval_frames")
+    results_file.add_options(p)
     args = p.parse_args()
     args.total_frames = args.total_frames or 16384 * args.cycles
     return soak(args)
