@@ -27,7 +27,7 @@ def test_pages_match_the_file(table):
 def test_every_benchmark_page_opens_with_its_table(table):
     pages = table["load"]()
     for path in sorted((ROOT / "docs" / "benchmarks").glob("*.md")):
-        if path.name == "index.md":
+        if path.name in ("index.md", "log.md"):  # the log holds the dated history, no targets
             continue
         assert path.stem in pages, f"{path.name} has no rows in results.json"
         text = path.read_text()
