@@ -246,8 +246,8 @@ class SAC(Algorithm):
         ``_sample``). It holds the actor near the expert while the critics are still wrong, which
         RLPD alone leaves to the critics (Nair et al. 2018 add the same term to DDPG). With a
         camera it reads the features the critics' loss trains, not detached: the demonstrated
-        actions are a supervised signal, as a DAgger student's, and teach the encoders where the
-        object is long before the critics' loss does."""
+        actions are a supervised signal for the encoders, as for a DAgger student's (on the cube
+        this did not make the camera learner faster: docs/algorithms.md)."""
         if self.bc is None:
             return None
         with set_exploration_type(ExplorationType.DETERMINISTIC):
