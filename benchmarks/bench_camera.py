@@ -64,8 +64,12 @@ def main() -> None:
     parser.add_argument("--size", type=int, default=64)
     parser.add_argument("--visual", default="default", help="visual preset of the camera envs")
     results_file.add_options(parser)
-    parser.add_argument("--record-camera", default="wrist depth", choices=[c for c in CONFIGS if CONFIGS[c]],
-                        help="with --record: the camera whose ratio to the state env is written")
+    parser.add_argument(
+        "--record-camera",
+        default="wrist depth",
+        choices=[c for c in CONFIGS if CONFIGS[c]],
+        help="with --record: the camera whose ratio to the state env is written",
+    )
     parser.add_argument("--target", type=float, help="with --record: the ratio to reach")
     args = parser.parse_args()
     rng = np.random.default_rng(0)
@@ -89,8 +93,12 @@ def main() -> None:
     if args.record:
         rate = statistics.median(fps[args.record_camera])
         met = "see page" if args.target is None else results_file.met_of([rate / base >= args.target])
-        results_file.record(*args.record, f"{rate / base:.2f} ({rate:,.0f} against {base:,.0f} frames/s)",
-                            met, load=args.record_load)
+        results_file.record(
+            *args.record,
+            f"{rate / base:.2f} ({rate:,.0f} against {base:,.0f} frames/s)",
+            met,
+            load=args.record_load,
+        )
 
 
 if __name__ == "__main__":

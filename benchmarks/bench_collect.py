@@ -128,8 +128,12 @@ def main() -> None:
     parser.add_argument("--train-frames", type=int, default=0, help="also train this many frames")
     parser.add_argument("overrides", nargs="*", help="Hydra overrides, e.g. experiment=grasp_ppo")
     results_file.add_options(parser)
-    parser.add_argument("--record-end-to-end", type=results_file.row_spec, metavar="PAGE/ID",
-                        help="with --train-frames: the row the end-to-end ratio is written into")
+    parser.add_argument(
+        "--record-end-to-end",
+        type=results_file.row_spec,
+        metavar="PAGE/ID",
+        help="with --train-frames: the row the end-to-end ratio is written into",
+    )
     args = parser.parse_args()
     if args.record_end_to_end and not args.train_frames:
         parser.error("--record-end-to-end needs --train-frames")
@@ -166,8 +170,12 @@ def main() -> None:
         )
         if args.record_end_to_end:
             best = max(sps.values())
-            results_file.record(*args.record_end_to_end, ratio_text(best, raw),
-                                results_file.met_of([best / raw >= END_TO_END_TARGET]), load=args.record_load)
+            results_file.record(
+                *args.record_end_to_end,
+                ratio_text(best, raw),
+                results_file.met_of([best / raw >= END_TO_END_TARGET]),
+                load=args.record_load,
+            )
 
 
 COLLECTOR_TARGET, END_TO_END_TARGET = 0.85, 0.75  # shares of raw stepping: docs/benchmarks/throughput.md

@@ -58,9 +58,11 @@ class Run:
 
     def row(self, episodes: int) -> str:
         n, bare = self.steps, self.bare / (episodes * BARE_STEPS)
-        return (f"{self.model:<11}{self.step / n * 1e3:>9.2f}{self.physics / n * 1e3:>10.2f}"
-                f"{bare * 1e3:>9.2f}{bare / (self.step / n):>10.2f}{self.contacts / n:>10.1f}"
-                f"{self.successes:>7d}/{episodes}")
+        return (
+            f"{self.model:<11}{self.step / n * 1e3:>9.2f}{self.physics / n * 1e3:>10.2f}"
+            f"{bare * 1e3:>9.2f}{bare / (self.step / n):>10.2f}{self.contacts / n:>10.1f}"
+            f"{self.successes:>7d}/{episodes}"
+        )
 
 
 def main() -> None:
@@ -73,14 +75,20 @@ def main() -> None:
     for seed in range(args.episodes):
         for run in runs if seed % 2 == 0 else runs[::-1]:
             run.episode(seed)
-    print(f"objects={args.objects}  randomization={args.randomization}  episodes={args.episodes}  "
-          "(CPU ms per env step)")
-    print(f"{'model':<11}{'env.step':>9}{'physics':>10}{'bare':>9}{'env/bare':>10}{'contacts':>10}{'expert':>11}")
+    print(
+        f"objects={args.objects}  randomization={args.randomization}  episodes={args.episodes}  "
+        "(CPU ms per env step)"
+    )
+    print(
+        f"{'model':<11}{'env.step':>9}{'physics':>10}{'bare':>9}{'env/bare':>10}{'contacts':>10}{'expert':>11}"
+    )
     for run in runs:
         print(run.row(args.episodes))
     mesh, other = runs[0], runs[1]
-    print(f"{other.model}/{mesh.model}: env.step {other.step / mesh.step:.3f}, physics "
-          f"{other.physics / mesh.physics:.3f}, bare {other.bare / mesh.bare:.3f}")
+    print(
+        f"{other.model}/{mesh.model}: env.step {other.step / mesh.step:.3f}, physics "
+        f"{other.physics / mesh.physics:.3f}, bare {other.bare / mesh.bare:.3f}"
+    )
     for run in runs:
         run.env.close()
 

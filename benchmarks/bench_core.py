@@ -110,9 +110,11 @@ def main() -> None:
             runs[name].append(run)
             figures.setdefault(name, []).append(run["fps"])
             phases = ", ".join(f"{k} {v:.1f}" for k, v in run.items() if k not in ("frames", "wall_s", "fps"))
-            print(f"round {r}: {name}: {run['frames']:,} frames in {run['wall_s']:.1f} s from launch, "
-                  f"{run['fps']:,.0f} frames/s ({run['fps'] / raw:.2f} of this round's raw); {phases}",
-                  flush=True)
+            print(
+                f"round {r}: {name}: {run['frames']:,} frames in {run['wall_s']:.1f} s from launch, "
+                f"{run['fps']:,.0f} frames/s ({run['fps'] / raw:.2f} of this round's raw); {phases}",
+                flush=True,
+            )
 
     raw_med = statistics.median(figures["raw"])
     print(f"\n{'':<28} {'min':>9} {'median':>9}  median/raw   ({args.rounds} rounds)")
@@ -121,14 +123,20 @@ def main() -> None:
         print(f"{name:<28} {min(values):9,.0f} {med:9,.0f}  {med / raw_med:.2f}")
     for name, rs in runs.items():
         keys = [k for k in rs[0] if k not in ("frames", "wall_s", "fps")]
-        print(f"{name}: median seconds " + ", ".join(
-            f"{k} {statistics.median(x.get(k, 0.0) for x in rs):.1f}" for k in keys))
+        print(
+            f"{name}: median seconds "
+            + ", ".join(f"{k} {statistics.median(x.get(k, 0.0) for x in rs):.1f}" for k in keys)
+        )
     if args.record:
         medians = {name: statistics.median(figures[name]) for name in variants}
-        met = "see page" if args.target is None else results_file.met_of(
-            [next(iter(medians.values())) / raw_med >= args.target])
-        results_file.record(*args.record, record_text(medians, raw_med, args.rounds), met,
-                            load=args.record_load)
+        met = (
+            "see page"
+            if args.target is None
+            else results_file.met_of([next(iter(medians.values())) / raw_med >= args.target])
+        )
+        results_file.record(
+            *args.record, record_text(medians, raw_med, args.rounds), met, load=args.record_load
+        )
 
 
 def record_text(medians: dict[str, float], raw: float, rounds: int) -> str:

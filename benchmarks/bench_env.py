@@ -82,8 +82,12 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--randomization", default="default")
     parser.add_argument("--objects", default="cube", help="object set (rlgrasp.envs.objects)")
-    parser.add_argument("--modes", nargs="+", default=list(CONTROL_MODES) + ["expert"],
-                        help="control modes (random actions) and/or expert (ee_delta, scripted expert)")
+    parser.add_argument(
+        "--modes",
+        nargs="+",
+        default=list(CONTROL_MODES) + ["expert"],
+        help="control modes (random actions) and/or expert (ee_delta, scripted expert)",
+    )
     parser.add_argument("--collision-model", default="mesh", choices=["mesh", "primitive"])
     parser.add_argument("--cpu-time", action="store_true", help="time with the process's CPU clock")
     results_file.add_options(parser)
@@ -96,11 +100,15 @@ def main() -> None:
         scene["collision_model"] = args.collision_model
 
     rng = np.random.default_rng(0)
-    print(f"randomization={args.randomization}  objects={args.objects}  "
-          f"collision_model={args.collision_model}  steps/round={args.steps}  rounds={args.rounds}  "
-          f"clock={'cpu' if args.cpu_time else 'wall'}")
-    print(f"{'control_mode':<14}{'policy':<9}{'env steps/s':>12}{'bare steps/s':>13}{'ratio':>7}"
-          f"{'physics share':>15}{'other ms/step':>15}")
+    print(
+        f"randomization={args.randomization}  objects={args.objects}  "
+        f"collision_model={args.collision_model}  steps/round={args.steps}  rounds={args.rounds}  "
+        f"clock={'cpu' if args.cpu_time else 'wall'}"
+    )
+    print(
+        f"{'control_mode':<14}{'policy':<9}{'env steps/s':>12}{'bare steps/s':>13}{'ratio':>7}"
+        f"{'physics share':>15}{'other ms/step':>15}"
+    )
     bare_env = PandaGraspEnv(**scene)
     PhysicsTimer(bare_env)
     cases = [("ee_delta", "expert") if m == "expert" else (m, "random") for m in args.modes]
@@ -112,8 +120,10 @@ def main() -> None:
         if policy_name == "expert":
             policy = ScriptedExpert(env.obs_slices)
         else:
+
             def policy(_obs, n=env.action_dim):
                 return rng.uniform(-1, 1, n).astype(np.float32)
+
         rates, shares, bares = [], [], []
         for _ in range(args.rounds):
             bares.append(bare_rate(bare_env, args.steps))
@@ -121,13 +131,19 @@ def main() -> None:
             rates.append(rate)
             shares.append(share)
         e, b, share = statistics.median(rates), statistics.median(bares), statistics.median(shares)
-        print(f"{mode:<14}{policy_name:<9}{e:>12.0f}{b:>13.0f}{e / b:>7.2f}"
-              f"{share:>15.2f}{(1 - share) / e * 1e3:>15.3f}", flush=True)
+        print(
+            f"{mode:<14}{policy_name:<9}{e:>12.0f}{b:>13.0f}{e / b:>7.2f}"
+            f"{share:>15.2f}{(1 - share) / e * 1e3:>15.3f}",
+            flush=True,
+        )
         env.close()
         ratios[mode if policy_name == "random" else f"{mode} {policy_name}"] = e / b
     if args.record:
-        met = "see page" if args.target is None else results_file.met_of(
-            [r >= args.target for r in ratios.values()])
+        met = (
+            "see page"
+            if args.target is None
+            else results_file.met_of([r >= args.target for r in ratios.values()])
+        )
         results_file.record(*args.record, record_text(ratios), met, load=args.record_load)
 
 

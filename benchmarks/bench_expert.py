@@ -46,11 +46,19 @@ def failure_reason(infos: list[dict]) -> str:
     )
 
 
-def run(preset: str, objects, episodes: int, ee_yaw: bool, robot: str = "panda", first_seed: int = 0,
-        collision_model: str = "mesh") -> dict:
+def run(
+    preset: str,
+    objects,
+    episodes: int,
+    ee_yaw: bool,
+    robot: str = "panda",
+    first_seed: int = 0,
+    collision_model: str = "mesh",
+) -> dict:
     arm = spec_from_file(robot) if robot.endswith((".yaml", ".yml")) else robot
-    env = PandaGraspEnv(randomization=preset, objects=objects, ee_yaw=ee_yaw, robot=arm,
-                        collision_model=collision_model)
+    env = PandaGraspEnv(
+        randomization=preset, objects=objects, ee_yaw=ee_yaw, robot=arm, collision_model=collision_model
+    )
     expert = ScriptedExpert.for_env(env)
     successes, steps_to_success, reasons, failed = 0, [], collections.Counter(), []
     for seed in range(first_seed, first_seed + episodes):
@@ -81,31 +89,51 @@ def main() -> None:
     parser.add_argument("--presets", nargs="+", default=["none", "default", "wide"])
     parser.add_argument("--objects", nargs="+", default=["cube"], help="object sets, one row each")
     parser.add_argument("--no-yaw", action="store_true", help="keep the hand at yaw 0 (ee_yaw=False)")
-    parser.add_argument("--robot", nargs="+", default=["panda"],
-                        help="arms, one row each: built-in names or YAML files of a robot config group")
-    parser.add_argument("--first-seed", type=int, default=0,
-                        help="seeds first-seed.. (a long measurement in parts: their counts add up)")
+    parser.add_argument(
+        "--robot",
+        nargs="+",
+        default=["panda"],
+        help="arms, one row each: built-in names or YAML files of a robot config group",
+    )
+    parser.add_argument(
+        "--first-seed",
+        type=int,
+        default=0,
+        help="seeds first-seed.. (a long measurement in parts: their counts add up)",
+    )
     parser.add_argument("--list-failures", action="store_true", help="print seed:object:reason")
-    parser.add_argument("--collision-model", default="mesh", choices=["mesh", "primitive"],
-                        help="the arm's collision shapes (rlgrasp.envs.collision_model)")
+    parser.add_argument(
+        "--collision-model",
+        default="mesh",
+        choices=["mesh", "primitive"],
+        help="the arm's collision shapes (rlgrasp.envs.collision_model)",
+    )
     results_file.add_options(parser)
     parser.add_argument("--target", type=float, help="with --record: the success rate every row must reach")
     args = parser.parse_args()
     cases = []
-    print(f"{'robot':<11}{'objects':<20}{'preset':<9}{'success at end':>16}{'95% Wilson':>16}"
-          f"{'steps to success':>18}  failure reasons")
+    print(
+        f"{'robot':<11}{'objects':<20}{'preset':<9}{'success at end':>16}{'95% Wilson':>16}"
+        f"{'steps to success':>18}  failure reasons"
+    )
     for robot, objects, preset in itertools.product(args.robot, args.objects, args.presets):
         r = run(preset, objects, args.episodes, not args.no_yaw, robot, args.first_seed, args.collision_model)
         low, high = wilson_interval(r["successes"], args.episodes)
         reasons = ", ".join(f"{k} {v}" for k, v in r["reasons"].most_common()) or "-"
-        print(f"{robot:<11}{objects:<20}{preset:<9}{r['successes']:>9d}/{args.episodes:<6d}"
-              f"{f'[{low:.2f}, {high:.2f}]':>16}{r['mean_steps']:>18.1f}  {reasons}", flush=True)
+        print(
+            f"{robot:<11}{objects:<20}{preset:<9}{r['successes']:>9d}/{args.episodes:<6d}"
+            f"{f'[{low:.2f}, {high:.2f}]':>16}{r['mean_steps']:>18.1f}  {reasons}",
+            flush=True,
+        )
         if args.list_failures:
             print("   ", " ".join(r["failed"]))
         cases.append((robot, objects, preset, r["successes"], args.episodes))
     if args.record:
-        met = "see page" if args.target is None else results_file.met_of(
-            [s >= args.target * n - 1e-9 for *_, s, n in cases])
+        met = (
+            "see page"
+            if args.target is None
+            else results_file.met_of([s >= args.target * n - 1e-9 for *_, s, n in cases])
+        )
         results_file.record(*args.record, record_text(cases), met, load=args.record_load)
 
 

@@ -70,8 +70,15 @@ def evaluate_on(run_dir: Path, objects: str, episodes: int) -> dict:
     """success_at_end of the run's last checkpoint on ``objects`` (seeds 0..episodes-1)."""
     name = f"bench_{objects}"
     cmd = [
-        sys.executable, str(ROOT / "scripts" / "evaluate.py"), f"ckpt={run_dir}", "ckpt_kind=last",
-        f"objects={objects}", f"episodes={episodes}", "workers=2", "video=false", "tensorboard=false",
+        sys.executable,
+        str(ROOT / "scripts" / "evaluate.py"),
+        f"ckpt={run_dir}",
+        "ckpt_kind=last",
+        f"objects={objects}",
+        f"episodes={episodes}",
+        "workers=2",
+        "video=false",
+        "tensorboard=false",
         f"name={name}",
     ]
     print("$", " ".join(cmd[1:]), flush=True)
@@ -110,13 +117,23 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--eval-episodes", type=int, default=200)
     parser.add_argument("overrides", nargs="*", help="extra training overrides, after --")
     results_file.add_options(parser)
-    parser.add_argument("--record-threshold", type=float, default=0.9,
-                        help="with --record: the success of the 'first evaluation >=' figure")
+    parser.add_argument(
+        "--record-threshold",
+        type=float,
+        default=0.9,
+        help="with --record: the success of the 'first evaluation >=' figure",
+    )
     parser.add_argument("--target", type=float, help="with --record: the final success each seed must reach")
-    parser.add_argument("--target-on", default="final",
-                        help="with --target: 'final' (training's final evaluation) or an --eval-objects set")
-    parser.add_argument("--target-frames", type=int,
-                        help="with --record: the frames within which the first evaluation >= the threshold")
+    parser.add_argument(
+        "--target-on",
+        default="final",
+        help="with --target: 'final' (training's final evaluation) or an --eval-objects set",
+    )
+    parser.add_argument(
+        "--target-frames",
+        type=int,
+        help="with --record: the frames within which the first evaluation >= the threshold",
+    )
     args = parser.parse_args()
     if args.target_on != "final" and args.target_on not in args.eval_objects:
         parser.error(f"--target-on {args.target_on}: not 'final' nor one of --eval-objects")
@@ -137,14 +154,20 @@ def main() -> None:
         episodes = final_episodes(run["run_dir"])
         low, high = wilson_interval(round(success * episodes), episodes)
         finals.append((seed, minutes, frames, success, first_90, episodes, low, high))
-        print(f"seed {seed}: final eval success {success:.3f} over {episodes} episodes "
-              f"[{low:.3f}, {high:.3f}] at {frames:,} frames, {minutes:.1f} min; "
-              f"first >= 0.9 at {first_reach(first_90)}", flush=True)
+        print(
+            f"seed {seed}: final eval success {success:.3f} over {episodes} episodes "
+            f"[{low:.3f}, {high:.3f}] at {frames:,} frames, {minutes:.1f} min; "
+            f"first >= 0.9 at {first_reach(first_90)}",
+            flush=True,
+        )
         for objects in args.eval_objects:
             r = evaluate_on(run["run_dir"], objects, args.eval_episodes)
             held_out.append((seed, objects, r))
-            print(f"seed {seed}: last checkpoint on {objects}: {r['successes']}/{r['episodes']} "
-                  f"= {r['rate']:.3f} [{r['ci95'][0]:.3f}, {r['ci95'][1]:.3f}]", flush=True)
+            print(
+                f"seed {seed}: last checkpoint on {objects}: {r['successes']}/{r['episodes']} "
+                f"= {r['rate']:.3f} [{r['ci95'][0]:.3f}, {r['ci95'][1]:.3f}]",
+                flush=True,
+            )
 
     csv_path = args.out / f"{args.tag}.csv"
     with open(csv_path, "w", newline="") as f:
@@ -154,23 +177,31 @@ def main() -> None:
     plot(rows, args.out / f"{args.tag}.png", args.tag)
 
     print(f"\n{args.tag}: budget {args.minutes} min per seed")
-    print(f"{'seed':>4}{'final success':>15}{'episodes':>9}{'95% Wilson':>16}{'frames':>10}{'minutes':>9}"
-          f"{'first >= 0.9':>26}")
+    print(
+        f"{'seed':>4}{'final success':>15}{'episodes':>9}{'95% Wilson':>16}{'frames':>10}{'minutes':>9}"
+        f"{'first >= 0.9':>26}"
+    )
     for seed, minutes, frames, success, first_90, episodes, low, high in finals:
-        print(f"{seed:>4}{success:>15.3f}{episodes:>9}{f'[{low:.2f}, {high:.2f}]':>16}{frames:>10,}"
-              f"{minutes:>9.1f}{first_reach(first_90):>26}")
+        print(
+            f"{seed:>4}{success:>15.3f}{episodes:>9}{f'[{low:.2f}, {high:.2f}]':>16}{frames:>10,}"
+            f"{minutes:>9.1f}{first_reach(first_90):>26}"
+        )
     print(at_frames(rows))
     hits = sum(round(f[3] * f[5]) >= 0.9 * f[5] for f in finals)  # counts: 0.9 is 0.8999... in float32
     print(f"seeds with final eval success >= 0.9: {hits}/{len(finals)}")
     for seed, objects, r in held_out:
-        print(f"seed {seed} on {objects:>20}: {r['rate']:.3f} over {r['episodes']} episodes "
-              f"[{r['ci95'][0]:.2f}, {r['ci95'][1]:.2f}]")
+        print(
+            f"seed {seed} on {objects:>20}: {r['rate']:.3f} over {r['episodes']} episodes "
+            f"[{r['ci95'][0]:.2f}, {r['ci95'][1]:.2f}]"
+        )
     print(f"wrote {csv_path} and {csv_path.with_suffix('.png')}")
     if args.record:
-        met = record_met(curves, held_out, args.record_threshold, args.target, args.target_on,
-                         args.target_frames)
-        results_file.record(*args.record, record_text(curves, held_out, args.record_threshold), met,
-                            load=args.record_load)
+        met = record_met(
+            curves, held_out, args.record_threshold, args.target, args.target_on, args.target_frames
+        )
+        results_file.record(
+            *args.record, record_text(curves, held_out, args.record_threshold), met, load=args.record_load
+        )
 
 
 Curve = list[tuple[float, int, float]]  # (minutes from launch, frames, eval success)
@@ -197,8 +228,14 @@ def record_text(curves: dict[int, Curve], held_out: list[tuple[int, str, dict]],
     return text + f" (seeds {' / '.join(map(str, seeds))})"
 
 
-def record_met(curves: dict[int, Curve], held_out: list[tuple[int, str, dict]], threshold: float,
-               target: float | None, target_on: str = "final", target_frames: int | None = None) -> str:
+def record_met(
+    curves: dict[int, Curve],
+    held_out: list[tuple[int, str, dict]],
+    threshold: float,
+    target: float | None,
+    target_on: str = "final",
+    target_frames: int | None = None,
+) -> str:
     """The ``met`` cell: per seed, the final success (or ``target_on``'s object set) >= ``target``
     and the first evaluation >= ``threshold`` within ``target_frames``; "see page" without either."""
     if target is None and target_frames is None:

@@ -92,8 +92,10 @@ def main() -> None:
         env.close()
     print("pool of parked cubes: restoreState + swap one in")
     for size in (5, 100, 900):
-        print(f"{'pool of ' + str(size):<20}{np.median([pool_reset_ms(size) for _ in range(3)]):>10.2f}",
-              flush=True)
+        print(
+            f"{'pool of ' + str(size):<20}{np.median([pool_reset_ms(size) for _ in range(3)]):>10.2f}",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

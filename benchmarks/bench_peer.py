@@ -140,8 +140,10 @@ def sac_kwargs(cfg: Any) -> dict[str, Any]:
     steps = gradient_steps(cfg)
     if steps < 1:
         frames = n_envs(cfg) * cfg.collector.steps_per_env
-        raise ValueError(f"algo.utd_ratio={a.utd_ratio} x {frames} frames a batch rounds to 0 gradient "
-                         "steps: SB3 would never train")
+        raise ValueError(
+            f"algo.utd_ratio={a.utd_ratio} x {frames} frames a batch rounds to 0 gradient "
+            "steps: SB3 would never train"
+        )
     return {
         "train_freq": (cfg.collector.steps_per_env, "step"),  # each of the n_envs envs steps this often
         "gradient_steps": steps,
@@ -164,15 +166,21 @@ def sac_kwargs(cfg: Any) -> dict[str, Any]:
 
 def vecnorm_kwargs(cfg: Any) -> dict[str, Any]:
     """``VecNormalize`` as rlgrasp's ``RunningNorm``: observations only, clipped, eps 1e-8."""
-    return {"norm_obs": bool(cfg.model.obs_norm), "norm_reward": False, "clip_obs": cfg.model.obs_clip,
-            "epsilon": 1e-8}
+    return {
+        "norm_obs": bool(cfg.model.obs_norm),
+        "norm_reward": False,
+        "clip_obs": cfg.model.obs_clip,
+        "epsilon": 1e-8,
+    }
 
 
 def unmatched(cfg: Any) -> list[str]:
     """What the SB3 side cannot set like rlgrasp, for this config (printed with the results)."""
     c = cfg.collector
-    layout = (f"layout: {n_envs(cfg)} env processes (SubprocVecEnv steps one env per process); rlgrasp "
-              f"{c.num_workers} workers x {c.envs_per_worker} envs")
+    layout = (
+        f"layout: {n_envs(cfg)} env processes (SubprocVecEnv steps one env per process); rlgrasp "
+        f"{c.num_workers} workers x {c.envs_per_worker} envs"
+    )
     return [layout, *(sac_unmatched(cfg) if sb3_algo(cfg) == "SAC" else ppo_unmatched(cfg))]
 
 
@@ -185,13 +193,17 @@ def ppo_unmatched(cfg: Any) -> list[str]:
         "observation statistics: VecNormalize updates them every step, rlgrasp after each update",
     ]
     if cfg.model.get("distribution", "tanh_normal") == "tanh_normal":
-        notes.append("policy: SB3 samples a Gaussian and clips actions to the bounds; rlgrasp's TanhNormal "
-                     "squashes them (SB3 squashes only with gSDE; model.distribution=normal is SB3's)")
+        notes.append(
+            "policy: SB3 samples a Gaussian and clips actions to the bounds; rlgrasp's TanhNormal "
+            "squashes them (SB3 squashes only with gSDE; model.distribution=normal is SB3's)"
+        )
     if cfg.algo.gae_every_epoch:
         notes.append("algo.gae_every_epoch=true: SB3 computes advantages once per rollout")
     if cfg.algo.get("desired_kl") is not None:
-        notes.append(f"algo.desired_kl={cfg.algo.desired_kl}: SB3 has no KL-adaptive learning rate; it gets "
-                     "algo.lr on the linear schedule")
+        notes.append(
+            f"algo.desired_kl={cfg.algo.desired_kl}: SB3 has no KL-adaptive learning rate; it gets "
+            "algo.lr on the linear schedule"
+        )
     return notes
 
 
@@ -210,27 +222,38 @@ def sac_unmatched(cfg: Any) -> list[str]:
         "observation statistics: VecNormalize updates them every step, rlgrasp once a batch",
     ]
     if not a.critic_lr == a.alpha_lr == a.actor_lr:
-        notes.append(f"learning rates: SB3 has one for actor, critics and temperature (algo.actor_lr="
-                     f"{a.actor_lr}); rlgrasp's critics use algo.critic_lr={a.critic_lr}, its temperature "
-                     f"algo.alpha_lr={a.alpha_lr}")
+        notes.append(
+            f"learning rates: SB3 has one for actor, critics and temperature (algo.actor_lr="
+            f"{a.actor_lr}); rlgrasp's critics use algo.critic_lr={a.critic_lr}, its temperature "
+            f"algo.alpha_lr={a.alpha_lr}"
+        )
     if a.critic_layer_norm:
         notes.append("algo.critic_layer_norm=true: SB3's SAC critics have no LayerNorm")
     if a.critic_activation != m.activation:
-        notes.append(f"activation: SB3's SAC has one for actor and critics (model.activation="
-                     f"{m.activation}); rlgrasp's critics use algo.critic_activation={a.critic_activation}")
+        notes.append(
+            f"activation: SB3's SAC has one for actor and critics (model.activation="
+            f"{m.activation}); rlgrasp's critics use algo.critic_activation={a.critic_activation}"
+        )
     if a.actor_every != 1:
-        notes.append(f"algo.actor_every={a.actor_every}: SB3's SAC steps the actor and temperature every "
-                     "gradient step")
+        notes.append(
+            f"algo.actor_every={a.actor_every}: SB3's SAC steps the actor and temperature every gradient step"
+        )
     per_batch = a.utd_ratio * n_envs(cfg) * cfg.collector.steps_per_env
     if per_batch != gradient_steps(cfg):
-        notes.append(f"algo.utd_ratio={a.utd_ratio}: {per_batch:g} gradient steps a batch, SB3 takes "
-                     f"{gradient_steps(cfg)} (a whole number; rlgrasp carries the fraction over)")
+        notes.append(
+            f"algo.utd_ratio={a.utd_ratio}: {per_batch:g} gradient steps a batch, SB3 takes "
+            f"{gradient_steps(cfg)} (a whole number; rlgrasp carries the fraction over)"
+        )
     if collector_backend(cfg.collector).collects_ahead:
-        notes.append("collector.overlap=true: rlgrasp's workers collect the next batch during the update "
-                     "(with the policy one update behind); SB3 steps its envs only between updates")
+        notes.append(
+            "collector.overlap=true: rlgrasp's workers collect the next batch during the update "
+            "(with the policy one update behind); SB3 steps its envs only between updates"
+        )
     if m.get("distribution", "tanh_normal") == "normal":
-        notes.append("model.distribution=normal: rlgrasp's SAC actor is an unsquashed Gaussian, SB3's "
-                     "squashes with tanh")
+        notes.append(
+            "model.distribution=normal: rlgrasp's SAC actor is an unsquashed Gaussian, SB3's "
+            "squashes with tanh"
+        )
     return notes
 
 
@@ -294,8 +317,10 @@ class PeriodicEval(BaseCallback):
         success = result.get("success_rate", math.nan)
         self.evals.append((time.time(), self.frames, success, episodes))
         sps = self.sps[-1][2] if self.sps else math.nan
-        print(f"{self.frames:>9,} frames  SPS {sps:,.0f}  eval success {success:.3f} ({episodes} episodes)",
-              flush=True)
+        print(
+            f"{self.frames:>9,} frames  SPS {sps:,.0f}  eval success {success:.3f} ({episodes} episodes)",
+            flush=True,
+        )
 
 
 def run_sb3(cfg: Any, out_json: Path) -> None:
@@ -317,8 +342,14 @@ def run_sb3(cfg: Any, out_json: Path) -> None:
     evaluator = periodic_evaluator(make_env, cfg)
     try:
         algo = getattr(stable_baselines3, sb3_algo(cfg))
-        model = algo("MlpPolicy", venv, seed=cfg.seed, device=str(resolve_device(cfg.device)), verbose=0,
-                    **sb3_kwargs(cfg))
+        model = algo(
+            "MlpPolicy",
+            venv,
+            seed=cfg.seed,
+            device=str(resolve_device(cfg.device)),
+            verbose=0,
+            **sb3_kwargs(cfg),
+        )
         venv.seed(worker_seed(cfg.seed, 0))  # env k seeded worker_seed + k (rlgrasp: per worker)
         budget_s = cfg.time_budget_min * 60 if cfg.time_budget_min else math.inf
         callback = PeriodicEval(cfg, evaluator, venv, start, budget_s)
@@ -339,11 +370,20 @@ def sb3_child(args: argparse.Namespace) -> None:
     from rlgrasp.config import validate_train
 
     run_dir = args.out / f"sb3_seed{args.seed}"
-    cfg = compose_train([f"experiment={args.experiment}", f"seed={args.seed}",
-                         f"time_budget_min={args.minutes}", f"paths.output_dir={run_dir}", *args.overrides])
+    cfg = compose_train(
+        [
+            f"experiment={args.experiment}",
+            f"seed={args.seed}",
+            f"time_budget_min={args.minutes}",
+            f"paths.output_dir={run_dir}",
+            *args.overrides,
+        ]
+    )
     validate_train(cfg)
-    print(f"SB3 {sb3_algo(cfg)}: {n_envs(cfg)} envs (SubprocVecEnv), VecNormalize {vecnorm_kwargs(cfg)}",
-          flush=True)
+    print(
+        f"SB3 {sb3_algo(cfg)}: {n_envs(cfg)} envs (SubprocVecEnv), VecNormalize {vecnorm_kwargs(cfg)}",
+        flush=True,
+    )
     print(f"{sb3_algo(cfg)} keywords: {sb3_kwargs(cfg)}", flush=True)
     run_sb3(cfg, args.out / f"sb3_seed{args.seed}.json")
 
@@ -371,9 +411,21 @@ def sb3_side(args: argparse.Namespace) -> dict[str, Any]:
     """This script again with ``--sb3-child``, in its own process like ``scripts/train.py``."""
     out_json = args.out / f"sb3_seed{args.seed}.json"
     out_json.unlink(missing_ok=True)
-    cmd = [sys.executable, str(Path(__file__).resolve()), "--sb3-child", "--seed", str(args.seed),
-           "--minutes", str(args.minutes), "--experiment", args.experiment, "--out", str(args.out),
-           "--", *args.overrides]
+    cmd = [
+        sys.executable,
+        str(Path(__file__).resolve()),
+        "--sb3-child",
+        "--seed",
+        str(args.seed),
+        "--minutes",
+        str(args.minutes),
+        "--experiment",
+        args.experiment,
+        "--out",
+        str(args.out),
+        "--",
+        *args.overrides,
+    ]
     print("$", " ".join(cmd[1:]), flush=True)
     start = time.time()
     with open(args.out / f"sb3_seed{args.seed}.log", "w") as log:
@@ -398,15 +450,24 @@ def summary(evals: Curve, sps: list[tuple[float, int, float]]) -> dict[str, Any]
     _, _, success, episodes = evals[-1] if evals else (math.nan, 0, math.nan, 0)
     low, high = wilson_interval(round(success * episodes), episodes) if episodes else (math.nan, math.nan)
     first_90 = next((m for m, _, v, _ in evals if v >= 0.9 - 1e-6), None)
-    return {"frames": frames, "sps": last_sps, "launch_fps": frames / max(minutes * 60, 1e-9),
-            "success": success, "episodes": episodes, "ci": f"[{low:.2f}, {high:.2f}]",
-            "first_90": "-" if first_90 is None else f"{first_90:.1f} min", "first_90_min": first_90}
+    return {
+        "frames": frames,
+        "sps": last_sps,
+        "launch_fps": frames / max(minutes * 60, 1e-9),
+        "success": success,
+        "episodes": episodes,
+        "ci": f"[{low:.2f}, {high:.2f}]",
+        "first_90": "-" if first_90 is None else f"{first_90:.1f} min",
+        "first_90_min": first_90,
+    }
 
 
 def print_curves(results: dict[str, dict[str, Any]], args: argparse.Namespace) -> Path:
     """Each side's eval success against minutes, printed and written to one CSV."""
-    names = {"rlgrasp": f"rlgrasp (scripts/train.py experiment={args.experiment})",
-             "sb3": f"Stable-Baselines3 {args.algo} (SubprocVecEnv + VecNormalize)"}
+    names = {
+        "rlgrasp": f"rlgrasp (scripts/train.py experiment={args.experiment})",
+        "sb3": f"Stable-Baselines3 {args.algo} (SubprocVecEnv + VecNormalize)",
+    }
     rows = [("side", "seed", "minutes", "frames", "eval_success_rate", "episodes")]
     for side, r in results.items():
         print(f"\n{names[side]}, seed {args.seed}: eval success against minutes from launch")
@@ -424,17 +485,25 @@ def report(results: dict[str, dict[str, Any]], args: argparse.Namespace) -> None
     """The curves, then the comparison table with the ratios rlgrasp/SB3."""
     csv_path = print_curves(results, args)
     sums = {side: summary(r["evals"], r["sps"]) for side, r in results.items()}
-    print(f"\n{args.minutes} min budget each, seed {args.seed}, one after the other. SPS: frames/s from "
-          "the end of the first update on, evaluations included (rlgrasp's console figure)")
-    print(f"{'':<12}{'frames':>10}{'SPS':>8}{'frames/s from launch':>22}{'final success':>15}"
-          f"{'episodes':>9}{'95% Wilson':>14}{'first >= 0.9':>14}{'wall min':>10}")
+    print(
+        f"\n{args.minutes} min budget each, seed {args.seed}, one after the other. SPS: frames/s from "
+        "the end of the first update on, evaluations included (rlgrasp's console figure)"
+    )
+    print(
+        f"{'':<12}{'frames':>10}{'SPS':>8}{'frames/s from launch':>22}{'final success':>15}"
+        f"{'episodes':>9}{'95% Wilson':>14}{'first >= 0.9':>14}{'wall min':>10}"
+    )
     for side, s in sums.items():
-        print(f"{side:<12}{s['frames']:>10,}{s['sps']:>8,.0f}{s['launch_fps']:>22,.0f}{s['success']:>15.3f}"
-              f"{s['episodes']:>9}{s['ci']:>14}{s['first_90']:>14}{results[side]['wall_min']:>10.1f}")
+        print(
+            f"{side:<12}{s['frames']:>10,}{s['sps']:>8,.0f}{s['launch_fps']:>22,.0f}{s['success']:>15.3f}"
+            f"{s['episodes']:>9}{s['ci']:>14}{s['first_90']:>14}{results[side]['wall_min']:>10.1f}"
+        )
     if len(sums) == 2:
         a, b = sums["rlgrasp"], sums["sb3"]
-        print(f"{'rlgrasp/sb3':<12}{ratio(a['frames'], b['frames']):>10}{ratio(a['sps'], b['sps']):>8}"
-              f"{ratio(a['launch_fps'], b['launch_fps']):>22}{ratio(a['success'], b['success']):>15}")
+        print(
+            f"{'rlgrasp/sb3':<12}{ratio(a['frames'], b['frames']):>10}{ratio(a['sps'], b['sps']):>8}"
+            f"{ratio(a['launch_fps'], b['launch_fps']):>22}{ratio(a['success'], b['success']):>15}"
+        )
     if "sb3" in results:
         print("\nNot matched on the SB3 side:\n  " + "\n  ".join(results["sb3"]["unmatched"]))
     print(f"\nwrote {csv_path}; logs in {args.out}")
@@ -442,8 +511,9 @@ def report(results: dict[str, dict[str, Any]], args: argparse.Namespace) -> None
         import results_file
 
         met = record_met(sums["rlgrasp"], sums["sb3"], args.target_on, args.target)
-        results_file.record(*args.record, record_text(sums["rlgrasp"], sums["sb3"], args.seed), met,
-                            load=args.record_load)
+        results_file.record(
+            *args.record, record_text(sums["rlgrasp"], sums["sb3"], args.seed), met, load=args.record_load
+        )
 
 
 def record_text(a: dict[str, Any], b: dict[str, Any], seed: int) -> str:
@@ -453,8 +523,10 @@ def record_text(a: dict[str, Any], b: dict[str, Any], seed: int) -> str:
         first = f"first >= 0.9 in {ratio(a['first_90_min'], b['first_90_min'])} of SB3's time"
     else:
         first = f"first >= 0.9 at {a['first_90']} against SB3's {b['first_90']}"
-    return (f"{ratio(a['sps'], b['sps'])}x SPS, {ratio(a['launch_fps'], b['launch_fps'])}x frames/s from "
-            f"launch; {first}; final {a['success']:.2f} against SB3's {b['success']:.2f} (seed {seed})")
+    return (
+        f"{ratio(a['sps'], b['sps'])}x SPS, {ratio(a['launch_fps'], b['launch_fps'])}x frames/s from "
+        f"launch; {first}; final {a['success']:.2f} against SB3's {b['success']:.2f} (seed {seed})"
+    )
 
 
 RECORD_FIGURES = ("launch-fps", "sps", "first-0.9", "final")
@@ -492,8 +564,12 @@ def parse_args() -> argparse.Namespace:
 
     results_file.add_options(parser)
     parser.add_argument("--target", type=float, help="with --record: the ratio rlgrasp/SB3 to reach")
-    parser.add_argument("--target-on", choices=RECORD_FIGURES, default="launch-fps",
-                        help="with --target: which ratio (first-0.9: rlgrasp's share of SB3's time)")
+    parser.add_argument(
+        "--target-on",
+        choices=RECORD_FIGURES,
+        default="launch-fps",
+        help="with --target: which ratio (first-0.9: rlgrasp's share of SB3's time)",
+    )
     args = parser.parse_args()
     if args.record and args.only:
         parser.error("--record compares both sides: not with --only")

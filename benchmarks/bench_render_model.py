@@ -46,8 +46,10 @@ def main() -> None:
         as_is = dataclasses.replace(ROBOTS[robot], low_poly_meshes=None)
         for name, cam in CAMERAS.items():
             camera = {**cam, "width": args.size, "height": args.size}
-            envs = {"as is": GraspEnv(robot=as_is, camera=camera, visual="none"),
-                    "low poly": GraspEnv(robot=robot, camera=camera, visual="none")}
+            envs = {
+                "as is": GraspEnv(robot=as_is, camera=camera, visual="none"),
+                "low poly": GraspEnv(robot=robot, camera=camera, visual="none"),
+            }
             times = {k: [] for k in envs}
             for env in envs.values():
                 env.reset(seed=0)

@@ -36,8 +36,11 @@ from rlgrasp.vision.dagger import load_teacher
 
 # The RGB experiment with the flat encoder (model=cnn), which the docs' tables call "base"; a variant
 # adds "model.pooling=keypoints ..." for the experiment's own keypoint encoder.
-BASE = ["experiment=grasp_objects_vision_distill_rgb", "model=cnn",
-        "paths.output_dir=/tmp/bench_student_offline"]
+BASE = [
+    "experiment=grasp_objects_vision_distill_rgb",
+    "model=cnn",
+    "paths.output_dir=/tmp/bench_student_offline",
+]
 SETS = {  # name: (first seed, overrides)
     "train": (0, []),
     "val_default": (500_000, []),
@@ -91,8 +94,11 @@ def record(name: str, episodes: int, cache: Path) -> dict[str, torch.Tensor]:
 # --- training ----------------------------------------------------------------------------------
 def _minibatch(data: dict[str, torch.Tensor], index: torch.Tensor) -> TensorDict:
     return TensorDict(
-        {"observation": data["state"][index].float(), IMAGE: data[IMAGE][index],
-         "action": data["label"][index].float()},
+        {
+            "observation": data["state"][index].float(),
+            IMAGE: data[IMAGE][index],
+            "action": data["label"][index].float(),
+        },
         [len(index)],
     )
 
@@ -118,8 +124,12 @@ def train_variant(overrides: list[str], sets: dict[str, dict], seconds: float) -
     while (elapsed := time.monotonic() - start) < seconds:
         for group in optimizer.param_groups:  # annealed over the budget, as a run anneals over its frames
             group["lr"] = a.lr * max(a.min_lr_frac, 1.0 - elapsed / seconds)
-        sample = augment(_minibatch(train, torch.randint(len(train["label"]), (a.minibatch_size,))),
-                         a.augment, a.augment_grey, a.augment_shift)
+        sample = augment(
+            _minibatch(train, torch.randint(len(train["label"]), (a.minibatch_size,))),
+            a.augment,
+            a.augment_grey,
+            a.augment_shift,
+        )
         with set_exploration_type(ExplorationType.DETERMINISTIC):
             loss = loss_fn(sample)["loss_bc"]
         optimizer.zero_grad()
@@ -127,8 +137,11 @@ def train_variant(overrides: list[str], sets: dict[str, dict], seconds: float) -
         optimizer.step()
         steps, recent = steps + 1, [*recent[-49:], loss.item()]
     student.eval()
-    return {"updates": steps, "train (augmented)": sum(recent) / len(recent),
-            **{name: validation_loss(loss_fn, data) for name, data in sets.items() if name != "train"}}
+    return {
+        "updates": steps,
+        "train (augmented)": sum(recent) / len(recent),
+        **{name: validation_loss(loss_fn, data) for name, data in sets.items() if name != "train"},
+    }
 
 
 def main() -> None:
@@ -136,21 +149,34 @@ def main() -> None:
     parser.add_argument("--train-episodes", type=int, default=800)
     parser.add_argument("--val-episodes", type=int, default=100)
     parser.add_argument("--seconds", type=float, default=200.0)
-    parser.add_argument("--cache", type=Path, default=Path("outputs/bench_student_offline"),
-                        help="recorded frames, reused by set name and episode count (new teacher: delete)")
-    parser.add_argument("--variant", action="append", metavar="NAME=[OVERRIDE ...]",
-                        help="default: base= and shift=algo.augment_shift=4")
+    parser.add_argument(
+        "--cache",
+        type=Path,
+        default=Path("outputs/bench_student_offline"),
+        help="recorded frames, reused by set name and episode count (new teacher: delete)",
+    )
+    parser.add_argument(
+        "--variant",
+        action="append",
+        metavar="NAME=[OVERRIDE ...]",
+        help="default: base= and shift=algo.augment_shift=4",
+    )
     args = parser.parse_args()
     variants = args.variant or ["base=", "shift=algo.augment_shift=4"]
-    sets = {name: record(name, args.train_episodes if name == "train" else args.val_episodes, args.cache)
-            for name in SETS}
+    sets = {
+        name: record(name, args.train_episodes if name == "train" else args.val_episodes, args.cache)
+        for name in SETS
+    }
     counts = ", ".join(f"{name} {len(data['label']):,}" for name, data in sets.items())
     print(f"frames: {counts}; {args.seconds:.0f} s per variant")
     for variant in variants:
         name, _, spec = variant.partition("=")
         result = train_variant(spec.split(), sets, args.seconds)
-        print(f"{name:12s} " + "  ".join(f"{k} {v:.4f}" if isinstance(v, float) else f"{k} {v}"
-                                          for k, v in result.items()), flush=True)
+        print(
+            f"{name:12s} "
+            + "  ".join(f"{k} {v:.4f}" if isinstance(v, float) else f"{k} {v}" for k, v in result.items()),
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

@@ -41,10 +41,13 @@ def collect(overrides: list[str], frames: int) -> tuple[Any, Any]:
     """The config as training composes it, and ``frames`` frames collected by one in-process
     worker (as many envs as a training worker steps, each for more steps)."""
     cfg = compose_train(overrides)
-    single = compose_train([
-        *overrides, "collector=single",
-        f"collector.steps_per_env={max(1, frames // cfg.collector.envs_per_worker)}",
-    ])
+    single = compose_train(
+        [
+            *overrides,
+            "collector=single",
+            f"collector.steps_per_env={max(1, frames // cfg.collector.envs_per_worker)}",
+        ]
+    )
     torch.manual_seed(0)
     collector = build_parts(single).make_collector()
     batch = next(iter(collector))
@@ -56,8 +59,10 @@ def ppo_table(cfg: Any, batch: Any, args: argparse.Namespace) -> None:
     """One row per thread count, minibatch size (and with ``--compile``, compiled or not)."""
     frames = batch.numel()
     print(f"{frames:,} frames per batch, {cfg.algo.epochs} epochs, hidden {list(cfg.model.hidden_sizes)}")
-    print("| torch threads | minibatch | loss | first update, s | ms per update | ms per frame"
-          " | learner ceiling, frames/s |")
+    print(
+        "| torch threads | minibatch | loss | first update, s | ms per update | ms per frame"
+        " | learner ceiling, frames/s |"
+    )
     print("|---|---|---|---|---|---|---|")
     for threads in args.threads:
         torch.set_num_threads(threads)
@@ -76,8 +81,15 @@ def ppo_table(cfg: Any, batch: Any, args: argparse.Namespace) -> None:
                 for _ in range(args.repeats):
                     learner.update(batch.clone())
                 ms = (time.perf_counter() - t0) / args.repeats * 1000
-                row = [threads, minibatch, "compiled" if compiled else "eager", f"{first:.1f}", f"{ms:.0f}",
-                       f"{ms / frames:.3f}", f"{frames / ms * 1000:,.0f}"]
+                row = [
+                    threads,
+                    minibatch,
+                    "compiled" if compiled else "eager",
+                    f"{first:.1f}",
+                    f"{ms:.0f}",
+                    f"{ms / frames:.3f}",
+                    f"{frames / ms * 1000:,.0f}",
+                ]
                 print("| " + " | ".join(map(str, row)) + " |", flush=True)
 
 
@@ -123,22 +135,37 @@ def sac_table(cfg: Any, batch: Any, args: argparse.Namespace) -> None:
     workers, which of the two bounds, and the ceiling it implies."""
     a, workers = cfg.algo, max(1, cfg.collector.num_workers)
     env_ms = env_ms_per_frame(cfg, args.env_steps)
-    print(f"replay: {batch.numel():,} frames; minibatch {a.batch_size}, {a.num_critics} critics "
-          f"{list(a.critic_hidden_sizes)}, actor {list(cfg.model.hidden_sizes)}, utd_ratio {a.utd_ratio}")
-    print(f"env: {env_ms:.3f} ms per frame (one env, random actions, {args.env_steps} steps); "
-          f"{workers} workers: {env_ms / workers:.3f} ms per frame")
-    print("| torch threads | ms per gradient step | learner ms per frame | env ms per frame / workers"
-          " | learner / env | bound | ceiling, frames/s |")
+    print(
+        f"replay: {batch.numel():,} frames; minibatch {a.batch_size}, {a.num_critics} critics "
+        f"{list(a.critic_hidden_sizes)}, actor {list(cfg.model.hidden_sizes)}, utd_ratio {a.utd_ratio}"
+    )
+    print(
+        f"env: {env_ms:.3f} ms per frame (one env, random actions, {args.env_steps} steps); "
+        f"{workers} workers: {env_ms / workers:.3f} ms per frame"
+    )
+    print(
+        "| torch threads | ms per gradient step | learner ms per frame | env ms per frame / workers"
+        " | learner / env | bound | ceiling, frames/s |"
+    )
     print("|---|---|---|---|---|---|---|")
     for threads in args.threads:
         step_ms = sac_step_ms(cfg, batch, threads, args.steps)
         learner, env = step_ms * a.utd_ratio, env_ms / workers
         bound = "learner" if learner > env else "env"
-        row = [threads, f"{step_ms:.1f}", f"{learner:.3f}", f"{env:.3f}", f"{learner / env:.2f}", bound,
-               f"{1000 / max(learner, env):,.0f}"]  # overlapped: the slower of the two sets the pace
+        row = [
+            threads,
+            f"{step_ms:.1f}",
+            f"{learner:.3f}",
+            f"{env:.3f}",
+            f"{learner / env:.2f}",
+            bound,
+            f"{1000 / max(learner, env):,.0f}",
+        ]  # overlapped: the slower of the two sets the pace
         print("| " + " | ".join(map(str, row)) + " |", flush=True)
-    print(f"The ceiling gives the learner and each of the {workers} workers a core of its own; on 2 cores "
-          "they share them, and a worker also runs the actor and TorchRL's bookkeeping.")
+    print(
+        f"The ceiling gives the learner and each of the {workers} workers a core of its own; on 2 cores "
+        "they share them, and a worker also runs the actor and TorchRL's bookkeeping."
+    )
 
 
 def main() -> None:

@@ -39,8 +39,10 @@ def read_curves(paths: list[Path]) -> dict[str, dict[int, list[tuple[float, int,
 
 def along(seeds: dict[int, list[tuple[float, int, float]]], axis: int) -> list[tuple[np.ndarray, np.ndarray]]:
     """Each seed's (x, success) arrays, x = minutes (axis 0) or frames (axis 1), for ``report.band``."""
-    return [(np.array([p[axis] for p in pts], float), np.array([p[2] for p in pts], float))
-            for pts in seeds.values()]
+    return [
+        (np.array([p[axis] for p in pts], float), np.array([p[2] for p in pts], float))
+        for pts in seeds.values()
+    ]
 
 
 def main() -> None:
@@ -49,8 +51,9 @@ def main() -> None:
     )
     parser.add_argument("csvs", type=Path, nargs="+", help="bench_learning.py CSVs (any number of tags)")
     parser.add_argument("--out", type=Path, required=True, help="the PNG to write")
-    parser.add_argument("--title", default=(
-        "eval success: mean over seeds, band: bootstrap 95% interval of the mean"))
+    parser.add_argument(
+        "--title", default=("eval success: mean over seeds, band: bootstrap 95% interval of the mean")
+    )
     args = parser.parse_args()
 
     plt = pyplot()

@@ -90,21 +90,32 @@ def met_of(flags: list[bool]) -> str:
     return f"missed, {n} of {n}" if k == 0 else f"met on {k} of {n}"
 
 
-def record(page: str, row_id: str, measured: str, met: str, command: list[str] | None = None, *,
-           load: str | None = None, results: Path = results_table.RESULTS,
-           folder: Path = results_table.PAGES, today: datetime.date | None = None) -> dict:
+def record(
+    page: str,
+    row_id: str,
+    measured: str,
+    met: str,
+    command: list[str] | None = None,
+    *,
+    load: str | None = None,
+    results: Path = results_table.RESULTS,
+    folder: Path = results_table.PAGES,
+    today: datetime.date | None = None,
+) -> dict:
     """Write one row's figure (``measured``, ``met``), today's date, this machine and the command
     (default: this script's own command line) into ``results``, then rewrite ``page``'s table in
     ``folder``. Returns the row as written."""
     data = json.loads(results.read_text())
     row = find_row(data["pages"], page, row_id)
-    row.update({
-        "measured": measured,
-        "date": (today or datetime.date.today()).isoformat(),
-        "machine": machine(load),
-        "command": list(command) if command is not None else [script_command()],
-        "met": met,
-    })
+    row.update(
+        {
+            "measured": measured,
+            "date": (today or datetime.date.today()).isoformat(),
+            "machine": machine(load),
+            "command": list(command) if command is not None else [script_command()],
+            "met": met,
+        }
+    )
     row.pop("command_note", None)  # a note on the old command ("arguments not recorded")
     results_table.render([row])  # refuses a '|' or a line break before anything is written
     results.write_text(json.dumps(data, indent=1) + "\n")
@@ -115,8 +126,15 @@ def record(page: str, row_id: str, measured: str, met: str, command: list[str] |
 
 def add_options(parser: argparse.ArgumentParser) -> None:
     """``--record PAGE/ID`` and ``--record-load`` for a benchmark script's parser."""
-    parser.add_argument("--record", type=row_spec, metavar="PAGE/ID",
-                        help="write this run's figure into docs/benchmarks/results.json's row ID of PAGE "
-                             "and re-render that page's table (python benchmarks/results_table.py --ids)")
-    parser.add_argument("--record-load", choices=["alone", "shared"],
-                        help="with --record: whether the machine ran nothing else (the machine column)")
+    parser.add_argument(
+        "--record",
+        type=row_spec,
+        metavar="PAGE/ID",
+        help="write this run's figure into docs/benchmarks/results.json's row ID of PAGE "
+        "and re-render that page's table (python benchmarks/results_table.py --ids)",
+    )
+    parser.add_argument(
+        "--record-load",
+        choices=["alone", "shared"],
+        help="with --record: whether the machine ran nothing else (the machine column)",
+    )

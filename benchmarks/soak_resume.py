@@ -43,9 +43,15 @@ PROGRESS = re.compile(r"frames ([\d,]+)/")
 
 def train_command(out: Path, seed: int, total: int, interval: int) -> list[str]:
     return [
-        sys.executable, str(ROOT / "scripts" / "train.py"), "experiment=smoke", "resume=auto",
-        f"seed={seed}", f"paths.root_dir={out}", f"total_frames={total}",
-        f"checkpoint.interval_frames={interval}", "eval.interval_frames=4096",
+        sys.executable,
+        str(ROOT / "scripts" / "train.py"),
+        "experiment=smoke",
+        "resume=auto",
+        f"seed={seed}",
+        f"paths.root_dir={out}",
+        f"total_frames={total}",
+        f"checkpoint.interval_frames={interval}",
+        "eval.interval_frames=4096",
     ]
 
 
@@ -116,7 +122,7 @@ def soak(args: argparse.Namespace) -> int:
         log_start = {r: (r / "train.log").stat().st_size for r in runs if (r / "train.log").exists()}
         pgid, waited, left, ended = kill_cycle(cmd, rng.uniform(*args.wait), out / "soak_train_output.txt")
         run = max(run_dirs(out, args.seed), key=lambda r: check_checkpoints(r)[0])
-        text = (run / "train.log").read_text()[log_start.get(run, 0):]
+        text = (run / "train.log").read_text()[log_start.get(run, 0) :]
         at_kill = reached(text)
         frames, problems = check_checkpoints(run)
         lost = max(at_kill - frames, 0)
@@ -131,8 +137,11 @@ def soak(args: argparse.Namespace) -> int:
         best = max(best, frames)
         verdict = "ok" if not problems else "; ".join(problems)
         rows.append((cycle, f"{waited:.1f}", at_kill, frames, lost, verdict))
-        print(f"cycle {cycle}: killed after {waited:.1f} s at {at_kill} frames; newest checkpoint "
-              f"{frames}; lost {lost}; {rows[-1][-1]}", flush=True)
+        print(
+            f"cycle {cycle}: killed after {waited:.1f} s at {at_kill} frames; newest checkpoint "
+            f"{frames}; lost {lost}; {rows[-1][-1]}",
+            flush=True,
+        )
         failures += problems
     return finish(cmd, out, args, rows, failures)
 
@@ -146,15 +155,24 @@ def finish(cmd: list[str], out: Path, args: argparse.Namespace, rows: list, fail
     problems += tensorboard_problems(run)
     if proc.returncode != 0 or frames != args.total_frames:
         problems.append(f"final resume: exit {proc.returncode}, {frames} frames (want {args.total_frames})")
-    print(f"final resume: exit {proc.returncode} after {time.monotonic() - t0:.1f} s at {frames} frames; "
-          f"{'ok' if not problems else '; '.join(problems)}")
+    print(
+        f"final resume: exit {proc.returncode} after {time.monotonic() - t0:.1f} s at {frames} frames; "
+        f"{'ok' if not problems else '; '.join(problems)}"
+    )
     failures += problems
-    print(markdown_table(["cycle", "killed after (s)", "frames reached", "newest checkpoint", "lost",
-                          "checks"], rows))
+    print(
+        markdown_table(
+            ["cycle", "killed after (s)", "frames reached", "newest checkpoint", "lost", "checks"], rows
+        )
+    )
     print(f"run dir {run}; {'PASSED' if not failures else 'FAILED: ' + '; '.join(failures)}")
     if getattr(args, "record", None):
-        results_file.record(*args.record, soak_text(rows), "missed (FAILED)" if failures else "met (PASSED)",
-                            load=args.record_load)
+        results_file.record(
+            *args.record,
+            soak_text(rows),
+            "missed (FAILED)" if failures else "met (PASSED)",
+            load=args.record_load,
+        )
     return 1 if failures else 0
 
 
@@ -172,8 +190,12 @@ def main() -> int:
     p.add_argument("--out", default="outputs/soak")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--wait", type=float, nargs=2, default=(15.0, 40.0), metavar=("MIN_S", "MAX_S"))
-    p.add_argument("--total-frames", type=int, default=None,
-                   help="default: 16,384 per cycle, so that no cycle reaches the end")
+    p.add_argument(
+        "--total-frames",
+        type=int,
+        default=None,
+        help="default: 16,384 per cycle, so that no cycle reaches the end",
+    )
     p.add_argument("--interval", type=int, default=2048, help="checkpoint.interval_frames")
     results_file.add_options(p)
     args = p.parse_args()

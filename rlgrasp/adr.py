@@ -110,8 +110,12 @@ def parse_settings(node: Mapping[str, Any]) -> AdrSettings:
         ("low_threshold", lo, 0 <= lo <= 1, "must be in [0, 1]"),
         ("high_threshold", hi, 0 <= hi <= 1, "must be in [0, 1]"),
         ("low_threshold", lo, lo < hi, f"must be below high_threshold ({hi})"),
-        ("buffer_size", size, isinstance(size, int) and not isinstance(size, bool) and size >= 1,
-         "must be an integer >= 1"),
+        (
+            "buffer_size",
+            size,
+            isinstance(size, int) and not isinstance(size, bool) and size >= 1,
+            "must be an integer >= 1",
+        ),
     ]
     for key, value, ok, allowed in checks:
         if not ok:

@@ -538,6 +538,7 @@ def _sum(*values: int) -> int:
 #: schema needs no import of ``rlgrasp.vision.augment``, which implements them.
 AUGMENTATIONS = ("none", "colour")
 
+
 class ConfigError(ValueError):
     """A bad training input; the message is one line naming the key, its value and what is allowed."""
 
@@ -581,37 +582,71 @@ def _train_problems(cfg: Any, batch: int) -> list[str]:
     distribution = m.get("distribution", "tanh_normal")  # a camera model has no such key
     checks = [
         ("seed", cfg.seed, 0 <= cfg.seed < 2**32, "must be an integer in [0, 2**32)"),
-        ("experiment_name", cfg.experiment_name, _one_path_component(cfg.experiment_name),
-         "must be a plain name (no '/', not '..' or empty): it names a folder under the outputs"),
+        (
+            "experiment_name",
+            cfg.experiment_name,
+            _one_path_component(cfg.experiment_name),
+            "must be a plain name (no '/', not '..' or empty): it names a folder under the outputs",
+        ),
         ("total_frames", cfg.total_frames, cfg.total_frames > 0, "must be > 0"),
-        ("time_budget_min", cfg.time_budget_min, cfg.time_budget_min is None or cfg.time_budget_min > 0,
-         "must be > 0 or null"),
+        (
+            "time_budget_min",
+            cfg.time_budget_min,
+            cfg.time_budget_min is None or cfg.time_budget_min > 0,
+            "must be > 0 or null",
+        ),
         ("collector.num_workers", c.num_workers, c.num_workers >= 0, "must be >= 0 (0: in-process)"),
         ("collector.envs_per_worker", c.envs_per_worker, c.envs_per_worker >= 1, "must be >= 1"),
         ("collector.steps_per_env", c.steps_per_env, c.steps_per_env >= 1, "must be >= 1"),
         ("collector.torch_threads", c.torch_threads, c.torch_threads >= 1, "must be >= 1"),
-        ("collector.worker_timeout_s", c.worker_timeout_s, _positive(c.worker_timeout_s),
-         "must be > 0 (seconds a batch may take)"),
+        (
+            "collector.worker_timeout_s",
+            c.worker_timeout_s,
+            _positive(c.worker_timeout_s),
+            "must be > 0 (seconds a batch may take)",
+        ),
         *_algo_checks(a, batch, cfg.env.get("camera")),
-        ("model.hidden_sizes", list(m.hidden_sizes), len(m.hidden_sizes) > 0 and all(
-            _positive(h) for h in m.hidden_sizes), "must be a non-empty list of positive sizes"),
-        ("model.activation", m.activation, m.activation in ("tanh", "relu", "elu"),
-         "must be tanh, relu or elu"),
-        ("model.distribution", distribution, distribution in ("tanh_normal", "normal"),
-         "must be tanh_normal or normal"),
+        (
+            "model.hidden_sizes",
+            list(m.hidden_sizes),
+            len(m.hidden_sizes) > 0 and all(_positive(h) for h in m.hidden_sizes),
+            "must be a non-empty list of positive sizes",
+        ),
+        (
+            "model.activation",
+            m.activation,
+            m.activation in ("tanh", "relu", "elu"),
+            "must be tanh, relu or elu",
+        ),
+        (
+            "model.distribution",
+            distribution,
+            distribution in ("tanh_normal", "normal"),
+            "must be tanh_normal or normal",
+        ),
         ("model.obs_clip", m.obs_clip, m.obs_clip > 0, "must be > 0 (the normalized observation's bound)"),
         *_model_camera_checks(m, cfg.env.get("camera"), a.name),
         ("eval.episodes", e.episodes, e.episodes >= 1, "must be >= 1"),
-        ("eval.final_episodes", e.final_episodes, e.final_episodes is None or e.final_episodes >= 1,
-         "must be >= 1 or null"),
+        (
+            "eval.final_episodes",
+            e.final_episodes,
+            e.final_episodes is None or e.final_episodes >= 1,
+            "must be >= 1 or null",
+        ),
         ("eval.num_envs", e.num_envs, e.num_envs >= 1, "must be >= 1"),
         ("checkpoint.keep_last", k.keep_last, k.keep_last >= 1, "must be >= 1"),
-        ("checkpoint.interval_frames", k.interval_frames, k.interval_frames >= 0,
-         "must be >= 0 (0: only at the end)"),
+        (
+            "checkpoint.interval_frames",
+            k.interval_frames,
+            k.interval_frames >= 0,
+            "must be >= 0 (0: only at the end)",
+        ),
     ]
-    return [f"{key}={value!r}: {allowed}" for key, value, ok, allowed in checks if not ok] + _device_problems(
-        cfg.device
-    ) + _eval_randomization_problems(e.get("randomization"))
+    return (
+        [f"{key}={value!r}: {allowed}" for key, value, ok, allowed in checks if not ok]
+        + _device_problems(cfg.device)
+        + _eval_randomization_problems(e.get("randomization"))
+    )
 
 
 def _eval_randomization_problems(spec: Any) -> list[str]:
@@ -635,8 +670,10 @@ def _model_camera_checks(m: Any, camera: Any, algo: str) -> list[tuple[str, Any,
     """A camera env needs a camera policy (model=cnn), a state env a state one (model=mlp); distill
     refuses a camera-less env itself, naming its student."""
     if camera:
-        return [("model", m.name, m.name == "cnn", "must be cnn with a camera (or cameras=none for mlp)"),
-                *(_cnn_checks(m) if m.name == "cnn" else [])]
+        return [
+            ("model", m.name, m.name == "cnn", "must be cnn with a camera (or cameras=none for mlp)"),
+            *(_cnn_checks(m) if m.name == "cnn" else []),
+        ]
     if algo == "ppo":
         return [("model", m.name, m.name != "cnn", "needs a camera (e.g. cameras=wrist_depth) or model=mlp")]
     return []
@@ -675,26 +712,48 @@ def _learning_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
 
 def _sac_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
     """SAC's keys: a ratio > 0, a buffer that holds a minibatch, rates > 0."""
-    rates = [(f"algo.{k}", a[k], _positive(a[k]) and math.isfinite(a[k]), "must be finite and > 0")
-             for k in ("actor_lr", "critic_lr", "alpha_lr", "alpha_init", "bc_lr")]
+    rates = [
+        (f"algo.{k}", a[k], _positive(a[k]) and math.isfinite(a[k]), "must be finite and > 0")
+        for k in ("actor_lr", "critic_lr", "alpha_lr", "alpha_init", "bc_lr")
+    ]
     return [
         ("algo.utd_ratio", a.utd_ratio, _positive(a.utd_ratio), "must be > 0 (gradient steps per env frame)"),
         ("algo.batch_size", a.batch_size, a.batch_size >= 1, "must be >= 1"),
-        ("algo.buffer_frames", a.buffer_frames, a.buffer_frames >= a.batch_size,
-         f"must be >= algo.batch_size ({a.batch_size}): the buffer must hold a minibatch"),
-        ("algo.learning_starts", a.learning_starts, 0 <= a.learning_starts <= a.buffer_frames,
-         "must be between 0 and algo.buffer_frames"),
+        (
+            "algo.buffer_frames",
+            a.buffer_frames,
+            a.buffer_frames >= a.batch_size,
+            f"must be >= algo.batch_size ({a.batch_size}): the buffer must hold a minibatch",
+        ),
+        (
+            "algo.learning_starts",
+            a.learning_starts,
+            0 <= a.learning_starts <= a.buffer_frames,
+            "must be between 0 and algo.buffer_frames",
+        ),
         ("algo.gamma", a.gamma, 0 < a.gamma <= 1, "must be in (0, 1]"),
         ("algo.tau", a.tau, 0 < a.tau <= 1, "must be in (0, 1]"),
         ("algo.actor_every", a.actor_every, a.actor_every >= 1, "must be >= 1"),
         ("algo.num_critics", a.num_critics, a.num_critics >= 1, "must be >= 1"),
-        ("algo.critic_hidden_sizes", list(a.critic_hidden_sizes), len(a.critic_hidden_sizes) > 0 and all(
-            _positive(h) for h in a.critic_hidden_sizes), "must be a non-empty list of positive sizes"),
-        ("algo.critic_activation", a.critic_activation, a.critic_activation in ("tanh", "relu", "elu"),
-         "must be tanh, relu or elu"),
+        (
+            "algo.critic_hidden_sizes",
+            list(a.critic_hidden_sizes),
+            len(a.critic_hidden_sizes) > 0 and all(_positive(h) for h in a.critic_hidden_sizes),
+            "must be a non-empty list of positive sizes",
+        ),
+        (
+            "algo.critic_activation",
+            a.critic_activation,
+            a.critic_activation in ("tanh", "relu", "elu"),
+            "must be tanh, relu or elu",
+        ),
         ("algo.demo_ratio", a.demo_ratio, 0 < a.demo_ratio < 1, "must be in (0, 1)"),
-        ("algo.bc_coeff", a.bc_coeff, a.bc_coeff >= 0 and math.isfinite(a.bc_coeff),
-         "must be finite and >= 0"),
+        (
+            "algo.bc_coeff",
+            a.bc_coeff,
+            a.bc_coeff >= 0 and math.isfinite(a.bc_coeff),
+            "must be finite and >= 0",
+        ),
         ("algo.bc_epochs", a.bc_epochs, a.bc_epochs >= 0, "must be >= 0 (0: no pre-training)"),
         ("algo.bc_epochs", a.bc_epochs, not a.bc_epochs or a.demos, "needs algo.demos=<demonstrations>"),
         ("algo.bc_coeff", a.bc_coeff, not a.bc_coeff or a.demos, "needs algo.demos=<demonstrations>"),
@@ -705,22 +764,42 @@ def _sac_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
 
 def _ppo_checks(a: Any, batch: int) -> list[tuple[str, Any, bool, str]]:
     return [
-        ("algo.minibatch_size", a.minibatch_size, 1 <= a.minibatch_size <= max(batch, 1),
-         f"must be between 1 and the batch size ({batch:,} frames = workers x envs_per_worker x "
-         "steps_per_env)"),
+        (
+            "algo.minibatch_size",
+            a.minibatch_size,
+            1 <= a.minibatch_size <= max(batch, 1),
+            f"must be between 1 and the batch size ({batch:,} frames = workers x envs_per_worker x "
+            "steps_per_env)",
+        ),
         ("algo.gamma", a.gamma, 0 < a.gamma <= 1, "must be in (0, 1]"),
         ("algo.gae_lambda", a.gae_lambda, 0 <= a.gae_lambda <= 1, "must be in [0, 1]"),
         ("algo.clip_epsilon", a.clip_epsilon, 0 < a.clip_epsilon < 1, "must be in (0, 1)"),
         ("algo.target_kl", a.target_kl, a.target_kl is None or a.target_kl > 0, "must be > 0 or null"),
-        ("algo.loss_critic_type", a.loss_critic_type, a.loss_critic_type in ("l1", "l2", "smooth_l1"),
-         "must be l1, l2 or smooth_l1"),
+        (
+            "algo.loss_critic_type",
+            a.loss_critic_type,
+            a.loss_critic_type in ("l1", "l2", "smooth_l1"),
+            "must be l1, l2 or smooth_l1",
+        ),
         ("algo.max_grad_norm", a.max_grad_norm, a.max_grad_norm > 0, "must be > 0"),
-        ("algo.desired_kl", a.desired_kl, a.desired_kl is None or a.desired_kl > 0,
-         "must be > 0 or null (null: the learning rate anneals linearly)"),
-        ("algo.anneal_lr_frames", a.anneal_lr_frames, a.anneal_lr_frames is None or a.anneal_lr_frames > 0,
-         "must be > 0 or null (null: total_frames)"),
-        ("algo.critic_warmup_frames", a.critic_warmup_frames, a.critic_warmup_frames >= 0,
-         "must be >= 0 (0: the actor learns from the first update)"),
+        (
+            "algo.desired_kl",
+            a.desired_kl,
+            a.desired_kl is None or a.desired_kl > 0,
+            "must be > 0 or null (null: the learning rate anneals linearly)",
+        ),
+        (
+            "algo.anneal_lr_frames",
+            a.anneal_lr_frames,
+            a.anneal_lr_frames is None or a.anneal_lr_frames > 0,
+            "must be > 0 or null (null: total_frames)",
+        ),
+        (
+            "algo.critic_warmup_frames",
+            a.critic_warmup_frames,
+            a.critic_warmup_frames >= 0,
+            "must be >= 0 (0: the actor learns from the first update)",
+        ),
         ("algo.teacher_coeff", a.teacher_coeff, a.teacher_coeff >= 0, "must be >= 0 (0: no imitation term)"),
         ("algo.teacher_decay", a.teacher_decay, 0 < a.teacher_decay <= 1, "must be in (0, 1]"),
     ]
@@ -740,14 +819,22 @@ def _extra_term_checks(a: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
         ("algo.bc_epochs", a.bc_epochs, not a.bc_epochs or a.demos, "needs algo.demos=<demonstrations>"),
         ("algo.bc_only", a.bc_only, not a.bc_only or a.bc_epochs > 0, "needs algo.bc_epochs > 0"),
         ("algo.demos", a.demos, not a.demos or state, "needs a state policy (cameras=none)"),
-        ("algo.teacher", a.teacher, not a.teacher or not state,
-         "labels a camera run's privileged state: needs a camera (e.g. cameras=wrist_depth)"),
+        (
+            "algo.teacher",
+            a.teacher,
+            not a.teacher or not state,
+            "labels a camera run's privileged state: needs a camera (e.g. cameras=wrist_depth)",
+        ),
         ("algo.rnd_coeff", a.rnd_coeff, a.rnd_coeff >= 0, "must be >= 0 (0: no curiosity)"),
         ("algo.rnd_coeff", a.rnd_coeff, not a.rnd_coeff or state, "needs a state policy (cameras=none)"),
         ("algo.rnd_gamma", a.rnd_gamma, 0 < a.rnd_gamma <= 1, "must be in (0, 1]"),
         ("algo.rnd_features", a.rnd_features, a.rnd_features >= 1, "must be >= 1"),
-        ("algo.rnd_update_fraction", a.rnd_update_fraction, 0 < a.rnd_update_fraction <= 1,
-         "must be in (0, 1]"),
+        (
+            "algo.rnd_update_fraction",
+            a.rnd_update_fraction,
+            0 < a.rnd_update_fraction <= 1,
+            "must be in (0, 1]",
+        ),
     ]
 
 
@@ -756,15 +843,26 @@ def _distill_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
         ("algo.minibatch_size", a.minibatch_size, a.minibatch_size >= 1, "must be >= 1"),
         ("algo.beta0", a.beta0, 0 <= a.beta0 <= 1, "must be in [0, 1]"),
         ("algo.beta_decay", a.beta_decay, 0 < a.beta_decay <= 1, "must be in (0, 1]"),
-        ("algo.buffer_frames", a.buffer_frames, a.buffer_frames >= a.minibatch_size,
-         f"must be >= algo.minibatch_size ({a.minibatch_size})"),
-        ("algo.learner_threads", a.learner_threads, a.learner_threads is None or a.learner_threads >= 1,
-         "must be >= 1 or null"),
+        (
+            "algo.buffer_frames",
+            a.buffer_frames,
+            a.buffer_frames >= a.minibatch_size,
+            f"must be >= algo.minibatch_size ({a.minibatch_size})",
+        ),
+        (
+            "algo.learner_threads",
+            a.learner_threads,
+            a.learner_threads is None or a.learner_threads >= 1,
+            "must be >= 1 or null",
+        ),
         ("algo.aux_coeff", a.aux_coeff, a.aux_coeff >= 0, "must be >= 0 (0: no auxiliary task)"),
         ("algo.augment", a.augment, a.augment in AUGMENTATIONS, f"must be one of {', '.join(AUGMENTATIONS)}"),
-        ("algo.augment_grey", a.augment_grey,
-         0 <= a.augment_grey <= 1 and (a.augment_grey == 0 or a.augment == "colour"),
-         "must be in [0, 1], and 0 unless algo.augment=colour"),
+        (
+            "algo.augment_grey",
+            a.augment_grey,
+            0 <= a.augment_grey <= 1 and (a.augment_grey == 0 or a.augment == "colour"),
+            "must be in [0, 1], and 0 unless algo.augment=colour",
+        ),
         ("algo.augment_shift", a.augment_shift, 0 <= a.augment_shift <= 16, "must be in [0, 16] pixels"),
         ("algo.ema_decay", a.ema_decay, 0 <= a.ema_decay < 1, "must be in [0, 1) (0: no averaging)"),
     ]
@@ -802,7 +900,11 @@ def _warn_about_workers(workers: int) -> None:
     if workers > 2 * cores:
         logging.getLogger("rlgrasp.train").warning(
             "collector.num_workers=%d on a machine with %d cores: each worker gets a fraction of a core "
-            "(collector.num_workers=%d or fewer is usually fastest)", workers, cores, cores)
+            "(collector.num_workers=%d or fewer is usually fastest)",
+            workers,
+            cores,
+            cores,
+        )
 
 
 def validate_train(cfg: Any) -> None:

@@ -1,6 +1,6 @@
 """Watch the scripted expert: a few seeded episodes rendered offscreen to a GIF and a contact sheet.
 
-    rlgrasp-demo [--episodes 3] [--randomization default] [--objects cube] [--out outputs/demo]
+rlgrasp-demo [--episodes 3] [--randomization default] [--objects cube] [--out outputs/demo]
 """
 
 from __future__ import annotations
@@ -47,8 +47,10 @@ def run(episodes: int, randomization: str, out: Path, seed: int = 0, objects: st
             frames.append(env.render())
             done = terminated or truncated
         successes.append(bool(info["is_success"]))
-        print(f"episode {episode} (seed {seed + episode}, {info['object']}): success={successes[-1]} "
-              f"lift={float(info['lift_height']) * 100:.1f} cm")
+        print(
+            f"episode {episode} (seed {seed + episode}, {info['object']}): success={successes[-1]} "
+            f"lift={float(info['lift_height']) * 100:.1f} cm"
+        )
     env.close()
 
     plt = pyplot()

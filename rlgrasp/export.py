@@ -95,8 +95,14 @@ def input_specs(spec: dict[str, Any]) -> list[dict[str, Any]]:
     """The exported file's inputs, in its signature's order: name, the env observation entry it is
     fed from (``None``: the whole observation of an env without a camera), dtype, shape."""
     images = image_specs(spec)
-    inputs = [{"name": "observation", "env_key": "state" if images else None, "dtype": "float32",
-               "shape": ["batch", int(spec["obs_dim"])]}]
+    inputs = [
+        {
+            "name": "observation",
+            "env_key": "state" if images else None,
+            "dtype": "float32",
+            "shape": ["batch", int(spec["obs_dim"])],
+        }
+    ]
     for key, shape in images.items():
         dtype = "uint8" if key == "rgb" else "float32"
         inputs.append({"name": key, "env_key": key, "dtype": dtype, "shape": ["batch", *map(int, shape)]})
@@ -291,8 +297,11 @@ def describe(ckpt: dict[str, Any], ckpt_path: Path, env: Any) -> dict[str, Any]:
         "control_mode": env_cfg.get("control_mode"),
         "control_hz": round(1.0 / (env_cfg.get("time_step", 1 / 240) * env_cfg.get("substeps", 12))),
         "normalization": normalization if model.get("obs_norm", True) else "none",
-        "deterministic": ("tanh of the Gaussian's mean, scaled to the action bounds" if squashes(model)
-                          else "the Gaussian's mean, clipped to the action bounds"),
+        "deterministic": (
+            "tanh of the Gaussian's mean, scaled to the action bounds"
+            if squashes(model)
+            else "the Gaussian's mean, clipped to the action bounds"
+        ),
         "env_id": ENV_ID,
         "env_kwargs": env_kwargs,
         "checkpoint": {
@@ -333,8 +342,17 @@ def camera_description(env: Any) -> dict[str, Any]:
     pose = {k: [float(x) for x in v] for k, v in s.pose().items()}
     frame = "the hand's frame (z along the fingers)" if s.mount == "wrist" else "the world frame"
     return {
-        "camera": {"mount": s.mount, "modality": s.modality, "width": s.width, "height": s.height,
-                   "fov_deg_vertical": s.fov, "near": s.near, "far": s.far, **pose, "pose_frame": frame},
+        "camera": {
+            "mount": s.mount,
+            "modality": s.modality,
+            "width": s.width,
+            "height": s.height,
+            "fov_deg_vertical": s.fov,
+            "near": s.near,
+            "far": s.far,
+            **pose,
+            "pose_frame": frame,
+        },
         "images": {
             "layout": "channel first, [batch, C, H, W], row 0 at the top",
             "depth": f"float32 metres along the view axis, clipped to [{s.near}, {s.far}]; 0 = no reading "
@@ -385,7 +403,7 @@ def check_request(cfg: Any, paths: dict[str, Path]) -> None:
         needed = ["onnxscript", *(["onnxruntime"] if cfg.verify else [])]
         missing = [m for m in needed if importlib.util.find_spec(m) is None]
         if missing:
-            raise ExportError(f"format=onnx needs {', '.join(missing)}: pip install -e \".[export]\"")
+            raise ExportError(f'format=onnx needs {", ".join(missing)}: pip install -e ".[export]"')
     for path in paths.values():
         problem = unwritable(path)
         if problem:
@@ -407,8 +425,13 @@ def export(cfg: Any) -> dict[str, dict[str, Any]]:
 
 
 def _write_one(
-    module: nn.Module, fmt: str, path: Path, info: dict[str, Any],
-    recorded: tuple[Inputs, np.ndarray] | None, cfg: Any, tolerance: float,
+    module: nn.Module,
+    fmt: str,
+    path: Path,
+    info: dict[str, Any],
+    recorded: tuple[Inputs, np.ndarray] | None,
+    cfg: Any,
+    tolerance: float,
 ) -> dict[str, Any]:
     """One format: the file, its JSON, its largest action difference on ``recorded`` (if any).
 
@@ -424,10 +447,16 @@ def _write_one(
         diff = max_abs_diff(tmp, *recorded) if recorded else None
         shown = "not verified" if diff is None else f"max |action diff| {diff:.2e} on {cfg.verify_obs} obs"
         if diff is not None and not diff <= tolerance:
-            raise ExportError(f"{path}: exported actions differ from the checkpoint's by {diff:.3g} "
-                              f"> tolerance {tolerance} (nothing was replaced)")
-        check = {"observations": cfg.verify_obs, "seed": cfg.seed, "max_abs_action_diff": diff,
-                 "tolerance": tolerance}
+            raise ExportError(
+                f"{path}: exported actions differ from the checkpoint's by {diff:.3g} "
+                f"> tolerance {tolerance} (nothing was replaced)"
+            )
+        check = {
+            "observations": cfg.verify_obs,
+            "seed": cfg.seed,
+            "max_abs_action_diff": diff,
+            "tolerance": tolerance,
+        }
         meta = {"format": fmt, "file": path.name, **info, "verification": check if recorded else None}
         with _writing(json_path):
             json_tmp.write_text(_dumps(meta))

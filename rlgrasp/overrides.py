@@ -40,8 +40,18 @@ ENV_GROUPS = {"objects": ("{", "["), "randomization": ("{",), "robot": ("{",)}
 #: experiment=grasp_objects_ppo's objects are a list).
 NEUTRAL = {"objects": "cube", "randomization": "default", "robot": "panda"}
 #: Hydra's flags after which the command line is not one run's overrides (help, multirun, ...).
-_NOT_A_RUN = ("help", "hydra_help", "cfg", "info", "shell_completion", "multirun", "experimental_rerun",
-              "config_path", "config_name", "config_dir")
+_NOT_A_RUN = (
+    "help",
+    "hydra_help",
+    "cfg",
+    "info",
+    "shell_completion",
+    "multirun",
+    "experimental_rerun",
+    "config_path",
+    "config_name",
+    "config_dir",
+)
 
 
 class CommandLineError(ValueError):

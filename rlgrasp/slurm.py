@@ -69,8 +69,17 @@ def parse_sinfo(text: str) -> list[Node]:
             continue
         name, cpus, mem, partition, limit, gres = parts
         try:
-            nodes.append(Node(name, partition.rstrip("*"), partition.endswith("*"), int(cpus.rstrip("+")),
-                              int(mem.rstrip("+")), _gres_gpus(gres), slurm_minutes(limit)))
+            nodes.append(
+                Node(
+                    name,
+                    partition.rstrip("*"),
+                    partition.endswith("*"),
+                    int(cpus.rstrip("+")),
+                    int(mem.rstrip("+")),
+                    _gres_gpus(gres),
+                    slurm_minutes(limit),
+                )
+            )
         except ValueError:
             continue
     return nodes
@@ -110,8 +119,9 @@ def sinfo_text() -> str | None:
         return None
     try:
         # --all: hidden partitions too (a job may name one), or the check would call them unknown
-        proc = subprocess.run(["sinfo", "--all", "-h", "-N", "-o", SINFO_FORMAT], capture_output=True,
-                              text=True, timeout=30)
+        proc = subprocess.run(
+            ["sinfo", "--all", "-h", "-N", "-o", SINFO_FORMAT], capture_output=True, text=True, timeout=30
+        )
     except (OSError, subprocess.TimeoutExpired):
         return None
     return proc.stdout if proc.returncode == 0 else None
@@ -158,14 +168,24 @@ class Request:
         elif params.get("mem_per_cpu") is not None:
             mem_mb = _mb(params["mem_per_cpu"]) * cpt * tasks
             mem_key = f"{KEY}mem_per_cpu={params['mem_per_cpu']}"
-        asked = {"gpus_per_node": _count(params.get("gpus_per_node")),
-                 "gpus_per_task": _count(params.get("gpus_per_task")) * tasks,
-                 "gres": _gres_gpus(str(params.get("gres") or ""))}
+        asked = {
+            "gpus_per_node": _count(params.get("gpus_per_node")),
+            "gpus_per_task": _count(params.get("gpus_per_task")) * tasks,
+            "gres": _gres_gpus(str(params.get("gres") or "")),
+        }
         gpu_key = max(asked, key=asked.__getitem__)
         partition = params.get("partition")
-        return cls(tuple(p for p in str(partition or "").split(",") if p), cpt, tasks, mem_mb, mem_key,
-                   asked[gpu_key], f"{KEY}{gpu_key}={params.get(gpu_key)}", int(params.get("nodes") or 1),
-                   float(params.get("timeout_min") or 0))
+        return cls(
+            tuple(p for p in str(partition or "").split(",") if p),
+            cpt,
+            tasks,
+            mem_mb,
+            mem_key,
+            asked[gpu_key],
+            f"{KEY}{gpu_key}={params.get(gpu_key)}",
+            int(params.get("nodes") or 1),
+            float(params.get("timeout_min") or 0),
+        )
 
 
 # --- can it ever run? -------------------------------------------------------------------------
@@ -180,12 +200,16 @@ def refusal(params: Mapping[str, Any], sinfo: str, workers: int | None = None) -
     names = list(dict.fromkeys(n.partition for n in nodes))
     wanted = list(request.partitions) or [n.partition for n in nodes if n.default][:1]
     if not wanted:
-        return (f"error: {KEY}partition=null but the SLURM cluster has no default partition; "
-                f"set {KEY}partition to one of {', '.join(names)}")
+        return (
+            f"error: {KEY}partition=null but the SLURM cluster has no default partition; "
+            f"set {KEY}partition to one of {', '.join(names)}"
+        )
     unknown = [p for p in wanted if p not in names]
     if unknown:
-        return (f"error: {KEY}partition={','.join(request.partitions)}: no SLURM partition {unknown[0]}; "
-                f"sinfo lists {', '.join(names)}")
+        return (
+            f"error: {KEY}partition={','.join(request.partitions)}: no SLURM partition {unknown[0]}; "
+            f"sinfo lists {', '.join(names)}"
+        )
     verdicts = {p: _problems(request, [n for n in nodes if n.partition == p], workers) for p in wanted}
     if any(not problems for problems in verdicts.values()):
         return None
@@ -196,15 +220,31 @@ def refusal(params: Mapping[str, Any], sinfo: str, workers: int | None = None) -
 
 def _problems(request: Request, nodes: Sequence[Node], workers: int | None) -> list[str]:
     """Each reason ``nodes`` (one partition) can never run ``request``, as ``key=value: why; fix``."""
-    most = Node("", nodes[0].partition, False, max(n.cpus for n in nodes), max(n.mem_mb for n in nodes),
-                max(n.gpus for n in nodes), None)
+    most = Node(
+        "",
+        nodes[0].partition,
+        False,
+        max(n.cpus for n in nodes),
+        max(n.mem_mb for n in nodes),
+        max(n.gpus for n in nodes),
+        None,
+    )
     limits = [n.max_time_min for n in nodes]
     max_time = None if None in limits else max(t for t in limits if t is not None)
-    problems = [p for p in (_cpu_problem(request, most, workers), _mem_problem(request, most),
-                            _gpu_problem(request, most)) if p]
+    problems = [
+        p
+        for p in (
+            _cpu_problem(request, most, workers),
+            _mem_problem(request, most),
+            _gpu_problem(request, most),
+        )
+        if p
+    ]
     if max_time is not None and request.timeout_min > max_time:
-        problems.append(f"{KEY}timeout_min={request.timeout_min:g}: its time limit is {max_time:g} min; "
-                        f"use {KEY}timeout_min={math.floor(max_time)}")
+        problems.append(
+            f"{KEY}timeout_min={request.timeout_min:g}: its time limit is {max_time:g} min; "
+            f"use {KEY}timeout_min={math.floor(max_time)}"
+        )
     if not problems:
         problems += _node_problems(request, nodes)
     return problems
@@ -223,7 +263,8 @@ def _cpu_problem(request: Request, most: Node, workers: int | None) -> str | Non
     if request.tasks > 1:
         asked += f" x {KEY}tasks_per_node={request.tasks}"
     return f"{asked} asks for {request.cpus} CPUs per node, its nodes have at most {most.cpus}; use " + (
-        " or ".join(fixes))
+        " or ".join(fixes)
+    )
 
 
 def _mem_problem(request: Request, most: Node) -> str | None:
@@ -240,8 +281,10 @@ def _mem_problem(request: Request, most: Node) -> str | None:
     else:  # mem_gb takes whole GB only
         fix = f"{KEY}mem_gb=null {per_cpu_fix}"
     per_cpu = f" x {cpus} CPUs" if "mem_per_cpu" in request.mem_key else ""
-    return (f"{request.mem_key}{per_cpu} asks for {need / 1024:.1f} GB per node, its nodes have at most "
-            f"{most.mem_mb / 1024:.1f} GB ({most.mem_mb} MB); use {fix}")
+    return (
+        f"{request.mem_key}{per_cpu} asks for {need / 1024:.1f} GB per node, its nodes have at most "
+        f"{most.mem_mb / 1024:.1f} GB ({most.mem_mb} MB); use {fix}"
+    )
 
 
 def _gpu_problem(request: Request, most: Node) -> str | None:
@@ -254,23 +297,48 @@ def _gpu_problem(request: Request, most: Node) -> str | None:
 
 def _node_problems(request: Request, nodes: Sequence[Node]) -> list[str]:
     """Enough nodes for each resource alone, but not for all of them at once (a mixed partition)."""
-    fit = [n for n in nodes if n.cpus >= request.cpus and n.gpus >= request.gpus
-           and (request.mem_mb is None or n.mem_mb >= request.mem_mb)]
+    fit = [
+        n
+        for n in nodes
+        if n.cpus >= request.cpus
+        and n.gpus >= request.gpus
+        and (request.mem_mb is None or n.mem_mb >= request.mem_mb)
+    ]
     if len(fit) >= request.nodes:
         return []
-    want = f"{request.cpus} CPUs" + (f", {request.mem_mb / 1024:.1f} GB" if request.mem_mb else "") + (
-        f", {request.gpus} GPUs" if request.gpus else "")
+    want = (
+        f"{request.cpus} CPUs"
+        + (f", {request.mem_mb / 1024:.1f} GB" if request.mem_mb else "")
+        + (f", {request.gpus} GPUs" if request.gpus else "")
+    )
     if not fit:
-        return [f"{KEY}cpus_per_task={request.cpus_per_task} with {request.mem_key or 'its memory'}: "
-                f"no single node has {want} at once; lower one of them"]
-    return [f"{KEY}nodes={request.nodes}: only {len(fit)} of its nodes have {want}; "
-            f"use {KEY}nodes={len(fit)}"]
+        return [
+            f"{KEY}cpus_per_task={request.cpus_per_task} with {request.mem_key or 'its memory'}: "
+            f"no single node has {want} at once; lower one of them"
+        ]
+    return [
+        f"{KEY}nodes={request.nodes}: only {len(fit)} of its nodes have {want}; use {KEY}nodes={len(fit)}"
+    ]
 
 
 # --- waiting for the jobs ---------------------------------------------------------------------
 #: States of a job that may still write its result (a requeued job is PENDING again).
-ALIVE = {"PENDING", "RUNNING", "CONFIGURING", "COMPLETING", "REQUEUED", "REQUEUE_HOLD", "REQUEUE_FED",
-         "RESIZING", "SUSPENDED", "STOPPED", "SIGNALING", "STAGE_OUT", "SPECIAL_EXIT", "RESV_DEL_HOLD"}
+ALIVE = {
+    "PENDING",
+    "RUNNING",
+    "CONFIGURING",
+    "COMPLETING",
+    "REQUEUED",
+    "REQUEUE_HOLD",
+    "REQUEUE_FED",
+    "RESIZING",
+    "SUSPENDED",
+    "STOPPED",
+    "SIGNALING",
+    "STAGE_OUT",
+    "SPECIAL_EXIT",
+    "RESV_DEL_HOLD",
+}
 #: Pending reasons no waiting cures: the job is cancelled and the wait ends at once.
 NEVER = {
     "PartitionConfig": "it asks for more than the partition's nodes or limits allow",
@@ -345,8 +413,9 @@ def scontrol_states(job_ids: Iterable[str]) -> States | None:
     states: States = {}
     for main in sorted({j.split("_")[0] for j in job_ids}):
         try:
-            proc = subprocess.run(["scontrol", "-o", "show", "job", main], capture_output=True, text=True,
-                                  timeout=30)
+            proc = subprocess.run(
+                ["scontrol", "-o", "show", "job", main], capture_output=True, text=True, timeout=30
+            )
         except (OSError, subprocess.TimeoutExpired):
             return None
         if proc.returncode != 0:
@@ -360,8 +429,12 @@ def scontrol_states(job_ids: Iterable[str]) -> States | None:
 class Watch:
     """Polls a sweep's jobs until each has its result; ``check`` raises JobLost for a job that never will."""
 
-    def __init__(self, jobs: Sequence[Any], query: Callable[[list[str]], States | None] = scontrol_states,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        jobs: Sequence[Any],
+        query: Callable[[list[str]], States | None] = scontrol_states,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.jobs, self.query, self.clock = list(jobs), query, clock
         self.start = self.next_query = clock()
         self.ended: dict[str, float] = {}  # job id -> when first seen ended without a result
@@ -398,16 +471,26 @@ class Watch:
             state = states.get(lost[0].job_id)
             what = f"ended with JobState={state[0]}" if state else "is no longer known to SLURM (ended)"
             more = f"; so did {_ids(lost[1:])}" if len(lost) > 1 else ""
-            running = (f"; {len(alive)} other job(s) of this sweep are still queued or running "
-                       f"(squeue -j {alive[0].job_id.split('_')[0]})") if alive else ""
-            raise JobLost(f"SLURM job {lost[0].job_id} {what} without writing a result{_log_tail(lost[0])}"
-                          f"{more}{running}")
+            running = (
+                (
+                    f"; {len(alive)} other job(s) of this sweep are still queued or running "
+                    f"(squeue -j {alive[0].job_id.split('_')[0]})"
+                )
+                if alive
+                else ""
+            )
+            raise JobLost(
+                f"SLURM job {lost[0].job_id} {what} without writing a result{_log_tail(lost[0])}"
+                f"{more}{running}"
+            )
         never = [j for j in alive if _reason(states[j.job_id]) in NEVER]
         if never:
             reason = states[never[0].job_id][1]
-            raise JobLost(f"SLURM job {never[0].job_id} can never start: pending with Reason={reason} "
-                          f"({NEVER[_reason(states[never[0].job_id])]}); cancelled {_ids(never)}",
-                          cancel=[j.job_id for j in never])
+            raise JobLost(
+                f"SLURM job {never[0].job_id} can never start: pending with Reason={reason} "
+                f"({NEVER[_reason(states[never[0].job_id])]}); cancelled {_ids(never)}",
+                cancel=[j.job_id for j in never],
+            )
         for job in alive:
             self._blocked(job.job_id, states[job.job_id], now)
 
@@ -420,12 +503,19 @@ class Watch:
         self.blocked.setdefault(jid, now)
         if _reason(state) not in self.warned:
             self.warned.add(_reason(state))
-            log.warning("SLURM job %s is pending with Reason=%s (%s); waiting at most %d min for it to start",
-                        jid, reason, BLOCKED[_reason(state)], BLOCKED_LIMIT_S // 60)
+            log.warning(
+                "SLURM job %s is pending with Reason=%s (%s); waiting at most %d min for it to start",
+                jid,
+                reason,
+                BLOCKED[_reason(state)],
+                BLOCKED_LIMIT_S // 60,
+            )
         if now - self.blocked[jid] >= BLOCKED_LIMIT_S:
-            raise JobLost(f"SLURM job {jid} has been pending with Reason={reason} for "
-                          f"{BLOCKED_LIMIT_S / 60:g} min; stopped waiting (it stays queued: "
-                          f"scancel {jid.split('_')[0]} to drop it)")
+            raise JobLost(
+                f"SLURM job {jid} has been pending with Reason={reason} for "
+                f"{BLOCKED_LIMIT_S / 60:g} min; stopped waiting (it stays queued: "
+                f"scancel {jid.split('_')[0]} to drop it)"
+            )
 
 
 def _reason(state: tuple[str, str]) -> str:
@@ -492,12 +582,19 @@ class CheckedSlurmLauncher(SlurmLauncher):
 
         assert self.config is not None
         init_keys = {"submitit_folder", "max_num_timeout"}
-        executor = submitit.AutoExecutor(cluster=self._EXECUTOR, folder=self.params["submitit_folder"],
-                                         **{f"{self._EXECUTOR}_{k}": v for k, v in self.params.items()
-                                            if k == "max_num_timeout"})
+        executor = submitit.AutoExecutor(
+            cluster=self._EXECUTOR,
+            folder=self.params["submitit_folder"],
+            **{f"{self._EXECUTOR}_{k}": v for k, v in self.params.items() if k == "max_num_timeout"},
+        )
         base = set(OmegaConf.structured(BaseQueueConf).keys())
-        executor.update_parameters(**{k if k in base else f"{self._EXECUTOR}_{k}": v
-                                      for k, v in self.params.items() if k not in init_keys})
+        executor.update_parameters(
+            **{
+                k if k in base else f"{self._EXECUTOR}_{k}": v
+                for k, v in self.params.items()
+                if k not in init_keys
+            }
+        )
         log.info(f"Submitit '{self._EXECUTOR}' sweep output dir : {self.config.hydra.sweep.dir}")
         sweep_dir = Path(str(self.config.hydra.sweep.dir))
         sweep_dir.mkdir(parents=True, exist_ok=True)
@@ -506,8 +603,9 @@ class CheckedSlurmLauncher(SlurmLauncher):
         job_params = []
         for idx, overrides in enumerate(job_overrides, start=initial_job_idx):
             log.info(f"\t#{idx} : {' '.join(filter_overrides(overrides))}")
-            job_params.append((list(overrides), "hydra.sweep.dir", idx, f"job_id_for_{idx}",
-                               Singleton.get_state()))
+            job_params.append(
+                (list(overrides), "hydra.sweep.dir", idx, f"job_id_for_{idx}", Singleton.get_state())
+            )
         return executor.map_array(self, *zip(*job_params))
 
 

@@ -24,17 +24,21 @@ from typing import Any
 #: The classes a received config may name, by the node that builds them.
 REGISTRY: dict[str, frozenset[str]] = {
     "env": frozenset({"rlgrasp.envs.PandaGraspEnv", "rlgrasp.envs.GraspEnv"}),
-    "collector": frozenset({
-        "rlgrasp.train.collectors.ProcessCollector",
-        "rlgrasp.train.collectors.SingleCollector",
-        "rlgrasp.train.collectors.RayCollector",
-    }),
-    "logger": frozenset({
-        "rlgrasp.train.logger.TensorBoardLogger",
-        "rlgrasp.train.logger.ConsoleLogger",
-        "rlgrasp.train.trackers.WandbLogger",
-        "rlgrasp.train.trackers.MlflowLogger",
-    }),
+    "collector": frozenset(
+        {
+            "rlgrasp.train.collectors.ProcessCollector",
+            "rlgrasp.train.collectors.SingleCollector",
+            "rlgrasp.train.collectors.RayCollector",
+        }
+    ),
+    "logger": frozenset(
+        {
+            "rlgrasp.train.logger.TensorBoardLogger",
+            "rlgrasp.train.logger.ConsoleLogger",
+            "rlgrasp.train.trackers.WandbLogger",
+            "rlgrasp.train.trackers.MlflowLogger",
+        }
+    ),
     "algo": frozenset({"rlgrasp.algos.ppo.PPO", "rlgrasp.algos.sac.SAC", "rlgrasp.vision.distill.DAgger"}),
 }
 #: Hydra's keys that make a node callable or change how it is called.
@@ -85,8 +89,13 @@ def env_trusted_targets() -> frozenset[str]:
 
 def _entries(node: Any, path: str) -> Iterable[tuple[str, str, Any]]:
     """Every (path of the container, key or index, value) of a config, at any depth."""
-    items = node.items() if isinstance(node, Mapping) else enumerate(node) if isinstance(
-        node, (list, tuple)) else ()
+    items = (
+        node.items()
+        if isinstance(node, Mapping)
+        else enumerate(node)
+        if isinstance(node, (list, tuple))
+        else ()
+    )
     for key, value in items:
         yield path, str(key) if isinstance(node, Mapping) else f"[{key}]", value
         child = (f"{path}.{key}" if path else str(key)) if isinstance(node, Mapping) else f"{path}[{key}]"
@@ -102,8 +111,11 @@ def _where(path: str, key: str) -> str:
 def trusted_targets(config: Any) -> set[str]:
     """The ``_target_`` of each node of the user's own composed config (what their command line
     chose, e.g. a collector class of their own), to pass as ``trusted`` for a file read beside it."""
-    return {str(config[n]["_target_"]) for n in REGISTRY
-            if isinstance(config.get(n), Mapping) and "_target_" in config[n]}
+    return {
+        str(config[n]["_target_"])
+        for n in REGISTRY
+        if isinstance(config.get(n), Mapping) and "_target_" in config[n]
+    }
 
 
 #: What ``TensorDict.memmap`` writes for a TensorDict of plain tensors.

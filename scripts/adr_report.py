@@ -54,8 +54,9 @@ def compare(policies: list[str], ranges: str | None, episodes: int, seed: int, w
     results: dict[str, dict[str, Any]] = {}
     for policy in policies:
         for label, randomization in conditions.items():
-            found, _ = timed_run(source=_source(policy, randomization), episodes=episodes, base_seed=seed,
-                                 workers=workers)
+            found, _ = timed_run(
+                source=_source(policy, randomization), episodes=episodes, base_seed=seed, workers=workers
+            )
             results.setdefault(policy, {})[label] = summarize(found)["success_at_end"]
     report = {"conditions": conditions, "episodes": episodes, "seed": seed, "success": results}
     if "adr ranges" in conditions:

@@ -29,7 +29,15 @@ from rlgrasp.train import checkpoint as ckpt_lib  # noqa: E402
 from rlgrasp.train.legacy import upgrade_config  # noqa: E402
 
 POLICY_KEYS = (
-    "kind", "actor", "config", "spec", "frames", "updates", "best_eval_success", "last_eval", "versions"
+    "kind",
+    "actor",
+    "config",
+    "spec",
+    "frames",
+    "updates",
+    "best_eval_success",
+    "last_eval",
+    "versions",
 )
 
 

@@ -71,14 +71,24 @@ STUDENT_MODEL = {
 
 
 def make_student(
-    tmp: Path, modality: str = "depth", mount: str = "wrist", visual: str = "default", spread: bool = True,
-    name: str = "student.pt", teacher: str | None = str(TEACHER), model: dict | None = None,
+    tmp: Path,
+    modality: str = "depth",
+    mount: str = "wrist",
+    visual: str = "default",
+    spread: bool = True,
+    name: str = "student.pt",
+    teacher: str | None = str(TEACHER),
+    model: dict | None = None,
 ) -> Path:
     """A camera checkpoint laid out as ``Distiller.save`` writes it. ``spread``: weights that send
     the actions over the whole box (a fresh actor acts near zero, which would hide a wrong squashing
     or a wrong image scaling)."""
-    env_cfg = {**asdict(EnvConfig()), "control_mode": "joint_delta",
-               "camera": {"mount": mount, "modality": modality}, "visual": visual}
+    env_cfg = {
+        **asdict(EnvConfig()),
+        "control_mode": "joint_delta",
+        "camera": {"mount": mount, "modality": modality},
+        "visual": visual,
+    }
     spec = vision_spec(env_factory(env_cfg))
     torch.manual_seed(0)
     model = model or STUDENT_MODEL
@@ -96,8 +106,13 @@ def make_student(
         "kind": "vision",
         "actor": actor.state_dict(),
         "spec": spec,
-        "config": {"env": env_cfg, "model": model, "algo": {"name": "dagger", "teacher": teacher},
-                   "experiment_name": "student", "seed": 0},
+        "config": {
+            "env": env_cfg,
+            "model": model,
+            "algo": {"name": "dagger", "teacher": teacher},
+            "experiment_name": "student",
+            "seed": 0,
+        },
         "frames": 1234,
         "last_eval": None,
         "versions": {},
@@ -142,15 +157,27 @@ def bad_input_files(root: Path) -> dict[str, str]:
     ckpt = torch.load(mismatched, weights_only=True)
     ckpt["spec"]["images"] = {"rgb": [3, 64, 64]}
     torch.save(ckpt, mismatched)
-    return {"student": str(student), "orphan": str(orphan), "mismatched": str(mismatched),
-            "teacher": str(TEACHER)}
+    return {
+        "student": str(student),
+        "orphan": str(orphan),
+        "mismatched": str(mismatched),
+        "teacher": str(TEACHER),
+    }
 
 
 # --- entry points in-process ---------------------------------------------------------------------
 #: What PyBullet prints on stderr when it is imported, whatever the command: not one of our lines.
 PYBULLET_BANNER = "pybullet build time:"
-SCRIPTS = {"train": "train.py", "train_sac": "train.py", "eval": "evaluate.py", "export": "export.py",
-           "enjoy": "enjoy.py", "sweep": "sweep.py", "demos": "demos.py", "report": "report.py"}
+SCRIPTS = {
+    "train": "train.py",
+    "train_sac": "train.py",
+    "eval": "evaluate.py",
+    "export": "export.py",
+    "enjoy": "enjoy.py",
+    "sweep": "sweep.py",
+    "demos": "demos.py",
+    "report": "report.py",
+}
 
 
 def our_lines(stderr: str) -> list[str]:
@@ -193,10 +220,22 @@ def run_entry(entry: str, argv: list[str], cwd: Path) -> int:
 
 # --- what a training run logs and what its seed decides ------------------------------------------
 #: A PPO run in-process (collector=single) on a few hundred frames.
-SMOKE_IN_PROCESS = ["experiment=smoke", "logger=none", "collector=single", "collector.envs_per_worker=2",
-                    "collector.steps_per_env=64", "algo.minibatch_size=64", "total_frames=256",
-                    "eval.interval_frames=0", "eval.episodes=1", "eval.final_episodes=1", "eval.num_envs=1",
-                    "checkpoint.interval_frames=128", "env.reward=sparse", "device=cpu"]
+SMOKE_IN_PROCESS = [
+    "experiment=smoke",
+    "logger=none",
+    "collector=single",
+    "collector.envs_per_worker=2",
+    "collector.steps_per_env=64",
+    "algo.minibatch_size=64",
+    "total_frames=256",
+    "eval.interval_frames=0",
+    "eval.episodes=1",
+    "eval.final_episodes=1",
+    "eval.num_envs=1",
+    "checkpoint.interval_frames=128",
+    "env.reward=sparse",
+    "device=cpu",
+]
 #: Tags that measure the wall clock, not the run.
 WALL_CLOCK = ("charts/SPS", "time/")
 

@@ -80,9 +80,15 @@ def start_script(
     with SIGINT's default action whatever pytest inherited."""
     env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1", **(env or {})}
     with open(out, "ab") as f:
-        proc = subprocess.Popen([sys.executable, str(ROOT / "scripts" / f"{name}.py"), *args], cwd=cwd,
-                                env=env, stdout=f, stderr=subprocess.STDOUT, start_new_session=True,
-                                preexec_fn=_as_at_a_terminal)
+        proc = subprocess.Popen(
+            [sys.executable, str(ROOT / "scripts" / f"{name}.py"), *args],
+            cwd=cwd,
+            env=env,
+            stdout=f,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+            preexec_fn=_as_at_a_terminal,
+        )
     return Started(proc, out)
 
 
@@ -106,7 +112,9 @@ def wait_for(probe: Callable[[], Any], timeout: float, started: Started | None =
         if (found := probe()) is not None:
             return found
         if started is not None and started.proc.poll() is not None:
-            raise AssertionError(f"ended (exit {started.proc.returncode}) before the awaited state:\n"
-                                 f"{started.output()[-3000:]}")
+            raise AssertionError(
+                f"ended (exit {started.proc.returncode}) before the awaited state:\n"
+                f"{started.output()[-3000:]}"
+            )
         time.sleep(0.3)
     raise TimeoutError(f"nothing after {timeout} s")

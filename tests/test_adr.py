@@ -35,8 +35,9 @@ def _settings(**keys):
         "action_delay": {"nominal": 0, "limits": [0, 2], "step": 1, "integer": True},
         "joint_damping": {"nominal": 0.0, "limits": [0.0, 1.0], "step": 0.25},
     }
-    return parse_settings({"params": params, "buffer_size": 4, "low_threshold": 0.4,
-                           "high_threshold": 0.7, **keys})
+    return parse_settings(
+        {"params": params, "buffer_size": 4, "low_threshold": 0.4, "high_threshold": 0.7, **keys}
+    )
 
 
 def _code(settings, name: str, bound: int) -> int:
@@ -126,8 +127,12 @@ def test_boundary_episodes_come_with_probability_p_over_the_bounds_that_can_move
     boundary = [d for d in draws if d != NOT_BOUNDARY]
     assert len(boundary) / len(draws) == pytest.approx(0.3, abs=0.015)
     # action_delay's and joint_damping's low bounds sit at nominal = hard limit: never drawn
-    movable = {_code(s, "object_mass", 0), _code(s, "object_mass", 1), _code(s, "action_delay", 1),
-               _code(s, "joint_damping", 1)}
+    movable = {
+        _code(s, "object_mass", 0),
+        _code(s, "object_mass", 1),
+        _code(s, "action_delay", 1),
+        _code(s, "joint_damping", 1),
+    }
     counts = {c: boundary.count(c) for c in set(boundary)}
     assert set(counts) == movable
     assert max(counts.values()) / min(counts.values()) < 1.15  # uniform over the movable bounds
@@ -200,22 +205,32 @@ def test_the_ranges_file_keeps_the_base_preset_and_log_uniform_draws(tmp_path: P
     default = Randomizer("default").ranges
     assert {k: loaded.ranges.get(k) for k in others} == {k: default.get(k) for k in others}
     with pytest.raises(ValueError, match="a log-uniform range needs limits above 0"):
-        parse_settings({"params": {"joint_damping": {"nominal": 0.0, "limits": [0.0, 1.0], "step": 0.1,
-                                                     "log": True}}})
+        parse_settings(
+            {"params": {"joint_damping": {"nominal": 0.0, "limits": [0.0, 1.0], "step": 0.1, "log": True}}}
+        )
 
 
-@pytest.mark.parametrize(("change", "message"), [
-    ({"params": {"object_mass": {"limits": [0.01, 1.0], "step": 0.1}}}, "needs ['nominal']"),
-    ({"params": {"object_mass": {"nominal": 0.1, "step": 0.1}}}, "needs ['limits']"),
-    ({"params": {"object_mass": {"nominal": 0.1, "limits": [0.2, 1.0], "step": 0.1}}}, "exclude the nominal"),
-    ({"params": {"object_mass": {"nominal": 0.1, "limits": [0.01, 1.0], "step": 0}}}, "step must be > 0"),
-    ({"params": {"object_mass": {"nominal": 0.1, "limits": [0.01, 1.0], "step": -1}}}, "step must be > 0"),
-    ({"low_threshold": -0.1}, "low_threshold=-0.1: must be in [0, 1]"),
-    ({"high_threshold": 1.5}, "high_threshold=1.5: must be in [0, 1]"),
-    ({"low_threshold": 0.8, "high_threshold": 0.5}, "low_threshold=0.8: must be below high_threshold"),
-    ({"buffer_size": 0}, "buffer_size=0: must be an integer >= 1"),
-    ({"boundary_prob": 2}, "boundary_prob=2.0: must be in [0, 1]"),
-])
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"params": {"object_mass": {"limits": [0.01, 1.0], "step": 0.1}}}, "needs ['nominal']"),
+        ({"params": {"object_mass": {"nominal": 0.1, "step": 0.1}}}, "needs ['limits']"),
+        (
+            {"params": {"object_mass": {"nominal": 0.1, "limits": [0.2, 1.0], "step": 0.1}}},
+            "exclude the nominal",
+        ),
+        ({"params": {"object_mass": {"nominal": 0.1, "limits": [0.01, 1.0], "step": 0}}}, "step must be > 0"),
+        (
+            {"params": {"object_mass": {"nominal": 0.1, "limits": [0.01, 1.0], "step": -1}}},
+            "step must be > 0",
+        ),
+        ({"low_threshold": -0.1}, "low_threshold=-0.1: must be in [0, 1]"),
+        ({"high_threshold": 1.5}, "high_threshold=1.5: must be in [0, 1]"),
+        ({"low_threshold": 0.8, "high_threshold": 0.5}, "low_threshold=0.8: must be below high_threshold"),
+        ({"buffer_size": 0}, "buffer_size=0: must be an integer >= 1"),
+        ({"boundary_prob": 2}, "boundary_prob=2.0: must be in [0, 1]"),
+    ],
+)
 def test_bad_settings_are_refused_naming_the_key(change, message) -> None:
     node = {**ADR_SPEC["adr"], **change}
     with pytest.raises(ValueError) as err:
@@ -234,14 +249,21 @@ def test_the_ranges_reach_the_workers_envs_between_batches(collector: str, train
 def test_the_ranges_reach_ray_workers_envs(request, train_cfg) -> None:
     cluster = request.getfixturevalue("ray_cluster")
     _check_the_ranges_reach_the_envs(
-        train_cfg, "collector=ray", f"collector.ray.address={cluster.address}",
+        train_cfg,
+        "collector=ray",
+        f"collector.ray.address={cluster.address}",
         "collector.ray.memory_per_worker_gb=0.25",
     )
 
 
 def _check_the_ranges_reach_the_envs(train_cfg, *collector: str) -> None:
-    cfg = train_cfg("experiment=smoke", "randomization=adr", *collector, "collector.steps_per_env=120",
-                    "collector.num_workers=1")
+    cfg = train_cfg(
+        "experiment=smoke",
+        "randomization=adr",
+        *collector,
+        "collector.steps_per_env=120",
+        "collector.num_workers=1",
+    )
     parts = build_parts(cfg)
     sync = AdrSync.from_env_cfg(cfg.env)
     sync.settings = dataclasses.replace(sync.settings, boundary_prob=1.0)
@@ -279,8 +301,13 @@ def test_a_short_run_moves_bounds_logs_them_and_a_resume_continues(tmp_path: Pat
     bounds narrow them: bounds move, the curves and the ranges file are written, and a resume starts
     from the checkpoint's ranges, not the config's."""
     run_dir = tmp_path / "run"
-    adr = ["randomization=adr", "env.randomization.adr.start=default", "env.randomization.adr.buffer_size=1",
-           "eval.episodes=2", "eval.final_episodes=2"]
+    adr = [
+        "randomization=adr",
+        "env.randomization.adr.start=default",
+        "env.randomization.adr.buffer_size=1",
+        "eval.episodes=2",
+        "eval.final_episodes=2",
+    ]
     train(train_cfg("experiment=smoke", *adr, run_dir=run_dir))
     ckpt = load_checkpoint(run_dir)
     state = ckpt["adr"]
@@ -304,8 +331,14 @@ def test_a_short_run_moves_bounds_logs_them_and_a_resume_continues(tmp_path: Pat
 @pytest.mark.slow
 def test_a_seed_gives_one_adr_run_on_this_machine(tmp_path: Path, train_cfg) -> None:
     """Boundary draws, moves and ranges included: twice the same seed, the same curves bit for bit."""
-    adr = ("randomization=adr", "env.randomization.adr.start=default", "env.randomization.adr.buffer_size=1",
-           "collector.steps_per_env=128", "eval.episodes=2", "eval.final_episodes=2")
+    adr = (
+        "randomization=adr",
+        "env.randomization.adr.start=default",
+        "env.randomization.adr.buffer_size=1",
+        "collector.steps_per_env=128",
+        "eval.episodes=2",
+        "eval.final_episodes=2",
+    )
     first, second = train_twice(train_cfg, tmp_path, *adr)
     assert "adr/entropy" in first["curves"]
     assert record_differences(first, second) == []

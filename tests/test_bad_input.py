@@ -88,11 +88,18 @@ def _files(root: Path) -> dict[str, str]:
     notamesh.write_text("this is not a mesh\n")
     notes = root / "notes.txt"
     notes.write_text("not a model")
-    return {"run": str(run), "empty": str(empty), "truncated": str(truncated), "foreign": str(foreign),
-            "unwritable": str(unwritable / "out"), "notamesh": str(notamesh), "notes": str(notes),
-            **bad_input_files(root),  # camera checkpoints: student, orphan, mismatched; the teacher
-            **demo_files(root),  # demonstrations of another control mode, and of no episode
-            **_more_files(root, run, Path(demo_files(root)["empty_demos"]))}
+    return {
+        "run": str(run),
+        "empty": str(empty),
+        "truncated": str(truncated),
+        "foreign": str(foreign),
+        "unwritable": str(unwritable / "out"),
+        "notamesh": str(notamesh),
+        "notes": str(notes),
+        **bad_input_files(root),  # camera checkpoints: student, orphan, mismatched; the teacher
+        **demo_files(root),  # demonstrations of another control mode, and of no episode
+        **_more_files(root, run, Path(demo_files(root)["empty_demos"])),
+    }
 
 
 def _more_files(root: Path, run: Path, demos: Path) -> dict[str, str]:
@@ -110,161 +117,302 @@ def _more_files(root: Path, run: Path, demos: Path) -> dict[str, str]:
     with socket.socket() as sock:  # a port nothing listens on (bound, then released)
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
-    return {"newer": str(newer), "frameless_demos": str(frameless), "flat": str(flat),
-            "closed_port": str(port)}
+    return {
+        "newer": str(newer),
+        "frameless_demos": str(frameless),
+        "flat": str(flat),
+        "closed_port": str(port),
+    }
 
 
 #: A user's arm (the Panda's model) naming a joint its model does not have.
-BAD_ARM = ("model:franka_panda/panda.urdf,arm_joints:[panda_joint1,panda_joint9],"
-           "grasp_link:panda_grasptarget,fingers:[{joint:panda_finger_joint1,open:0.04}],finger_links:[panda_leftfinger,panda_rightfinger],"
-           "neutral_pose:[0,0],max_finger_width:0.08")
+BAD_ARM = (
+    "model:franka_panda/panda.urdf,arm_joints:[panda_joint1,panda_joint9],"
+    "grasp_link:panda_grasptarget,fingers:[{joint:panda_finger_joint1,open:0.04}],finger_links:[panda_leftfinger,panda_rightfinger],"
+    "neutral_pose:[0,0],max_finger_width:0.08"
+)
 # (entry point, what, arguments after BASE (placeholders filled by _fill), a fragment of the one line)
 TRAIN = [
     ("unknown key", ["algo.lrr=1"], "algo.lrr=1: unknown key 'lrr'; algo has _target_, name, gamma"),
-    ("new key of an open node", ["cameras=wrist_depth", "model=cnn", "env.camera.width=48"],
-     "env.camera.width=48: unknown key 'width'; env.camera has mount, modality "
-     "(a new key of env.camera: +env.camera.width=48)"),
+    (
+        "new key of an open node",
+        ["cameras=wrist_depth", "model=cnn", "env.camera.width=48"],
+        "env.camera.width=48: unknown key 'width'; env.camera has mount, modality "
+        "(a new key of env.camera: +env.camera.width=48)",
+    ),
     ("wrong type", ["algo.lr=abc"], "algo.lr=abc: Value 'abc' of type 'str' could not be converted"),
-    ("unknown group option", ["collector=bogus"],
-     "collector=bogus: no such option; collector is one of process, ray, single"),
-    ("unknown objects option", ["objects=random_urdfs_tset"],
-     "objects=random_urdfs_tset: no such option; objects is one of cube, primitives"),
+    (
+        "unknown group option",
+        ["collector=bogus"],
+        "collector=bogus: no such option; collector is one of process, ray, single",
+    ),
+    (
+        "unknown objects option",
+        ["objects=random_urdfs_tset"],
+        "objects=random_urdfs_tset: no such option; objects is one of cube, primitives",
+    ),
     ("no frames", ["total_frames=0"], "total_frames=0: must be > 0"),
     ("negative frames", ["total_frames=-5"], "total_frames=-5: must be > 0"),
     ("negative workers", ["collector.num_workers=-1"], "collector.num_workers=-1: must be >= 0"),
     ("no envs per worker", ["collector.envs_per_worker=0"], "collector.envs_per_worker=0: must be >= 1"),
-    ("minibatch larger than a batch", ["algo.minibatch_size=4096"],
-     "algo.minibatch_size=4096: must be between 1"),
+    (
+        "minibatch larger than a batch",
+        ["algo.minibatch_size=4096"],
+        "algo.minibatch_size=4096: must be between 1",
+    ),
     ("minibatch 0", ["algo.minibatch_size=0"], "algo.minibatch_size=0: must be between 1"),
     ("no epochs", ["algo.epochs=0"], "algo.epochs=0: must be >= 1"),
     ("zero learning rate", ["algo.lr=0"], "algo.lr=0.0: must be > 0"),
     ("negative learning rate", ["algo.lr=-0.001"], "algo.lr=-0.001: must be > 0"),
-    ("a zero KL target for the adaptive rate", ["algo.desired_kl=0"],
-     "algo.desired_kl=0.0: must be > 0 or null"),
+    (
+        "a zero KL target for the adaptive rate",
+        ["algo.desired_kl=0"],
+        "algo.desired_kl=0.0: must be > 0 or null",
+    ),
     ("no substeps", ["env.substeps=0"], "env: substeps must be a positive integer, got 0"),
     ("unknown control mode", ["env.control_mode=fly"], "env: unknown control_mode 'fly'; valid modes"),
     ("no hidden layers", ["model.hidden_sizes=[]"], "model.hidden_sizes=[]: must be a non-empty list"),
-    ("unknown action distribution", ["model.distribution=beta"],
-     "model.distribution='beta': must be tanh_normal or normal"),
+    (
+        "unknown action distribution",
+        ["model.distribution=beta"],
+        "model.distribution='beta': must be tanh_normal or normal",
+    ),
     ("a camera policy without a camera", ["model=cnn"], "model='cnn': needs a camera (e.g. cameras="),
     ("a state policy with a camera", ["cameras=wrist_depth"], "model='mlp': must be cnn with a camera"),
-    ("fine-tuning from nowhere", ["algo.init_from={root}/nowhere.pt"],
-     "nowhere.pt: missing checkpoint"),
-    ("fine-tuning a camera policy without its camera", ["algo.init_from={student}"],
-     "env.camera={'mount': 'wrist'"),
-    ("fine-tuning a policy of another model", ["algo.init_from={run}", "model.hidden_sizes=[32]"],
-     "its policy does not fit this run's model"),
-    ("a negative critic warm-up", ["algo.critic_warmup_frames=-1"],
-     "algo.critic_warmup_frames=-1: must be >= 0"),
-    ("a teacher for a state policy", ["algo.teacher={teacher}"],
-     "needs a camera (e.g. cameras=wrist_depth)"),
+    ("fine-tuning from nowhere", ["algo.init_from={root}/nowhere.pt"], "nowhere.pt: missing checkpoint"),
+    (
+        "fine-tuning a camera policy without its camera",
+        ["algo.init_from={student}"],
+        "env.camera={'mount': 'wrist'",
+    ),
+    (
+        "fine-tuning a policy of another model",
+        ["algo.init_from={run}", "model.hidden_sizes=[32]"],
+        "its policy does not fit this run's model",
+    ),
+    (
+        "a negative critic warm-up",
+        ["algo.critic_warmup_frames=-1"],
+        "algo.critic_warmup_frames=-1: must be >= 0",
+    ),
+    ("a teacher for a state policy", ["algo.teacher={teacher}"], "needs a camera (e.g. cameras=wrist_depth)"),
     ("a negative teacher weight", ["algo.teacher_coeff=-1"], "algo.teacher_coeff=-1.0: must be >= 0"),
-    ("a teacher of another control mode", ["experiment=grasp_vision_finetune", "algo.teacher={teacher}",
-                                           "env.control_mode=ee_delta", "algo.init_from=null"],
-     "it reads 49 state values, this env's privileged state has 45"),
-    ("unknown reward weight", ["env.reward_weights={lfit:3}"],
-     "env: unknown reward weight 'lfit' (env.reward_weights); weights: reach, grasp, lift, success"),
-    ("unknown image pooling", ["cameras=wrist_depth", "model=cnn", "model.pooling=max"],
-     "model.pooling='max': must be one of flat, keypoints"),
-    ("a stride too few", ["cameras=wrist_depth", "model=cnn", "model.strides=[4,2]"],
-     "model.strides=[4, 2]: needs one entry per layer of model.channels=[16, 32, 32]"),
-    ("a camera inside the robot", ["cameras=fixed_depth", "model=cnn", "+env.camera.eye=[0,0,0.3]"],
-     "camera.eye=[0.0, 0.0, 0.3] (the world frame): inside the robot's link panda_link1"),
-    ("inverted randomization range", ["env.randomization={object_mass:[1.0,0.5]}"],
-     "'object_mass': low (1.0) is greater than high (0.5)"),
-    ("negative randomization range", ["randomization={object_mass:[-1.0,0.5]}"],
-     "'object_mass': range [-1.0, 0.5] is outside the allowed"),
-    ("own objects: nothing matches", ["objects={paths:[{root}/nowhere/*.obj]}"],
-     "nowhere/*.obj' matches no .urdf or .obj file"),
+    (
+        "a teacher of another control mode",
+        [
+            "experiment=grasp_vision_finetune",
+            "algo.teacher={teacher}",
+            "env.control_mode=ee_delta",
+            "algo.init_from=null",
+        ],
+        "it reads 49 state values, this env's privileged state has 45",
+    ),
+    (
+        "unknown reward weight",
+        ["env.reward_weights={lfit:3}"],
+        "env: unknown reward weight 'lfit' (env.reward_weights); weights: reach, grasp, lift, success",
+    ),
+    (
+        "unknown image pooling",
+        ["cameras=wrist_depth", "model=cnn", "model.pooling=max"],
+        "model.pooling='max': must be one of flat, keypoints",
+    ),
+    (
+        "a stride too few",
+        ["cameras=wrist_depth", "model=cnn", "model.strides=[4,2]"],
+        "model.strides=[4, 2]: needs one entry per layer of model.channels=[16, 32, 32]",
+    ),
+    (
+        "a camera inside the robot",
+        ["cameras=fixed_depth", "model=cnn", "+env.camera.eye=[0,0,0.3]"],
+        "camera.eye=[0.0, 0.0, 0.3] (the world frame): inside the robot's link panda_link1",
+    ),
+    (
+        "inverted randomization range",
+        ["env.randomization={object_mass:[1.0,0.5]}"],
+        "'object_mass': low (1.0) is greater than high (0.5)",
+    ),
+    (
+        "negative randomization range",
+        ["randomization={object_mass:[-1.0,0.5]}"],
+        "'object_mass': range [-1.0, 0.5] is outside the allowed",
+    ),
+    (
+        "own objects: nothing matches",
+        ["objects={paths:[{root}/nowhere/*.obj]}"],
+        "nowhere/*.obj' matches no .urdf or .obj file",
+    ),
     ("own objects: not a mesh", ["env.objects={paths:[{notamesh}]}"], "has no usable vertices"),
-    ("unknown robot option", ["robot=ur5"],
-     "robot=ur5: no such option; robot is one of kuka_iiwa, panda, xarm6"),
-    ("own arm: a joint not in the model", [f"robot={{{BAD_ARM}}}"],
-     "env: robot.arm_joints: 'panda_joint9' is not a movable joint of "),
-    ("own arm: a required key missing", ["robot={model:{root}/nowhere/arm.urdf}"],
-     "env: robot.arm_joints: missing; a robot needs model, arm_joints"),
-    ("ADR parameter without a nominal value",
-     ["randomization=adr", "~env.randomization.adr.params.object_mass.nominal"],
-     "randomization adr parameter 'object_mass': needs ['nominal']"),
-    ("ADR parameter without limits",
-     ["randomization=adr", "~env.randomization.adr.params.finger_force.limits"],
-     "randomization adr parameter 'finger_force': needs ['limits']"),
-    ("ADR limits that exclude the nominal value",
-     ["randomization=adr", "env.randomization.adr.params.object_mass.limits=[0.2,1.0]"],
-     "'object_mass': limits [0.2, 1.0] exclude the nominal value 0.1"),
-    ("ADR step 0", ["randomization=adr", "env.randomization.adr.params.gravity_z.step=0"],
-     "randomization adr parameter 'gravity_z': step must be > 0, got 0.0"),
-    ("ADR threshold above 1", ["randomization=adr", "env.randomization.adr.high_threshold=1.5"],
-     "randomization adr.high_threshold=1.5: must be in [0, 1]"),
-    ("ADR low threshold not below the high one",
-     ["randomization=adr", "env.randomization.adr.low_threshold=0.9"],
-     "randomization adr.low_threshold=0.9: must be below high_threshold (0.7)"),
-    ("ADR buffer of 0", ["randomization=adr", "env.randomization.adr.buffer_size=0"],
-     "randomization adr.buffer_size=0: must be an integer >= 1"),
+    (
+        "unknown robot option",
+        ["robot=ur5"],
+        "robot=ur5: no such option; robot is one of kuka_iiwa, panda, xarm6",
+    ),
+    (
+        "own arm: a joint not in the model",
+        [f"robot={{{BAD_ARM}}}"],
+        "env: robot.arm_joints: 'panda_joint9' is not a movable joint of ",
+    ),
+    (
+        "own arm: a required key missing",
+        ["robot={model:{root}/nowhere/arm.urdf}"],
+        "env: robot.arm_joints: missing; a robot needs model, arm_joints",
+    ),
+    (
+        "ADR parameter without a nominal value",
+        ["randomization=adr", "~env.randomization.adr.params.object_mass.nominal"],
+        "randomization adr parameter 'object_mass': needs ['nominal']",
+    ),
+    (
+        "ADR parameter without limits",
+        ["randomization=adr", "~env.randomization.adr.params.finger_force.limits"],
+        "randomization adr parameter 'finger_force': needs ['limits']",
+    ),
+    (
+        "ADR limits that exclude the nominal value",
+        ["randomization=adr", "env.randomization.adr.params.object_mass.limits=[0.2,1.0]"],
+        "'object_mass': limits [0.2, 1.0] exclude the nominal value 0.1",
+    ),
+    (
+        "ADR step 0",
+        ["randomization=adr", "env.randomization.adr.params.gravity_z.step=0"],
+        "randomization adr parameter 'gravity_z': step must be > 0, got 0.0",
+    ),
+    (
+        "ADR threshold above 1",
+        ["randomization=adr", "env.randomization.adr.high_threshold=1.5"],
+        "randomization adr.high_threshold=1.5: must be in [0, 1]",
+    ),
+    (
+        "ADR low threshold not below the high one",
+        ["randomization=adr", "env.randomization.adr.low_threshold=0.9"],
+        "randomization adr.low_threshold=0.9: must be below high_threshold (0.7)",
+    ),
+    (
+        "ADR buffer of 0",
+        ["randomization=adr", "env.randomization.adr.buffer_size=0"],
+        "randomization adr.buffer_size=0: must be an integer >= 1",
+    ),
     ("CUDA on a machine without it", ["device=cuda"], "device='cuda': CUDA is not available"),
     ("no eval episodes", ["eval.episodes=0"], "eval.episodes=0: must be >= 1"),
-    ("unknown evaluation randomization", ["eval.randomization=defualt"],
-     "eval.randomization='defualt': unknown randomization preset 'defualt'; valid presets: none, default"),
+    (
+        "unknown evaluation randomization",
+        ["eval.randomization=defualt"],
+        "eval.randomization='defualt': unknown randomization preset 'defualt'; valid presets: none, default",
+    ),
     ("keep no checkpoints", ["checkpoint.keep_last=0"], "checkpoint.keep_last=0: must be >= 1"),
     ("resume a missing path", ["resume={root}/nowhere"], "nowhere: no such file or directory"),
     ("resume a directory without checkpoints", ["resume={empty}"], "no checkpoints:"),
     ("resume a truncated checkpoint", ["resume={truncated}"], "unreadable checkpoint:"),
     ("resume a file that is not a checkpoint", ["resume={foreign}"], "unreadable checkpoint:"),
-    ("resume with another model", ["resume={run}", "model.hidden_sizes=[32]"],
-     "cannot change on resume: model.hidden_sizes: the checkpoint has [64, 64], the command line [32]"),
-    ("resume with another algorithm setting", ["resume={run}", "algo.gamma=0.5"],
-     "cannot change on resume: algo.gamma"),
+    (
+        "resume with another model",
+        ["resume={run}", "model.hidden_sizes=[32]"],
+        "cannot change on resume: model.hidden_sizes: the checkpoint has [64, 64], the command line [32]",
+    ),
+    (
+        "resume with another algorithm setting",
+        ["resume={run}", "algo.gamma=0.5"],
+        "cannot change on resume: algo.gamma",
+    ),
     ("a fresh run into a run dir with checkpoints", ["hydra.run.dir={run}"], "already holds checkpoints"),
     ("an unwritable output directory", ["hydra.run.dir={unwritable}"], "cannot create the run directory"),
     ("demonstrations: a missing file", ["algo.demos={root}/no_demos"], "no_demos: no such file or directory"),
-    ("demonstrations of another control mode", ["algo.demos={foreign_demos}"],
-     "recorded with control_mode='joint_delta', this run has 'ee_delta'"),
-    ("demonstrations of no episode", ["algo.demos={empty_demos}"],
-     "holds no demonstrations (0 episodes kept)"),
+    (
+        "demonstrations of another control mode",
+        ["algo.demos={foreign_demos}"],
+        "recorded with control_mode='joint_delta', this run has 'ee_delta'",
+    ),
+    (
+        "demonstrations of no episode",
+        ["algo.demos={empty_demos}"],
+        "holds no demonstrations (0 episodes kept)",
+    ),
     ("a demonstration decay above 1", ["algo.demo_decay=1.5"], "algo.demo_decay=1.5: must be in (0, 1]"),
     ("a demonstration decay of 0", ["algo.demo_decay=0"], "algo.demo_decay=0.0: must be in (0, 1]"),
     ("a negative demonstration weight", ["algo.demo_coeff=-1"], "algo.demo_coeff=-1.0: must be >= 0"),
     ("a negative curiosity coefficient", ["algo.rnd_coeff=-0.5"], "algo.rnd_coeff=-0.5: must be >= 0"),
     ("pre-training without demonstrations", ["algo.bc_epochs=5"], "algo.bc_epochs=5: needs algo.demos="),
     ("a negative seed", ["seed=-1"], "seed=-1: must be an integer in [0, 2**32)"),
-    ("an experiment name that leaves the outputs folder", ["experiment_name=../escaped"],
-     "experiment_name='../escaped': must be one folder name"),
-    ("an absolute experiment name", ["experiment_name=/tmp/escaped"],
-     "experiment_name='/tmp/escaped': must be one folder name"),
-    ("an unknown critic loss", ["algo.loss_critic_type=l3"],
-     "algo.loss_critic_type='l3': must be l1, l2 or smooth_l1"),
+    (
+        "an experiment name that leaves the outputs folder",
+        ["experiment_name=../escaped"],
+        "experiment_name='../escaped': must be one folder name",
+    ),
+    (
+        "an absolute experiment name",
+        ["experiment_name=/tmp/escaped"],
+        "experiment_name='/tmp/escaped': must be one folder name",
+    ),
+    (
+        "an unknown critic loss",
+        ["algo.loss_critic_type=l3"],
+        "algo.loss_critic_type='l3': must be l1, l2 or smooth_l1",
+    ),
     ("a clip range of 2", ["algo.clip_epsilon=2"], "algo.clip_epsilon=2.0: must be in (0, 1)"),
     ("an infinite learning rate", ["algo.lr=inf"], "algo.lr=inf: must be finite"),
     ("a KL target of 0", ["algo.target_kl=0"], "algo.target_kl=0.0: must be > 0 or null"),
-    ("a negative final learning-rate fraction", ["algo.min_lr_frac=-1"],
-     "algo.min_lr_frac=-1.0: must be in [0, 1]"),
+    (
+        "a negative final learning-rate fraction",
+        ["algo.min_lr_frac=-1"],
+        "algo.min_lr_frac=-1.0: must be in [0, 1]",
+    ),
     ("no observation clip", ["model.obs_clip=0"], "model.obs_clip=0.0: must be > 0"),
-    ("resume a policy file", [f"resume={ROOT}/policies/grasp_ppo.pt"],
-     "is a policy file (no training state to continue)"),
+    (
+        "resume a policy file",
+        [f"resume={ROOT}/policies/grasp_ppo.pt"],
+        "is a policy file (no training state to continue)",
+    ),
     ("an unknown algorithm", ["algo=dqn"], "algo=dqn: no such option; algo is one of distill, ppo, sac"),
     ("a seed above numpy's", ["seed=4294967296"], "seed=4294967296: must be an integer in [0, 2**32)"),
-    ("resume a checkpoint of a newer format", ["resume={newer}"],
-     f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)"),
-    ("fine-tuning from a checkpoint of a newer format", ["algo.init_from={newer}"],
-     f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)"),
-    ("demonstrations without their frames", ["algo.demos={frameless_demos}"],
-     "frames is missing (its demos.json came without the transitions"),
-    ("a tracking server that does not answer",
-     ["logger=mlflow", "logger.tracking_uri=http://127.0.0.1:{closed_port}"],
-     "no tracking server answers (Connection refused; waited up to 5 s)"),
-    ("own objects: a mesh of zero volume", ["env.objects={paths:[{flat}]}"],
-     "flat.obj has zero volume (its vertices lie on one plane or line)"),
+    (
+        "resume a checkpoint of a newer format",
+        ["resume={newer}"],
+        f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)",
+    ),
+    (
+        "fine-tuning from a checkpoint of a newer format",
+        ["algo.init_from={newer}"],
+        f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)",
+    ),
+    (
+        "demonstrations without their frames",
+        ["algo.demos={frameless_demos}"],
+        "frames is missing (its demos.json came without the transitions",
+    ),
+    (
+        "a tracking server that does not answer",
+        ["logger=mlflow", "logger.tracking_uri=http://127.0.0.1:{closed_port}"],
+        "no tracking server answers (Connection refused; waited up to 5 s)",
+    ),
+    (
+        "own objects: a mesh of zero volume",
+        ["env.objects={paths:[{flat}]}"],
+        "flat.obj has zero volume (its vertices lie on one plane or line)",
+    ),
 ]
 EVAL = [
-    ("unknown objects option (a typo of random_urdfs_test)", ["objects=random_urdfs_tset"],
-     "objects=random_urdfs_tset: no such option; objects is one of cube, primitives"),
-    ("unknown randomization option", ["randomization=widee"],
-     "randomization=widee: no such option; randomization is one of adr, adr_objects, default, none, wide"),
-    ("own objects: nothing matches", ["objects={paths:[{root}/nowhere/*.obj]}"],
-     "nowhere/*.obj' matches no .urdf or .obj file"),
+    (
+        "unknown objects option (a typo of random_urdfs_test)",
+        ["objects=random_urdfs_tset"],
+        "objects=random_urdfs_tset: no such option; objects is one of cube, primitives",
+    ),
+    (
+        "unknown randomization option",
+        ["randomization=widee"],
+        "randomization=widee: no such option; randomization is one of adr, adr_objects, default, none, wide",
+    ),
+    (
+        "own objects: nothing matches",
+        ["objects={paths:[{root}/nowhere/*.obj]}"],
+        "nowhere/*.obj' matches no .urdf or .obj file",
+    ),
     ("own objects: not a mesh", ["objects={paths:[{notamesh}]}"], "notamesh.obj has no usable vertices"),
-    ("own objects: not a mesh file (training's spelling)", ["env.objects={paths:[{notes}]}"],
-     "notes.txt' matches no .urdf or .obj file"),
+    (
+        "own objects: not a mesh file (training's spelling)",
+        ["env.objects={paths:[{notes}]}"],
+        "notes.txt' matches no .urdf or .obj file",
+    ),
     ("unknown key", ["episdoes=5"], "episdoes=5: unknown key 'episdoes'; the config has policy, ckpt"),
     ("wrong type", ["episodes=abc"], "episodes=abc: Value 'abc' of type 'str' could not be converted"),
     ("no episodes", ["episodes=0"], "episodes=0: must be at least 1"),
@@ -273,33 +421,66 @@ EVAL = [
     ("truncated checkpoint", ["ckpt={truncated}"], "corrupt checkpoint: "),
     ("unknown env keyword", ["env.grip=1"], "env.grip: unknown key 'grip'; env has _target_, control_mode"),
     ("env the checkpoint cannot act in", ["env.control_mode=joint_delta"], "action layout mismatch"),
-    ("a checkpoint of another arm", ["robot=kuka_iiwa"],
-     "was trained on the robot 'panda' and the env has the robot 'kuka_iiwa': a policy does not"),
-    ("unknown video format", ["video=true", "video_format=avi"],
-     "video_format=avi: must be auto, gif or mp4"),
+    (
+        "a checkpoint of another arm",
+        ["robot=kuka_iiwa"],
+        "was trained on the robot 'panda' and the env has the robot 'kuka_iiwa': a policy does not",
+    ),
+    (
+        "unknown video format",
+        ["video=true", "video_format=avi"],
+        "video_format=avi: must be auto, gif or mp4",
+    ),
     ("an unwritable output directory", ["out_dir={unwritable}"], "cannot write the evaluation to"),
-    ("unknown visual option (a typo of heldout)", ["visual=heldoutt"],
-     "visual=heldoutt: no such option; visual is one of default, heldout, none, repaint, wide"),
-    ("unknown cameras option", ["cameras=wrist"],
-     "cameras=wrist: no such option; cameras is one of fixed_depth"),
-    ("a camera policy in an env without a camera", ["ckpt={student}", "cameras=none"],
-     "is a camera policy (depth [1, 64, 64] + 29 state values) and the env has no camera (env.camera=null)"),
-    ("a state policy in an env with a camera", ["cameras=wrist_depth"],
-     "is a state policy (45 state values) and the env has a camera (env.camera={mount: wrist, "),
-    ("a camera policy given other images", ["ckpt={student}", "cameras=wrist_rgb"],
-     "image mismatch: checkpoint reads depth [1, 64, 64], env gives rgb [3, 64, 64]"),
+    (
+        "unknown visual option (a typo of heldout)",
+        ["visual=heldoutt"],
+        "visual=heldoutt: no such option; visual is one of default, heldout, none, repaint, wide",
+    ),
+    (
+        "unknown cameras option",
+        ["cameras=wrist"],
+        "cameras=wrist: no such option; cameras is one of fixed_depth",
+    ),
+    (
+        "a camera policy in an env without a camera",
+        ["ckpt={student}", "cameras=none"],
+        "is a camera policy (depth [1, 64, 64] + 29 state values) and the env has no camera "
+        "(env.camera=null)",
+    ),
+    (
+        "a state policy in an env with a camera",
+        ["cameras=wrist_depth"],
+        "is a state policy (45 state values) and the env has a camera (env.camera={mount: wrist, ",
+    ),
+    (
+        "a camera policy given other images",
+        ["ckpt={student}", "cameras=wrist_rgb"],
+        "image mismatch: checkpoint reads depth [1, 64, 64], env gives rgb [3, 64, 64]",
+    ),
     ("unknown camera key", ["ckpt={student}", "env.camera.fvo=60"], "camera: unknown key 'fvo'; valid keys"),
-    ("a teacher for a state policy", ["teacher={teacher}"],
-     "only a camera policy is compared with a teacher, this is a state policy"),
+    (
+        "a teacher for a state policy",
+        ["teacher={teacher}"],
+        "only a camera policy is compared with a teacher, this is a state policy",
+    ),
     ("a missing teacher", ["ckpt={student}", "teacher={root}/nowhere.pt"], "nowhere.pt: missing checkpoint"),
-    ("the checkpoint's teacher is gone", ["ckpt={orphan}"],
-     "teacher=auto: the checkpoint's teacher"),
-    ("a teacher of another control mode", ["ckpt={student}", "teacher={run}"],
-     "env.control_mode='ee_delta' in the teacher, 'joint_delta' here"),
-    ("a camera policy as the teacher", ["ckpt={student}", "teacher={student}"],
-     "the teacher must be a state policy"),
-    ("a checkpoint of a newer format", ["ckpt={newer}"],
-     f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)"),
+    ("the checkpoint's teacher is gone", ["ckpt={orphan}"], "teacher=auto: the checkpoint's teacher"),
+    (
+        "a teacher of another control mode",
+        ["ckpt={student}", "teacher={run}"],
+        "env.control_mode='ee_delta' in the teacher, 'joint_delta' here",
+    ),
+    (
+        "a camera policy as the teacher",
+        ["ckpt={student}", "teacher={student}"],
+        "the teacher must be a state policy",
+    ),
+    (
+        "a checkpoint of a newer format",
+        ["ckpt={newer}"],
+        f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)",
+    ),
     ("a name with a path", ["name=../x"], "name='../x': must be one folder name (no '/', '..' or absolute"),
     ("an absolute name", ["name=/tmp/x"], "name='/tmp/x': must be one folder name"),
     ("own objects: a mesh of zero volume", ["objects={paths:[{flat}]}"], "flat.obj has zero volume"),
@@ -307,71 +488,125 @@ EVAL = [
 EXPORT = [
     ("unknown format", ["format=tflite"], "format=tflite: must be one of torchscript, onnx, pt2 or all"),
     ("an unwritable output path", ["out={unwritable}/policy.pt"], "cannot write "),
-    ("a file name for another format", ["format=pt2", "out={root}/policy.onnx"],
-     "a pt2 file must end in .pt2"),
+    (
+        "a file name for another format",
+        ["format=pt2", "out={root}/policy.onnx"],
+        "a pt2 file must end in .pt2",
+    ),
     ("nothing to verify on", ["verify_obs=0"], "verify_obs=0: must be at least 1 (or verify=false)"),
     ("negative tolerance", ["tolerance=-1"], "tolerance=-1.0: must be >= 0"),
     ("missing checkpoint", ["ckpt={root}/nowhere.pt"], "missing checkpoint: "),
     ("a file that is not a checkpoint", ["ckpt={foreign}"], "corrupt checkpoint: "),
     ("unknown checkpoint kind", ["ckpt_kind=worst"], "ckpt_kind=worst: must be one of best, last"),
     ("unknown key", ["formatt=onnx"], "formatt=onnx: unknown key 'formatt'; the config has ckpt"),
-    ("a camera checkpoint whose env gives other images", ["ckpt={mismatched}"],
-     "image mismatch: checkpoint reads rgb [3, 64, 64], env gives depth [1, 64, 64]"),
-    ("a checkpoint of a newer format", ["ckpt={newer}"],
-     f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)"),
+    (
+        "a camera checkpoint whose env gives other images",
+        ["ckpt={mismatched}"],
+        "image mismatch: checkpoint reads rgb [3, 64, 64], env gives depth [1, 64, 64]",
+    ),
+    (
+        "a checkpoint of a newer format",
+        ["ckpt={newer}"],
+        f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)",
+    ),
 ]
 ENJOY = [
     ("no episodes", ["episodes=0"], "episodes=0: must be at least 1"),
     ("negative speed", ["speed=-1"], "speed=-1.0: must be at least 0"),
     ("unknown render mode", ["render=vr"], "render=vr: must be human or none"),
-    ("unknown objects option", ["objects=random_urdfs_tset"],
-     "objects=random_urdfs_tset: no such option; objects is one of cube"),
-    ("own objects: nothing matches", ["objects={paths:[{root}/nowhere/*.obj]}"],
-     "matches no .urdf or .obj file"),
+    (
+        "unknown objects option",
+        ["objects=random_urdfs_tset"],
+        "objects=random_urdfs_tset: no such option; objects is one of cube",
+    ),
+    (
+        "own objects: nothing matches",
+        ["objects={paths:[{root}/nowhere/*.obj]}"],
+        "matches no .urdf or .obj file",
+    ),
     ("missing checkpoint", ["ckpt={root}/nowhere.pt"], "missing checkpoint: "),
     ("unknown key", ["episdoes=5"], "episdoes=5: unknown key 'episdoes'"),
     ("unknown visual option", ["visual=heldoutt"], "visual=heldoutt: no such option; visual is one of"),
-    ("a camera policy in an env without a camera", ["ckpt={student}", "cameras=none"],
-     "is a camera policy (depth [1, 64, 64] + 29 state values) and the env has no camera"),
-    ("a checkpoint of another arm", ["robot=xarm6"], "was trained on the robot 'panda' and the env has the "
-     "robot 'xarm6'"),
-    ("a checkpoint of a newer format", ["ckpt={newer}"],
-     f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)"),
+    (
+        "a camera policy in an env without a camera",
+        ["ckpt={student}", "cameras=none"],
+        "is a camera policy (depth [1, 64, 64] + 29 state values) and the env has no camera",
+    ),
+    (
+        "a checkpoint of another arm",
+        ["robot=xarm6"],
+        "was trained on the robot 'panda' and the env has the robot 'xarm6'",
+    ),
+    (
+        "a checkpoint of a newer format",
+        ["ckpt={newer}"],
+        f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)",
+    ),
 ]
 SWEEP = [
-    ("unknown sweep", ["sweep=bogus"],
-     "sweep=bogus: no such option; sweep is one of grasp_ppo, grasp_ppo_refine, grasp_ppo_speed, smoke"),
+    (
+        "unknown sweep",
+        ["sweep=bogus"],
+        "sweep=bogus: no such option; sweep is one of grasp_ppo, grasp_ppo_refine, grasp_ppo_speed, smoke",
+    ),
     ("unknown sweep key", ["sweep.n_trial=3"], "sweep.n_trial=3: unknown key 'n_trial'; sweep has"),
     ("no trials", ["sweep.n_trials=0"], "sweep.n_trials=0: must be >= 1"),
-    ("a metric training does not report", ["sweep.metric=accuracy"],
-     "sweep.metric=accuracy: must be one of success_rate, mean_reward"),
+    (
+        "a metric training does not report",
+        ["sweep.metric=accuracy"],
+        "sweep.metric=accuracy: must be one of success_rate, mean_reward",
+    ),
     ("unknown direction", ["sweep.direction=up"], "sweep.direction=up: must be one of maximize, minimize"),
     ("unknown sampler", ["sweep.sampler.name=grid"], "sweep.sampler.name=grid: must be one of tpe"),
     ("unknown training key", ["algo.lrr=1"], "algo.lrr=1: unknown key 'lrr'; algo has"),
     ("bad training value", ["algo.lr=-1"], "a trial's training config: algo.lr=-1.0: must be > 0"),
-    ("a parameter naming no training key", ["+sweep.params.algo.lrr={type:float,low:0.1,high:0.2}"],
-     "sweep.params: algo.lrr=0.1: unknown key 'lrr'"),
-    ("unknown distribution", ["sweep.params.algo.lr={type:gauss}"],
-     "sweep.params.algo.lr: type must be float, int or categorical"),
-    ("own objects: nothing matches", ["objects={paths:[{root}/nowhere/*.obj]}"],
-     "a trial's env: object path"),
+    (
+        "a parameter naming no training key",
+        ["+sweep.params.algo.lrr={type:float,low:0.1,high:0.2}"],
+        "sweep.params: algo.lrr=0.1: unknown key 'lrr'",
+    ),
+    (
+        "unknown distribution",
+        ["sweep.params.algo.lr={type:gauss}"],
+        "sweep.params.algo.lr: type must be float, int or categorical",
+    ),
+    (
+        "own objects: nothing matches",
+        ["objects={paths:[{root}/nowhere/*.obj]}"],
+        "a trial's env: object path",
+    ),
     ("an unwritable study directory", ["sweep.root_dir={unwritable}"], "cannot create"),
     ("a summary of no study", ["--summary"], "no study to summarize: "),
-    ("a study name with a path", ["sweep.study_name=../x"],
-     "sweep.study_name='../x': must be one folder name (no '/', '..' or absolute path)"),
+    (
+        "a study name with a path",
+        ["sweep.study_name=../x"],
+        "sweep.study_name='../x': must be one folder name (no '/', '..' or absolute path)",
+    ),
     ("an absolute study name", ["sweep.study_name=/tmp/x"], "sweep.study_name='/tmp/x': must be one folder"),
-    ("a storage inside a file", ["sweep.storage={unwritable}/journal.log"],
-     "a_file/out/journal.log: cannot open "),
-    ("a database in a missing folder", ["sweep.storage=sqlite:///{root}/nowhere/study.db"],
-     "nowhere/study.db: cannot open "),
+    (
+        "a storage inside a file",
+        ["sweep.storage={unwritable}/journal.log"],
+        "a_file/out/journal.log: cannot open ",
+    ),
+    (
+        "a database in a missing folder",
+        ["sweep.storage=sqlite:///{root}/nowhere/study.db"],
+        "nowhere/study.db: cannot open ",
+    ),
 ]
 DEMO = [
     ("no episodes", ["--episodes", "0"], "--episodes 0: must be at least 1"),
     ("wrong type", ["--episodes", "abc"], "argument --episodes: invalid int value: 'abc'"),
-    ("unknown randomization preset", ["--randomization", "widee"],
-     "--randomization widee: unknown randomization preset 'widee'; valid presets: none, default, wide"),
-    ("unknown object set", ["--objects", "random_urdfs_tset"],
-     "--objects random_urdfs_tset: unknown object set 'random_urdfs_tset'; valid sets: cube"),
+    (
+        "unknown randomization preset",
+        ["--randomization", "widee"],
+        "--randomization widee: unknown randomization preset 'widee'; valid presets: none, default, wide",
+    ),
+    (
+        "unknown object set",
+        ["--objects", "random_urdfs_tset"],
+        "--objects random_urdfs_tset: unknown object set 'random_urdfs_tset'; valid sets: cube",
+    ),
     ("an unwritable output directory", ["--out", "{unwritable}"], "cannot write there"),
     ("negative seed", ["--seed", "-1"], "--seed -1: must be at least 0"),
     ("unknown flag", ["--bogus"], "unrecognized arguments: --bogus"),
@@ -379,36 +614,66 @@ DEMO = [
 DEMOS = [
     ("no episodes", ["episodes=0"], "episodes=0: must be at least 1"),
     ("keep neither", ["keep=some"], "keep=some: must be success or all"),
-    ("the expert in another control mode", ["env.control_mode=joint_delta"],
-     "env.control_mode=joint_delta: the scripted expert acts in ee_delta"),
+    (
+        "the expert in another control mode",
+        ["env.control_mode=joint_delta"],
+        "env.control_mode=joint_delta: the scripted expert acts in ee_delta",
+    ),
     ("a missing policy checkpoint", ["policy={root}/nowhere.pt"], "nowhere.pt: missing checkpoint"),
     ("unknown objects option", ["objects=random_urdfs_tset"], "objects=random_urdfs_tset: no such option"),
     ("an unwritable output directory", ["out={unwritable}"], "cannot write there"),
-    ("a policy checkpoint of a newer format", ["policy={newer}"],
-     f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)"),
+    (
+        "a policy checkpoint of a newer format",
+        ["policy={newer}"],
+        f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)",
+    ),
 ]
 TRAIN_SAC = [
-    ("no gradient steps", ["algo.utd_ratio=0"],
-     "algo.utd_ratio=0.0: must be > 0 (gradient steps per env frame)"),
-    ("a buffer smaller than a minibatch", ["algo.buffer_frames=100"],
-     "algo.buffer_frames=100: must be >= algo.batch_size (256): the buffer must hold a minibatch"),
-    ("demonstrations as the whole minibatch", ["algo.demo_ratio=1"],
-     "algo.demo_ratio=1.0: must be in (0, 1)"),
+    (
+        "no gradient steps",
+        ["algo.utd_ratio=0"],
+        "algo.utd_ratio=0.0: must be > 0 (gradient steps per env frame)",
+    ),
+    (
+        "a buffer smaller than a minibatch",
+        ["algo.buffer_frames=100"],
+        "algo.buffer_frames=100: must be >= algo.batch_size (256): the buffer must hold a minibatch",
+    ),
+    (
+        "demonstrations as the whole minibatch",
+        ["algo.demo_ratio=1"],
+        "algo.demo_ratio=1.0: must be in (0, 1)",
+    ),
     ("a negative image shift", ["algo.image_shift=-1"], "algo.image_shift=-1: must be >= 0 (pixels)"),
-    ("an image replay buffer larger than the memory", ["cameras=wrist_depth", "model=cnn",
-                                                        "algo.buffer_frames=1000000000"],
-     "algo.buffer_frames=1,000,000,000: the image replay buffer would take 15"),
-    ("no time for a batch", ["collector.worker_timeout_s=0"],
-     "collector.worker_timeout_s=0.0: must be > 0 (seconds a batch may take)"),
+    (
+        "an image replay buffer larger than the memory",
+        ["cameras=wrist_depth", "model=cnn", "algo.buffer_frames=1000000000"],
+        "algo.buffer_frames=1,000,000,000: the image replay buffer would take 15",
+    ),
+    (
+        "no time for a batch",
+        ["collector.worker_timeout_s=0"],
+        "collector.worker_timeout_s=0.0: must be > 0 (seconds a batch may take)",
+    ),
 ]
 REPORT = [
     ("no bootstrap resamples", ["--reps", "0"], "--reps 0: must be at least 1 (bootstrap resamples)"),
 ]
-CASES = [(entry, *case) for entry, cases in (("train", TRAIN), ("train_sac", TRAIN_SAC), ("eval", EVAL),
-                                              ("export", EXPORT),
-                                              ("enjoy", ENJOY), ("sweep", SWEEP), ("demo", DEMO),
-                                              ("demos", DEMOS), ("report", REPORT))
-         for case in cases]
+CASES = [
+    (entry, *case)
+    for entry, cases in (
+        ("train", TRAIN),
+        ("train_sac", TRAIN_SAC),
+        ("eval", EVAL),
+        ("export", EXPORT),
+        ("enjoy", ENJOY),
+        ("sweep", SWEEP),
+        ("demo", DEMO),
+        ("demos", DEMOS),
+        ("report", REPORT),
+    )
+    for case in cases
+]
 
 
 def _fill(args: list[str], root: Path, paths: dict[str, str]) -> list[str]:
@@ -435,8 +700,7 @@ def files(tmp_path_factory) -> tuple[Path, dict[str, str]]:
     return root, _files(root)
 
 
-@pytest.mark.parametrize(("entry", "what", "args", "message"), CASES,
-                         ids=[f"{c[0]}: {c[1]}" for c in CASES])
+@pytest.mark.parametrize(("entry", "what", "args", "message"), CASES, ids=[f"{c[0]}: {c[1]}" for c in CASES])
 def test_bad_input_gives_one_line_and_leaves_nothing(files, capsys, entry, what, args, message) -> None:
     root, paths = files
     before = _snapshot(root)
@@ -463,8 +727,10 @@ def test_far_more_workers_than_cores_is_a_warning_not_an_error(caplog, monkeypat
             validate_train(cfg)
         return [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
 
-    assert warnings() == ["collector.num_workers=64 on a machine with 2 cores: each worker gets a fraction "
-                          "of a core (collector.num_workers=2 or fewer is usually fastest)"]
+    assert warnings() == [
+        "collector.num_workers=64 on a machine with 2 cores: each worker gets a fraction "
+        "of a core (collector.num_workers=2 or fewer is usually fastest)"
+    ]
     cfg.collector.num_workers = 4
     assert warnings() == []  # up to twice the cores: no line
 
@@ -474,8 +740,12 @@ def _as_documented(text: str, tmp: str, paths: dict[str, str]) -> str:
     temporary folder, the closed port, the checkout's and the installed packages' folders."""
     port = f"127.0.0.1:{paths['closed_port']}"
     site = str(Path(pybullet_data.getDataPath()).parent)
-    return (text.replace(tmp, "...").replace(port, "127.0.0.1:<closed port>").replace(f"{ROOT}/", "")
-            .replace(site, ".../site-packages"))
+    return (
+        text.replace(tmp, "...")
+        .replace(port, "127.0.0.1:<closed port>")
+        .replace(f"{ROOT}/", "")
+        .replace(site, ".../site-packages")
+    )
 
 
 def _table() -> str:
@@ -494,8 +764,9 @@ def _table() -> str:
                 line = _as_documented(lines[0], tmp, paths).replace("|", "\\|")
                 shown = _as_documented(" ".join(_fill(args, root, paths)), tmp, paths)
                 rows.append((what, f"`{shown}`", code, line))
-            sections.append(f"### `{script}`\n\n" + markdown_table(["input", "arguments", "exit", "message"],
-                                                                    rows))
+            sections.append(
+                f"### `{script}`\n\n" + markdown_table(["input", "arguments", "exit", "message"], rows)
+            )
     return "\n\n".join(sections)
 
 

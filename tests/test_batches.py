@@ -67,8 +67,9 @@ class HangingCollector(RecordingCollector):
 @pytest.mark.parametrize("overlap", [True, False])
 def test_a_hanging_worker_ends_the_wait_with_one_line(overlap: bool) -> None:
     behaviour = torch.nn.Linear(1, 1, bias=False)
-    batches = Batches(HangingCollector(behaviour), torch.nn.Linear(1, 1, bias=False), behaviour, overlap,
-                      timeout_s=0.5)
+    batches = Batches(
+        HangingCollector(behaviour), torch.nn.Linear(1, 1, bias=False), behaviour, overlap, timeout_s=0.5
+    )
     assert next(batches) == 0.0
     started = time.monotonic()
     with pytest.raises(WorkerTimeoutError, match=r"no batch from the workers in 0.5 s: a worker hangs"):

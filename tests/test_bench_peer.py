@@ -28,9 +28,17 @@ def test_sb3_gets_grasp_ppo_settings(peer, train_cfg):
     assert envs == c.num_workers * c.envs_per_worker
     assert envs * kw["n_steps"] == c.num_workers * c.envs_per_worker * c.steps_per_env
     assert (kw["batch_size"], kw["n_epochs"], kw["gamma"], kw["gae_lambda"]) == (
-        a.minibatch_size, a.epochs, a.gamma, a.gae_lambda)
+        a.minibatch_size,
+        a.epochs,
+        a.gamma,
+        a.gae_lambda,
+    )
     assert (kw["clip_range"], kw["ent_coef"], kw["vf_coef"], kw["max_grad_norm"]) == (
-        a.clip_epsilon, a.entropy_coeff, a.critic_coeff, a.max_grad_norm)
+        a.clip_epsilon,
+        a.entropy_coeff,
+        a.critic_coeff,
+        a.max_grad_norm,
+    )
     assert 1.5 * kw["target_kl"] == pytest.approx(a.target_kl)  # SB3 stops at 1.5 x its target_kl
 
     # SB3 takes the keywords as they are; the networks, init std, optimizer and schedule come out as set.
@@ -65,9 +73,16 @@ def test_sb3_gets_grasp_sac_settings(peer, train_cfg):
     # grasp_sac: 8 envs x 16 steps = 128 frames a rollout, x 0.25 = 32 gradient steps, exactly.
     assert kw["gradient_steps"] == a.utd_ratio * envs * c.steps_per_env == 64  # grasp_sac: 0.5 steps a frame
     assert (kw["batch_size"], kw["buffer_size"], kw["learning_starts"]) == (
-        a.batch_size, a.buffer_frames, a.learning_starts)
+        a.batch_size,
+        a.buffer_frames,
+        a.learning_starts,
+    )
     assert (kw["gamma"], kw["tau"], kw["learning_rate"], kw["target_update_interval"]) == (
-        a.gamma, a.tau, a.actor_lr, 1)
+        a.gamma,
+        a.tau,
+        a.actor_lr,
+        1,
+    )
 
     venv = VecNormalize(DummyVecEnv([lambda: gym.make("Pendulum-v1")] * envs), **peer["vecnorm_kwargs"](cfg))
     model = sb3.SAC("MlpPolicy", venv, seed=0, device="cpu", **kw)
@@ -98,16 +113,32 @@ def test_sac_ratio_rounds_to_whole_steps(peer, train_cfg):
 
 
 def test_sac_unmatched_names_the_differences(peer, train_cfg):
-    notes = "\n".join(peer["unmatched"](train_cfg(
-        "experiment=grasp_sac", "algo.critic_lr=1e-3", "algo.actor_every=2")))
-    named_all = ("state-independent std", "model.min_std=0.05", "algo.critic_lr=0.001", "layer_norm",
-                 "critic_activation=relu", "algo.actor_every=2", "uniformly at random", "collector.overlap")
+    notes = "\n".join(
+        peer["unmatched"](train_cfg("experiment=grasp_sac", "algo.critic_lr=1e-3", "algo.actor_every=2"))
+    )
+    named_all = (
+        "state-independent std",
+        "model.min_std=0.05",
+        "algo.critic_lr=0.001",
+        "layer_norm",
+        "critic_activation=relu",
+        "algo.actor_every=2",
+        "uniformly at random",
+        "collector.overlap",
+    )
     for named in named_all:
         assert named in notes, named
     assert "target_kl" not in notes  # PPO's notes stay PPO's
-    plain = "\n".join(peer["unmatched"](train_cfg(
-        "experiment=grasp_sac", "algo.critic_layer_norm=false", "algo.critic_activation=tanh",
-        "collector.overlap=false")))
+    plain = "\n".join(
+        peer["unmatched"](
+            train_cfg(
+                "experiment=grasp_sac",
+                "algo.critic_layer_norm=false",
+                "algo.critic_activation=tanh",
+                "collector.overlap=false",
+            )
+        )
+    )
     for absent in ("LayerNorm", "critic_activation", "learning rates", "actor_every", "overlap"):
         assert absent not in plain, absent
 

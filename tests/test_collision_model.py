@@ -14,8 +14,10 @@ PRIMITIVE_LINKS = set(PRIMITIVES["panda"])
 def _shapes(env) -> dict[str, set[int]]:
     """Link name -> the geometry types of its collision shapes."""
     c, robot = env.client, env.robot
-    return {name: {shape[2] for shape in c.getCollisionShapeData(robot.body, j)}
-            for j, name in robot.link_names.items()}
+    return {
+        name: {shape[2] for shape in c.getCollisionShapeData(robot.body, j)}
+        for j, name in robot.link_names.items()
+    }
 
 
 def test_primitive_model_replaces_only_the_hand_and_finger_meshes(make_env):
@@ -24,11 +26,14 @@ def test_primitive_model_replaces_only_the_hand_and_finger_meshes(make_env):
     for name in PRIMITIVE_LINKS:
         assert before[name] == {pybullet.GEOM_MESH}
         assert after[name] <= {pybullet.GEOM_BOX, pybullet.GEOM_CAPSULE} and after[name]
-    assert {n: s for n, s in after.items() if n not in PRIMITIVE_LINKS} == \
-        {n: s for n, s in before.items() if n not in PRIMITIVE_LINKS}
+    assert {n: s for n, s in after.items() if n not in PRIMITIVE_LINKS} == {
+        n: s for n, s in before.items() if n not in PRIMITIVE_LINKS
+    }
     for j in mesh.robot.link_names:  # the links weigh and move as before
-        assert mesh.client.getDynamicsInfo(mesh.robot.body, j)[:3] == \
-            primitive.client.getDynamicsInfo(primitive.robot.body, j)[:3]
+        assert (
+            mesh.client.getDynamicsInfo(mesh.robot.body, j)[:3]
+            == primitive.client.getDynamicsInfo(primitive.robot.body, j)[:3]
+        )
 
 
 def test_primitive_model_with_a_wrist_camera_keeps_both_variants(make_env):

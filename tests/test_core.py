@@ -17,15 +17,34 @@ from rlgrasp.train.loop import Trainer, TrainingError
 
 #: One in-process worker, tiny networks, a few batches: PPO's and SAC's.
 SMALL = {
-    "ppo": ["experiment=smoke", "collector=single", "collector.envs_per_worker=2",
-            "collector.steps_per_env=32", "algo.minibatch_size=32"],
-    "sac": ["experiment=grasp_sac", "collector=single", "collector.envs_per_worker=2",
-            "collector.steps_per_env=32", "algo.learning_starts=64", "algo.batch_size=32",
-            "algo.critic_hidden_sizes=[16,16]"],
+    "ppo": [
+        "experiment=smoke",
+        "collector=single",
+        "collector.envs_per_worker=2",
+        "collector.steps_per_env=32",
+        "algo.minibatch_size=32",
+    ],
+    "sac": [
+        "experiment=grasp_sac",
+        "collector=single",
+        "collector.envs_per_worker=2",
+        "collector.steps_per_env=32",
+        "algo.learning_starts=64",
+        "algo.batch_size=32",
+        "algo.critic_hidden_sizes=[16,16]",
+    ],
 }
-COMMON = ["logger=none", "model.hidden_sizes=[16,16]", "total_frames=320", "eval.interval_frames=0",
-          "eval.episodes=1", "eval.final_episodes=1", "eval.num_envs=1", "checkpoint.interval_frames=0",
-          "device=cpu"]
+COMMON = [
+    "logger=none",
+    "model.hidden_sizes=[16,16]",
+    "total_frames=320",
+    "eval.interval_frames=0",
+    "eval.episodes=1",
+    "eval.final_episodes=1",
+    "eval.num_envs=1",
+    "checkpoint.interval_frames=0",
+    "device=cpu",
+]
 
 
 def _trainer(algo: str, run: Path) -> Trainer:

@@ -122,8 +122,13 @@ def test_the_demo_weight_decays_as_configured(recorded: Path) -> None:
 
 def test_ppo_with_demos_logs_checkpoints_and_resumes(recorded: Path, tmp_path: Path) -> None:
     run = tmp_path / "run"
-    args = [*SMOKE_IN_PROCESS, f"algo.demos={recorded}", "algo.bc_epochs=1", "algo.demo_decay=0.5",
-            f"paths.output_dir={run}"]
+    args = [
+        *SMOKE_IN_PROCESS,
+        f"algo.demos={recorded}",
+        "algo.bc_epochs=1",
+        "algo.demo_decay=0.5",
+        f"paths.output_dir={run}",
+    ]
     cfg, resumed = prepare_run(compose_train(args))
     trainer = Trainer(cfg, resumed=resumed)
     seen = logged_scalars(trainer)
@@ -143,8 +148,13 @@ def test_ppo_with_demos_logs_checkpoints_and_resumes(recorded: Path, tmp_path: P
 
 
 def test_behaviour_cloning_alone_starts_no_workers(recorded: Path, tmp_path: Path) -> None:
-    args = [*SMOKE_IN_PROCESS, f"algo.demos={recorded}", "algo.bc_epochs=1", "algo.bc_only=true",
-            f"paths.output_dir={tmp_path / 'bc'}"]
+    args = [
+        *SMOKE_IN_PROCESS,
+        f"algo.demos={recorded}",
+        "algo.bc_epochs=1",
+        "algo.bc_only=true",
+        f"paths.output_dir={tmp_path / 'bc'}",
+    ]
     trainer = Trainer(prepare_run(compose_train(args))[0])
     trainer.run()
     assert trainer.frames == 0 and (tmp_path / "bc" / "checkpoints" / "last.pt").is_file()
@@ -153,8 +163,12 @@ def test_behaviour_cloning_alone_starts_no_workers(recorded: Path, tmp_path: Pat
 def test_a_moved_file_is_refused_before_training(recorded: Path, tmp_path: Path) -> None:
     moved = tmp_path / "moved"
     shutil.copytree(recorded, moved / "demos")
-    args = [*SMOKE_IN_PROCESS, "env.control_mode=joint_delta", f"algo.demos={moved}",
-            f"paths.output_dir={tmp_path / 'r'}"]
+    args = [
+        *SMOKE_IN_PROCESS,
+        "env.control_mode=joint_delta",
+        f"algo.demos={moved}",
+        f"paths.output_dir={tmp_path / 'r'}",
+    ]
     with pytest.raises(DemoError, match="control_mode='ee_delta', this run has 'joint_delta'"):
         cfg = prepare_run(compose_train(args))[0]
         demos_for(cfg.algo.demos, env_factory(cfg.env), cfg.env)

@@ -33,8 +33,14 @@ def test_no_display_is_one_line_not_a_crash(tmp_path: Path) -> None:
     assert no_display_reason({"WAYLAND_DISPLAY": "wayland-0"}, "linux") is None
     assert no_display_reason({}, "darwin") is None
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
-    done = subprocess.run([sys.executable, str(ROOT / "scripts" / "enjoy.py"), "policy=scripted"],
-                          capture_output=True, text=True, env=env, cwd=tmp_path, timeout=120)
+    done = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "enjoy.py"), "policy=scripted"],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=tmp_path,
+        timeout=120,
+    )
     if sys.platform.startswith("linux"):
         assert done.returncode == 1 and "Traceback" not in done.stderr
         assert our_lines(done.stderr) == [no_display_reason({}, "linux")]
@@ -67,11 +73,14 @@ def test_play_prints_each_outcome_like_evaluation(tmp_path: Path) -> None:
     run = make_run(tmp_path)
     lines: list[str] = []
     slept: list[float] = []
-    results = play(_cfg(f"ckpt={run}", "episodes=2", "seed=5", "render=none"), out=lines.append,
-                   sleep=slept.append)
+    results = play(
+        _cfg(f"ckpt={run}", "episodes=2", "seed=5", "render=none"), out=lines.append, sleep=slept.append
+    )
     assert lines[0].startswith("playing 2 episodes of ") and lines[0].endswith("at 20 Hz")
-    assert [ln.split(":")[0] for ln in lines[1:3]] == ["episode 1/2 (seed 5, " + results[0].object + ")",
-                                                       "episode 2/2 (seed 6, " + results[1].object + ")"]
+    assert [ln.split(":")[0] for ln in lines[1:3]] == [
+        "episode 1/2 (seed 5, " + results[0].object + ")",
+        "episode 2/2 (seed 6, " + results[1].object + ")",
+    ]
     assert all(("success at step" in ln) or ("failed: " in ln) for ln in lines[1:3])
     assert lines[-1] == f"success {sum(r.success_at_end for r in results)}/2"
     assert slept  # paced to 20 Hz (the sleep was handed the waits)
@@ -102,13 +111,18 @@ def test_the_gui_opens_on_a_virtual_display(tmp_path: Path, camera: bool) -> Non
 
     ckpt = make_student(tmp_path) if camera else ROOT / "policies" / "grasp_ppo.pt"
     display = f":{90 + camera + os.getpid() % 50 * 2}"
-    xvfb = subprocess.Popen(["Xvfb", display, "-screen", "0", "1024x768x24"], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
+    xvfb = subprocess.Popen(
+        ["Xvfb", display, "-screen", "0", "1024x768x24"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+    )
     try:
         time.sleep(1.0)
         done = subprocess.run(
             [sys.executable, str(ROOT / "scripts" / "enjoy.py"), f"ckpt={ckpt}", "episodes=1", "speed=0"],
-            capture_output=True, text=True, cwd=tmp_path, timeout=300, env={**os.environ, "DISPLAY": display},
+            capture_output=True,
+            text=True,
+            cwd=tmp_path,
+            timeout=300,
+            env={**os.environ, "DISPLAY": display},
         )
     finally:
         xvfb.terminate()

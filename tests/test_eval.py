@@ -245,8 +245,18 @@ def test_held_out_objects_and_randomization_are_named(tmp_path: Path) -> None:
     """A figure on other objects or conditions than training's says so, in metrics.json and in the
     summary (as the console header does); one under training's own conditions says that too."""
     run = make_run(tmp_path)
-    m = evaluate(_cfg(f"ckpt={run}", "objects=primitives", "randomization=wide", "episodes=2",
-                      "video=false", "plots=false", "tensorboard=false", "name=held_out"))
+    m = evaluate(
+        _cfg(
+            f"ckpt={run}",
+            "objects=primitives",
+            "randomization=wide",
+            "episodes=2",
+            "video=false",
+            "plots=false",
+            "tensorboard=false",
+            "name=held_out",
+        )
+    )
     assert m["objects_label"] == "primitives (trained on cube)"
     assert m["randomization_label"] == "wide (trained on default)"
     assert m["checkpoint"]["train_objects"] == "cube" and m["config"]["env"]["objects"] == "primitives"
@@ -254,8 +264,11 @@ def test_held_out_objects_and_randomization_are_named(tmp_path: Path) -> None:
     assert summary.startswith("# Evaluation held_out\n")
     assert "| objects " in summary and "primitives (trained on cube)" in summary
     assert "wide (trained on default)" in summary
-    same = evaluate(_cfg(f"ckpt={run}", "episodes=1", "video=false", "plots=false", "tensorboard=false",
-                         "name=as_trained"))
+    same = evaluate(
+        _cfg(
+            f"ckpt={run}", "episodes=1", "video=false", "plots=false", "tensorboard=false", "name=as_trained"
+        )
+    )
     assert same["objects_label"] == "cube (as trained)"
     assert same["randomization_label"] == "default (as trained)"
 

@@ -46,8 +46,9 @@ def _perturb(actor: torch.nn.Module) -> None:
             p.add_(torch.randn_like(p) * 0.3)
 
 
-@pytest.mark.parametrize("parts", [SMOKE, pytest.param(CAMERA, marks=pytest.mark.slow)], indirect=True,
-                         ids=["state", "camera"])
+@pytest.mark.parametrize(
+    "parts", [SMOKE, pytest.param(CAMERA, marks=pytest.mark.slow)], indirect=True, ids=["state", "camera"]
+)
 def test_the_background_process_gives_the_learners_numbers_for_the_submitted_weights(parts) -> None:
     parts, evaluator = parts
     actor, episodes = parts.actor, evaluator.episodes

@@ -87,9 +87,18 @@ def test_report_cli_errors_and_folder_expansion(tmp_path: Path, capsys) -> None:
 
 
 #: A real training run in seconds: 16 frames in the learner's process, then a 3-episode final evaluation.
-TINY = ("collector=single", "collector.envs_per_worker=1", "collector.steps_per_env=16",
-        "algo.minibatch_size=16", "total_frames=16", "eval.episodes=1", "eval.final_episodes=3",
-        "eval.num_envs=3", "experiment_name=tiny", "seed=5")
+TINY = (
+    "collector=single",
+    "collector.envs_per_worker=1",
+    "collector.steps_per_env=16",
+    "algo.minibatch_size=16",
+    "total_frames=16",
+    "eval.episodes=1",
+    "eval.final_episodes=3",
+    "eval.num_envs=3",
+    "experiment_name=tiny",
+    "seed=5",
+)
 
 
 def test_report_takes_trainings_final_evaluation_unless_rlgrasp_eval_has_one(tmp_path: Path, train_cfg):
@@ -109,7 +118,9 @@ def test_report_takes_trainings_final_evaluation_unless_rlgrasp_eval_has_one(tmp
     assert sources == ("training", "rlgrasp-eval", None)
     wins = round(last_eval["success_rate"] * 3)
     assert trained.evaluation["success_at_end"] == {
-        "rate": last_eval["success_rate"], "successes": wins, "episodes": 3,
+        "rate": last_eval["success_rate"],
+        "successes": wins,
+        "episodes": 3,
         "ci95": list(wilson_interval(wins, 3)),
     }
     assert (trained.experiment, trained.seed) == ("tiny", 5)

@@ -33,8 +33,10 @@ def test_eval_runs_to_the_end_and_exits(tmp_path: Path, script) -> None:
 @pytest.mark.parametrize(
     ("sig", "to_group"),
     # `kill <pid>`, a scheduler: the main process only; its pool must end too
-    [pytest.param(signal.SIGTERM, False, marks=pytest.mark.full),
-     (signal.SIGINT, True)],  # Ctrl-C at a terminal: the whole group gets it
+    [
+        pytest.param(signal.SIGTERM, False, marks=pytest.mark.full),
+        (signal.SIGINT, True),
+    ],  # Ctrl-C at a terminal: the whole group gets it
     ids=["sigterm-to-main", "sigint-to-group"],
 )
 def test_eval_stopped_midway_exits_and_leaves_nothing(
@@ -84,11 +86,16 @@ def test_sweep_stops_on_sigterm_then_the_same_command_finishes(tmp_path: Path, s
     is resumable; the same command then runs to the end. Training hands the SIGTERM on: kept to itself,
     the trial would end early as COMPLETE with a half-trained value and the sweep go on."""
     root = tmp_path / "sweeps"
-    cmd = ["experiment=smoke", "sweep=smoke", f"sweep.root_dir={root}", "sweep.n_trials=1",
-           "sweep.plots=false",
-           "sweep.trial.total_frames=8192",  # the signal lands mid-run however fast the collector runs
-           # the smoke experiment's process collector (one worker, 512-frame batches), not collector=single
-           'sweep.overrides=["collector.num_workers=1","eval.interval_frames=512","eval.episodes=4","logger=none"]']
+    cmd = [
+        "experiment=smoke",
+        "sweep=smoke",
+        f"sweep.root_dir={root}",
+        "sweep.n_trials=1",
+        "sweep.plots=false",
+        "sweep.trial.total_frames=8192",  # the signal lands mid-run however fast the collector runs
+        # the smoke experiment's process collector (one worker, 512-frame batches), not collector=single
+        'sweep.overrides=["collector.num_workers=1","eval.interval_frames=512","eval.episodes=4","logger=none"]',
+    ]
     first = script("sweep", *cmd)
     log = root / "smoke" / "trials" / "0000" / "train.log"
     wait_for(lambda: True if log.is_file() and "frames 512/" in log.read_text() else None, 240, first)
@@ -125,9 +132,17 @@ def test_training_stopped_mid_background_evaluation_exits_and_leaves_nothing(
     to the main process (`kill`), or to the whole group (a scheduler); the run saves its checkpoint and
     exits 0 within a timeout, and its evaluation process and workers end with it."""
     run = tmp_path / "run"
-    started = script("train", "experiment=smoke", "collector.steps_per_env=64", "eval.background=true",
-                     "eval.interval_frames=256", "eval.episodes=400", "total_frames=100000", "logger=none",
-                     f"hydra.run.dir={run}")
+    started = script(
+        "train",
+        "experiment=smoke",
+        "collector.steps_per_env=64",
+        "eval.background=true",
+        "eval.interval_frames=256",
+        "eval.episodes=400",
+        "total_frames=100000",
+        "logger=none",
+        f"hydra.run.dir={run}",
+    )
     evaluating = "periodic evaluations run in process"
     wait_for(lambda: True if evaluating in started.output() else None, 600, started)  # a loaded machine
     time.sleep(5)  # 400 episodes take minutes: the learner collects, then waits for them at 512 frames
@@ -161,8 +176,9 @@ def test_eval_killed_with_sigkill_leaves_no_worker(tmp_path: Path, script) -> No
 
 def _demos_working(tmp_path: Path, script):
     started = script("demos", "episodes=100", f"out={tmp_path / 'demos_out'}", "workers=2")
-    workers = wait_for(lambda: w if len(w := in_group(started.pid, "spawn_main")) == 2 else None, 180,
-                       started)
+    workers = wait_for(
+        lambda: w if len(w := in_group(started.pid, "spawn_main")) == 2 else None, 180, started
+    )
     wait_for(lambda: re.search(r"\d+/100 episodes", started.output()), 180, started)  # mid-recording
     return started, workers
 

@@ -50,8 +50,11 @@ def test_every_format_matches_the_checkpoint_on_1000_observations(tmp_path: Path
         assert r["max_abs_action_diff"] <= 1e-5, (fmt, r)
         meta = json.loads(Path(r["json"]).read_text())
         assert meta["verification"]["observations"] == 1000 and meta["verification"]["tolerance"] == 1e-5
-        assert meta["inputs"] == [{"name": "observation", "env_key": None, "dtype": "float32",
-                                   "shape": meta["input"]["shape"]}] and "camera" not in meta
+        assert (
+            meta["inputs"]
+            == [{"name": "observation", "env_key": None, "dtype": "float32", "shape": meta["input"]["shape"]}]
+            and "camera" not in meta
+        )
         obs_dim, act_dim = meta["input"]["shape"][1], meta["output"]["shape"][1]
         stops = sorted(stop for _, stop in meta["observation_layout"].values())
         assert stops[-1] == obs_dim and len(meta["action_meaning"]) == act_dim
@@ -83,8 +86,9 @@ def test_bounds_other_than_unit_box_match_tanh_normal() -> None:
 
     from rlgrasp.models.mlp import RunningNorm, build_actor
 
-    model = OmegaConf.create({"hidden_sizes": [8], "activation": "tanh", "min_std": 0.05,
-                              "init_log_std": -0.5})
+    model = OmegaConf.create(
+        {"hidden_sizes": [8], "activation": "tanh", "min_std": 0.05, "init_log_std": -0.5}
+    )
     low, high = torch.tensor([-2.0, 0.0, -0.5]), torch.tensor([2.0, 1.0, 3.0])
     norm = RunningNorm(5)
     norm.update(torch.randn(100, 5) * 3 + 1)
@@ -106,8 +110,15 @@ def test_a_gaussian_policy_exports_its_mean_clipped_to_the_bounds() -> None:
 
     from rlgrasp.models.mlp import RunningNorm, build_actor
 
-    model = OmegaConf.create({"hidden_sizes": [8], "activation": "tanh", "min_std": 0.05,
-                              "init_log_std": -0.5, "distribution": "normal"})
+    model = OmegaConf.create(
+        {
+            "hidden_sizes": [8],
+            "activation": "tanh",
+            "min_std": 0.05,
+            "init_log_std": -0.5,
+            "distribution": "normal",
+        }
+    )
     low, high = torch.tensor([-2.0, 0.0, -0.5]), torch.tensor([2.0, 1.0, 3.0])
     actor = build_actor(RunningNorm(5), 5, low, high, model, deterministic=True)
     for p in actor.parameters():
@@ -139,8 +150,14 @@ def test_cli_and_example_run_without_training_code(tmp_path: Path) -> None:
     imports neither rlgrasp's training code nor TorchRL."""
     run = make_run(tmp_path)
     out = tmp_path / "deploy" / "grasp.pt2"
-    cli = [sys.executable, str(ROOT / "scripts" / "export.py"), f"ckpt={run}", "format=pt2", f"out={out}",
-           "verify_obs=100"]
+    cli = [
+        sys.executable,
+        str(ROOT / "scripts" / "export.py"),
+        f"ckpt={run}",
+        "format=pt2",
+        f"out={out}",
+        "verify_obs=100",
+    ]
     done = subprocess.run(cli, capture_output=True, text=True, cwd=tmp_path, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
     assert out.is_file() and Path(f"{out}.json").is_file()
@@ -150,8 +167,9 @@ def test_cli_and_example_run_without_training_code(tmp_path: Path) -> None:
         "bad = [m for m in sys.modules if m.startswith(('rlgrasp.train', 'rlgrasp.evaluation', 'torchrl'))];"
         "assert not bad, bad"
     )
-    done = subprocess.run([sys.executable, "-c", probe, str(out)], capture_output=True, text=True,
-                          cwd=tmp_path, timeout=300)
+    done = subprocess.run(
+        [sys.executable, "-c", probe, str(out)], capture_output=True, text=True, cwd=tmp_path, timeout=300
+    )
     assert done.returncode == 0, done.stderr[-2000:]
     assert "success " in done.stdout and "/2 " in done.stdout
     bad = subprocess.run([*cli[:2], "ckpt=/no/such/run"], capture_output=True, text=True, cwd=tmp_path)
@@ -167,8 +185,10 @@ def test_output_paths(tmp_path: Path) -> None:
     assert output_paths("pt2", None, loose) == {"pt2": tmp_path / "export" / "policy.pt2"}
     assert output_paths("pt2", str(tmp_path / "a.pt2"), loose) == {"pt2": tmp_path / "a.pt2"}
     every = output_paths("all", str(tmp_path / "out"), loose)
-    assert every == {f: tmp_path / "out" / f"policy{ext}" for f, ext in
-                     (("torchscript", ".pt"), ("onnx", ".onnx"), ("pt2", ".pt2"))}
+    assert every == {
+        f: tmp_path / "out" / f"policy{ext}"
+        for f, ext in (("torchscript", ".pt"), ("onnx", ".onnx"), ("pt2", ".pt2"))
+    }
 
 
 def test_a_failed_export_leaves_the_previous_one_and_no_temporary_file(tmp_path: Path, monkeypatch) -> None:

@@ -67,17 +67,25 @@ TEACHER = Path(__file__).resolve().parents[1] / "policies" / "grasp_ppo.pt"
 def test_the_teacher_term_pulls_the_student_towards_its_teacher(train_cfg) -> None:
     """``algo.teacher``: each minibatch's loss gains the squared error to the teacher's action on the
     minibatch's privileged state, weighted coeff * decay**k; its gradient moves the actor alone."""
-    cfg = train_cfg("experiment=grasp_vision_finetune", "logger=none", f"algo.teacher={TEACHER}",
-                    "algo.teacher_coeff=2.0", "algo.teacher_decay=0.5")
+    cfg = train_cfg(
+        "experiment=grasp_vision_finetune",
+        "logger=none",
+        f"algo.teacher={TEACHER}",
+        "algo.teacher_coeff=2.0",
+        "algo.teacher_decay=0.5",
+    )
     trainer = Trainer(cfg)  # starts no worker
     (term,) = [x for x in trainer.algo.learner.extras if isinstance(x, TeacherImitation)]
     assert term.start(TensorDict(), updates=3) == {"charts/teacher_weight": 2.0 * 0.5**3}
     spec, g = trainer.parts.spec, torch.Generator().manual_seed(0)
-    minibatch = TensorDict({
-        "observation": torch.randn(64, spec["obs_dim"], generator=g),
-        "depth": torch.rand(64, 1, 64, 64, generator=g),
-        "privileged": torch.randn(64, spec["privileged_dim"], generator=g),
-    }, [64])
+    minibatch = TensorDict(
+        {
+            "observation": torch.randn(64, spec["obs_dim"], generator=g),
+            "depth": torch.rand(64, 1, 64, 64, generator=g),
+            "privileged": torch.randn(64, spec["privileged_dim"], generator=g),
+        },
+        [64],
+    )
     teacher_before = {k: v.clone() for k, v in term.teacher.state_dict().items()}
     loss, logged = term.loss(minibatch)
     with set_exploration_type(ExplorationType.DETERMINISTIC):

@@ -212,10 +212,16 @@ def test_objects_spelling_reaches_env_objects_in_training_and_evaluation(tmp_pat
     """A dict or list for the `objects` group's name is the env's `objects` value, in training
     (env.objects exists) as in evaluation (env holds only the keywords given: ++ adds them)."""
     own = "objects={paths:[/my/meshes]}"
-    assert rewrite([own, "env.objects=toys"]) == ["objects=cube", "env.objects={paths:[/my/meshes]}",
-                                                  "env.objects=toys"]
+    assert rewrite([own, "env.objects=toys"]) == [
+        "objects=cube",
+        "env.objects={paths:[/my/meshes]}",
+        "env.objects=toys",
+    ]
     assert rewrite([own, "env.max_episode_steps=80", "randomization={preset:wide}"], open_env=True) == [
-        "++env.objects={paths:[/my/meshes]}", "++env.max_episode_steps=80", "randomization={preset:wide}"]
+        "++env.objects={paths:[/my/meshes]}",
+        "++env.max_episode_steps=80",
+        "randomization={preset:wide}",
+    ]
     out = f"paths.output_dir={tmp_path}"
     mixed = compose_train([*rewrite(["objects=[primitives,toys]", "randomization={object_mass:0.2}"]), out])
     assert OmegaConf.to_container(mixed.env.objects) == ["primitives", "toys"]
@@ -234,8 +240,19 @@ def test_evaluating_own_meshes_names_them(tmp_path):
     """rlgrasp-eval with objects={paths:[folder]}, as typed: the episodes use those meshes and the
     summary says which objects (and that the scripted baseline has no training objects)."""
     _box_obj(tmp_path / "small.obj", (0.03, 0.04, 0.06))
-    code = run_entry("eval", ["policy=scripted", f"objects={{paths:[{tmp_path}]}}", "episodes=2",
-                              "video=false", "plots=false", f"outputs_root={tmp_path}", "name=own"], tmp_path)
+    code = run_entry(
+        "eval",
+        [
+            "policy=scripted",
+            f"objects={{paths:[{tmp_path}]}}",
+            "episodes=2",
+            "video=false",
+            "plots=false",
+            f"outputs_root={tmp_path}",
+            "name=own",
+        ],
+        tmp_path,
+    )
     assert code == 0
     out = tmp_path / "eval" / "scripted" / "own"
     metrics = json.loads((out / "metrics.json").read_text())

@@ -43,8 +43,14 @@ def test_success_by_object_worst_first_with_intervals() -> None:
 def test_evaluation_on_an_object_set_names_every_object(tmp_path: Path) -> None:
     """`objects=primitives` reaches the env; every episode names its object and gets one outcome."""
     cfg = compose_eval(
-        ["policy=scripted", "objects=primitives", "episodes=6", "video=false", f"outputs_root={tmp_path}",
-         "name=p"]
+        [
+            "policy=scripted",
+            "objects=primitives",
+            "episodes=6",
+            "video=false",
+            f"outputs_root={tmp_path}",
+            "name=p",
+        ]
     )
     m = evaluate(cfg)
     out = Path(m["output_dir"])

@@ -6,8 +6,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-PROBE = ("import importlib.util, sys; import rlgrasp; import tensordict; "
-         "print(sys.modules.get('pandas', 'absent') is None, importlib.util.find_spec('pandas') is None)")
+PROBE = (
+    "import importlib.util, sys; import rlgrasp; import tensordict; "
+    "print(sys.modules.get('pandas', 'absent') is None, importlib.util.find_spec('pandas') is None)"
+)
 
 
 def _probe(extra_path: Path | None = None) -> str:

@@ -19,7 +19,12 @@ def test_phases_take_inner_phases_out_of_outer_ones_and_read_back() -> None:
     line = phases.line()
     figures = parse_phases(line)
     assert line.startswith("time from launch") and set(figures) == {
-        "total", "start-up", "periodic evaluations", "checkpoints", "other"}
+        "total",
+        "start-up",
+        "periodic evaluations",
+        "checkpoints",
+        "other",
+    }
     assert abs(figures["total"] - sum(v for k, v in figures.items() if k != "total")) < 0.3
 
 

@@ -35,9 +35,11 @@ def test_curves_along_frames_and_minutes(plot, tmp_path):
 
 def test_reads_bench_peer_sides_and_writes_the_figure(plot, tmp_path, monkeypatch):
     peer = tmp_path / "peer_seed0.csv"
-    peer.write_text("side,seed,minutes,frames,eval_success_rate,episodes\n"
-                    "rlgrasp,0,0.5,20480,0.25,32\nrlgrasp,0,1.0,40960,0.5,32\nsb3,0,0.7,20480,0.0,32\n"
-                    "sb3,0,1.4,40960,0.25,32\n")
+    peer.write_text(
+        "side,seed,minutes,frames,eval_success_rate,episodes\n"
+        "rlgrasp,0,0.5,20480,0.25,32\nrlgrasp,0,1.0,40960,0.5,32\nsb3,0,0.7,20480,0.0,32\n"
+        "sb3,0,1.4,40960,0.25,32\n"
+    )
     assert set(plot["read_curves"]([peer])) == {"rlgrasp", "sb3"}
     out = tmp_path / "fig" / "curves.png"
     monkeypatch.setattr("sys.argv", ["plot_learning.py", str(peer), "--out", str(out)])

@@ -27,8 +27,13 @@ def _batch(actor) -> TensorDict:
     done = torch.zeros(ENVS, STEPS, 1, dtype=torch.bool)
     done[:, -1] = True
     td["next"] = TensorDict(
-        {"observation": torch.randn(ENVS, STEPS, OBS_DIM), "reward": reward, "done": done,
-         "terminated": torch.zeros_like(done), "truncated": done.clone()},
+        {
+            "observation": torch.randn(ENVS, STEPS, OBS_DIM),
+            "reward": reward,
+            "done": done,
+            "terminated": torch.zeros_like(done),
+            "truncated": done.clone(),
+        },
         [ENVS, STEPS],
     )
     return td
@@ -78,8 +83,9 @@ def test_gae_runs_once_or_every_epoch(every_epoch: bool, expected_calls: int, mo
     assert metrics["epochs"] == 3.0
 
 
-@pytest.mark.parametrize("every_epoch, distribution", [(True, "tanh_normal"), (False, "tanh_normal"),
-                                                       (False, "normal")])
+@pytest.mark.parametrize(
+    "every_epoch, distribution", [(True, "tanh_normal"), (False, "tanh_normal"), (False, "normal")]
+)
 def test_update_moves_the_policy_towards_higher_reward(every_epoch: bool, distribution: str) -> None:
     learner, actor = _learner(distribution=distribution, epochs=10, lr=1e-2, gae_every_epoch=every_epoch)
     batch = _batch(actor)
@@ -145,8 +151,9 @@ def _at_the_std_floor(
 ) -> tuple[PPOLearner, object]:
     """A learner whose actor's standard deviation sits at its floor (``model.min_std``)."""
     torch.manual_seed(0)
-    model_cfg = OmegaConf.structured(MLPConfig(hidden_sizes=[16, 16], init_log_std=-10.0,
-                                               distribution=distribution))
+    model_cfg = OmegaConf.structured(
+        MLPConfig(hidden_sizes=[16, 16], init_log_std=-10.0, distribution=distribution)
+    )
     algo_cfg = OmegaConf.structured(PPOConfig(minibatch_size=32, target_kl=None))
     actor, critic, norm = build_models(OBS_DIM, -torch.ones(ACT_DIM), torch.ones(ACT_DIM), model_cfg)
     return PPOLearner(actor, critic, norm, algo_cfg, torch.device("cpu"), stale_batches), actor

@@ -64,8 +64,15 @@ def test_evaluation_refuses_and_calls_nothing(tmp_path: Path) -> None:
     from rlgrasp.evaluation.cli import evaluate
 
     victim = tmp_path / "pwned"
-    cfg = compose_config("eval", [f"ckpt={crafted_policy(tmp_path, victim)}", "episodes=1", "video=false",
-                                  f"out_dir={tmp_path / 'eval'}"])
+    cfg = compose_config(
+        "eval",
+        [
+            f"ckpt={crafted_policy(tmp_path, victim)}",
+            "episodes=1",
+            "video=false",
+            f"out_dir={tmp_path / 'eval'}",
+        ],
+    )
     with pytest.raises(EvaluationError) as info:
         evaluate(cfg)
     _refused(info, victim)
@@ -99,8 +106,9 @@ def test_resume_refuses_and_calls_nothing(tmp_path: Path) -> None:
     victim = tmp_path / "pwned"
     run = crafted_run(tmp_path, victim)
     with pytest.raises(CheckpointError) as info:
-        prepare_run(compose_train(["experiment=smoke", "logger=none", f"paths.output_dir={run}",
-                                   f"resume={run}"]))
+        prepare_run(
+            compose_train(["experiment=smoke", "logger=none", f"paths.output_dir={run}", f"resume={run}"])
+        )
     assert "refused" in str(info.value) and not victim.exists()
 
 
@@ -123,8 +131,10 @@ def test_recording_demonstrations_with_a_received_policy_refuses(tmp_path: Path)
     from rlgrasp.demos.cli import DemosInputError, record_demos
 
     victim = tmp_path / "pwned"
-    cfg = compose_config("demos", ["episodes=1", f"out={tmp_path / 'd'}", "workers=1",
-                                   f"policy={crafted_policy(tmp_path, victim)}"])
+    cfg = compose_config(
+        "demos",
+        ["episodes=1", f"out={tmp_path / 'd'}", "workers=1", f"policy={crafted_policy(tmp_path, victim)}"],
+    )
     with pytest.raises(DemosInputError) as info:
         record_demos(cfg)
     _refused(info, victim)
@@ -173,19 +183,32 @@ def _layout() -> dict:
         env.close()
 
 
-@pytest.mark.parametrize(("config", "where"), [
-    ({"env": {"_target_": "builtins.open"}},
-     "config.env._target_='builtins.open' is not a class rlgrasp builds"),
-    ({"env": {"_target_": "rlgrasp.envs.PandaGraspEnv", "robot": [{"x": {"_target_": "os.getcwd"}}]}},
-     "config.env.robot[0].x._target_ would be called"),
-    ({"env": {"_target_": "rlgrasp.envs.PandaGraspEnv", "_args_": ["x"]}},
-     "config.env._args_ would be called"),
-    ({"collector": {"_target_": "shutil.copyfile"}}, "config.collector._target_='shutil.copyfile'"),
-    ({"algo": {"_target_": "rlgrasp.algos.sac.SAC", "demos": {"_partial_": True}}},
-     "config.algo.demos._partial_ would be called"),
-    ({"env": {"_target_": "rlgrasp.envs.PandaGraspEnv", "objects": "${oc.env:HOME}"}},
-     "config.env.objects holds an interpolation"),
-])
+@pytest.mark.parametrize(
+    ("config", "where"),
+    [
+        (
+            {"env": {"_target_": "builtins.open"}},
+            "config.env._target_='builtins.open' is not a class rlgrasp builds",
+        ),
+        (
+            {"env": {"_target_": "rlgrasp.envs.PandaGraspEnv", "robot": [{"x": {"_target_": "os.getcwd"}}]}},
+            "config.env.robot[0].x._target_ would be called",
+        ),
+        (
+            {"env": {"_target_": "rlgrasp.envs.PandaGraspEnv", "_args_": ["x"]}},
+            "config.env._args_ would be called",
+        ),
+        ({"collector": {"_target_": "shutil.copyfile"}}, "config.collector._target_='shutil.copyfile'"),
+        (
+            {"algo": {"_target_": "rlgrasp.algos.sac.SAC", "demos": {"_partial_": True}}},
+            "config.algo.demos._partial_ would be called",
+        ),
+        (
+            {"env": {"_target_": "rlgrasp.envs.PandaGraspEnv", "objects": "${oc.env:HOME}"}},
+            "config.env.objects holds an interpolation",
+        ),
+    ],
+)
 def test_the_allow_list_names_the_key_and_the_target(config: dict, where: str) -> None:
     with pytest.raises(UntrustedConfigError) as info:
         check_received_config(config, "f.pt")

@@ -21,9 +21,20 @@ FRAMES = 4096
 
 @pytest.mark.slow
 def test_sigusr2_requeues_the_job_which_resumes_in_its_dir(tmp_path: Path, script) -> None:
-    sweep = script("train", "-m", "hydra/launcher=local", "experiment=smoke", "seed=0", "resume=auto",
-                   f"paths.root_dir={tmp_path}", f"total_frames={FRAMES}", "checkpoint.interval_frames=1024",
-                   "eval.interval_frames=100000", "logger=none", "collector.num_workers=1")
+    sweep = script(
+        "train",
+        "-m",
+        "hydra/launcher=local",
+        "experiment=smoke",
+        "seed=0",
+        "resume=auto",
+        f"paths.root_dir={tmp_path}",
+        f"total_frames={FRAMES}",
+        "checkpoint.interval_frames=1024",
+        "eval.interval_frames=100000",
+        "logger=none",
+        "collector.num_workers=1",
+    )
     runs = tmp_path / "outputs" / "multirun" / "smoke"
     last = wait_for(lambda: next(runs.glob("*/0/checkpoints/last.pt"), None), 300, sweep)
     job = last.parents[1]
@@ -44,7 +55,11 @@ def test_sigusr2_requeues_the_job_which_resumes_in_its_dir(tmp_path: Path, scrip
     assert "Caught signal SIGUSR2 on" in submitit_log.read_text()
     assert "this job is preempted" in submitit_log.read_text()
     # the requeued start recorded its own Hydra config next to the launch's
-    assert {p.name for p in (job / ".hydra").iterdir()} == {"config.yaml", "hydra.yaml", "overrides.yaml",
-                                                             "resume_1"}
+    assert {p.name for p in (job / ".hydra").iterdir()} == {
+        "config.yaml",
+        "hydra.yaml",
+        "overrides.yaml",
+        "resume_1",
+    }
     assert len(list(runs.iterdir())) == 1 and [p.name for p in runs.glob("*/[0-9]*")] == ["0"]
     assert sweep.left() == []  # neither the controller nor a task nor a collector worker

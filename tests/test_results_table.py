@@ -79,8 +79,9 @@ def copies(tmp_path):
     results = tmp_path / "results.json"
     results.write_text((ROOT / "docs" / "benchmarks" / "results.json").read_text())
     page = tmp_path / "throughput.md"
-    page.write_text("# T\n\nbefore\n\n<!-- results-table: throughput -->\nold table\n"
-                    "<!-- /results-table -->\n\nafter\n")
+    page.write_text(
+        "# T\n\nbefore\n\n<!-- results-table: throughput -->\nold table\n<!-- /results-table -->\n\nafter\n"
+    )
     return results, page
 
 
@@ -99,9 +100,16 @@ def test_record_writes_the_row_and_the_page(results_file, copies, monkeypatch):
     results, page = copies
     before = json.loads(results.read_text())["pages"]
     monkeypatch.setattr(sys, "argv", ["/x/benchmarks/bench_collect.py", "--seconds", "5", "experiment=a b"])
-    row = results_file["record"]("throughput", "collector", "0.80 (800 against 1,000 raw frames/s)", "missed",
-                                 load="alone", results=results, folder=page.parent,
-                                 today=datetime.date(2030, 1, 2))
+    row = results_file["record"](
+        "throughput",
+        "collector",
+        "0.80 (800 against 1,000 raw frames/s)",
+        "missed",
+        load="alone",
+        results=results,
+        folder=page.parent,
+        today=datetime.date(2030, 1, 2),
+    )
     after = json.loads(results.read_text())["pages"]
     written = next(r for r in after["throughput"] if r["id"] == "collector")
     assert written == row
@@ -139,8 +147,11 @@ def test_record_refuses_unknown_rows_and_broken_cells(results_file, copies):
 
 def test_row_spec_checks_the_row_before_a_run(results_file):
     assert results_file["row_spec"]("learning/ppo-5min") == ("learning", "ppo-5min")
-    for bad, says in (("learning", "expected PAGE/ID"), ("learning/", "expected PAGE/ID"),
-                      ("learning/nope", "its rows: ppo-5min")):
+    for bad, says in (
+        ("learning", "expected PAGE/ID"),
+        ("learning/", "expected PAGE/ID"),
+        ("learning/nope", "its rows: ppo-5min"),
+    ):
         with pytest.raises(argparse.ArgumentTypeError, match=says):
             results_file["row_spec"](bad)
 
@@ -155,8 +166,10 @@ def test_a_script_refuses_an_unknown_row_at_start(monkeypatch, capsys):
 
 def test_machine_from_cpuinfo(results_file, tmp_path):
     cpuinfo = tmp_path / "cpuinfo"
-    cpuinfo.write_text("processor\t: 0\nmodel name\t: Intel(R) Xeon(R)  Gold 6230 CPU @ 2.10GHz\n"
-                       "processor\t: 1\nmodel name\t: Intel(R) Xeon(R)  Gold 6230 CPU @ 2.10GHz\n")
+    cpuinfo.write_text(
+        "processor\t: 0\nmodel name\t: Intel(R) Xeon(R)  Gold 6230 CPU @ 2.10GHz\n"
+        "processor\t: 1\nmodel name\t: Intel(R) Xeon(R)  Gold 6230 CPU @ 2.10GHz\n"
+    )
     model = "Intel Xeon Gold 6230 CPU @ 2.10GHz"
     assert results_file["machine"]("shared", cpuinfo, 2) == f"{model}, 2 cores, shared"
     assert results_file["machine"](None, cpuinfo, 4) == f"{model}, 4 cores"
@@ -174,12 +187,16 @@ def test_met_of(results_file):
 def test_bench_learning_composes_its_row():
     b = bench("bench_learning")
     f32_09 = 0.8999999761581421  # 0.9 as TensorBoard's float32 gives it back
-    curves = {1: [(1.0, 40960, 0.5), (5.1, 249856, 0.85)],
-              0: [(1.0, 40960, 0.5), (2.24, 102400, f32_09), (5.0, 270336, 0.97)]}
+    curves = {
+        1: [(1.0, 40960, 0.5), (5.1, 249856, 0.85)],
+        0: [(1.0, 40960, 0.5), (2.24, 102400, f32_09), (5.0, 270336, 0.97)],
+    }
     held_out = [(0, "random_urdfs_test", {"rate": 0.945}), (1, "random_urdfs_test", {"rate": 0.8})]
     text = b["record_text"](curves, held_out, 0.9)
-    assert text == ("first >= 0.9 at 102k / - frames (2.2 / - min); final 0.97 / 0.85; "
-                    "random_urdfs_test 0.945 / 0.800 (seeds 0 / 1)")
+    assert text == (
+        "first >= 0.9 at 102k / - frames (2.2 / - min); final 0.97 / 0.85; "
+        "random_urdfs_test 0.945 / 0.800 (seeds 0 / 1)"
+    )
     assert b["record_text"](curves, [], 0.5).startswith("first >= 0.5 at 41k / 41k frames (1.0 / 1.0 min)")
     met = b["record_met"]
     assert met(curves, held_out, 0.9, None) == "see page"
@@ -191,13 +208,18 @@ def test_bench_learning_composes_its_row():
 
 def test_bench_peer_composes_its_row():
     b = bench("bench_peer")
-    ours = b["summary"]([(2.0, 81920, 0.5, 32), (3.0, 122880, 0.9, 32), (5.0, 270336, 0.92, 100)],
-                        [(1.0, 40960, 900.0), (5.0, 270000, 1000.0)])
-    sb3 = b["summary"]([(4.0, 81920, 0.91, 32), (5.0, 180000, 0.90, 100)],
-                       [(1.0, 20480, 700.0), (5.0, 180000, 800.0)])
+    ours = b["summary"](
+        [(2.0, 81920, 0.5, 32), (3.0, 122880, 0.9, 32), (5.0, 270336, 0.92, 100)],
+        [(1.0, 40960, 900.0), (5.0, 270000, 1000.0)],
+    )
+    sb3 = b["summary"](
+        [(4.0, 81920, 0.91, 32), (5.0, 180000, 0.90, 100)], [(1.0, 20480, 700.0), (5.0, 180000, 800.0)]
+    )
     text = b["record_text"](ours, sb3, 0)
-    assert text == ("1.25x SPS, 1.50x frames/s from launch; first >= 0.9 in 0.75 of SB3's time; "
-                    "final 0.92 against SB3's 0.90 (seed 0)")
+    assert text == (
+        "1.25x SPS, 1.50x frames/s from launch; first >= 0.9 in 0.75 of SB3's time; "
+        "final 0.92 against SB3's 0.90 (seed 0)"
+    )
     met = b["record_met"]
     assert met(ours, sb3, "launch-fps", None) == "see page"
     assert met(ours, sb3, "launch-fps", 2.5) == "missed"
@@ -212,17 +234,28 @@ def test_bench_peer_composes_its_row():
 
 def test_bench_core_expert_env_scale_soak_compose_their_rows():
     assert bench("bench_core")["record_text"]({"shipped": 1363.0}, 2154.0, 2) == (
-        "0.63 (1,363 against 2,154 raw frames/s, medians of 2 rounds)")
+        "0.63 (1,363 against 2,154 raw frames/s, medians of 2 rounds)"
+    )
     assert bench("bench_core")["record_text"]({"a": 1000.0, "b": 1500.0}, 2000.0, 3) == (
-        "a 0.50, b 0.75 of raw (2,000 frames/s, medians of 3 rounds)")
-    cases = [("panda", "cube", "none", 100, 100), ("panda", "cube", "default", 98, 100),
-             ("xarm6", "primitives", "none", 90, 100)]
+        "a 0.50, b 0.75 of raw (2,000 frames/s, medians of 3 rounds)"
+    )
+    cases = [
+        ("panda", "cube", "none", 100, 100),
+        ("panda", "cube", "default", 98, 100),
+        ("xarm6", "primitives", "none", 90, 100),
+    ]
     assert bench("bench_expert")["record_text"](cases) == (
-        "panda cube: none 100/100, default 98/100; xarm6 primitives: none 90/100")
+        "panda cube: none 100/100, default 98/100; xarm6 primitives: none 90/100"
+    )
     assert bench("bench_env")["record_text"]({"ee_delta": 0.641, "joint_delta": 0.72}) == (
-        "0.64 / 0.72 (`ee_delta` / `joint_delta`)")
+        "0.64 / 0.72 (`ee_delta` / `joint_delta`)"
+    )
     assert bench("bench_scale")["record_text"]({"process": 1000.0, "ray": 940.0, "ray_2nodes": 890.0}) == (
-        "ray 0.94, ray_2nodes 0.89 of process's frames/s")
-    rows = [(1, "20.0", 4096, 4096, 0, "ok"), (2, "30.0", 9216, 8192, 1024, "ok"),
-            (3, "25.0", 12288, 8192, 4096, "lost 4096 frames")]
+        "ray 0.94, ray_2nodes 0.89 of process's frames/s"
+    )
+    rows = [
+        (1, "20.0", 4096, 4096, 0, "ok"),
+        (2, "30.0", 9216, 8192, 1024, "ok"),
+        (3, "25.0", 12288, 8192, 4096, "lost 4096 frames"),
+    ]
     assert bench("soak_resume")["soak_text"](rows) == "2 of 3 cycles ok, at most 4,096 frames lost per kill"

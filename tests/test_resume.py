@@ -87,8 +87,11 @@ def test_resume_alone_continues_the_run_as_launched(run: Path) -> None:
 def test_resume_refuses_a_change_of_a_fixed_key_naming_both_values(run: Path) -> None:
     saved = ckpt_lib.load_checkpoint(run)["config"]
     cfg = compose_train([*SMOKE, f"paths.output_dir={run}", "env.control_mode=joint_delta"])
-    with pytest.raises(ConfigError, match=r"env.control_mode: the checkpoint has 'ee_delta', the command "
-                                          r"line 'joint_delta'"):
+    with pytest.raises(
+        ConfigError,
+        match=r"env.control_mode: the checkpoint has 'ee_delta', the command "
+        r"line 'joint_delta'",
+    ):
         merged_config(cfg, saved, {"env.control_mode"})
     cfg = compose_train([*SMOKE, f"paths.output_dir={run}", "randomization=wide"])
     with pytest.raises(ConfigError, match="env.randomization"):
@@ -104,8 +107,11 @@ def test_resume_refuses_a_group_choice_that_equals_the_default(run: Path) -> Non
         cfg = compose_train(overrides)
         changed = command_line_keys(overrides, cfg)
         if arm is None:
-            with pytest.raises(ConfigError, match="^cannot change on resume: env.robot: the checkpoint has "
-                                                  "'kuka_iiwa', the command line 'panda';") as info:
+            with pytest.raises(
+                ConfigError,
+                match="^cannot change on resume: env.robot: the checkpoint has "
+                "'kuka_iiwa', the command line 'panda';",
+            ) as info:
                 merged_config(cfg, saved, changed)
             assert "\n" not in str(info.value)
         else:
@@ -177,16 +183,22 @@ def test_a_truncated_last_falls_back_with_a_warning(tmp_path: Path, run: Path, c
 
 def test_run_dirs_are_unique_per_process_and_name_the_seed(tmp_path: Path) -> None:
     code = "from rlgrasp.rundir import run_dir; print(run_dir(None, 'base', 7))"
-    names = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
-                            check=True).stdout.strip() for _ in range(2)}
+    names = {
+        subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True
+        ).stdout.strip()
+        for _ in range(2)
+    }
     assert len(names) == 2
     assert all(n.startswith("base/") and "_s7_" in n for n in names)
 
 
 def test_a_refused_start_removes_the_folders_it_created_and_nothing_else(tmp_path: Path) -> None:
     (tmp_path / "outputs" / "train" / "other").mkdir(parents=True)  # another experiment's runs
-    for base, gone, kept in (("outputs/train/new", "outputs/train/new", "outputs/train/other"),
-                             ("fresh/train/new", "fresh", "outputs")):
+    for base, gone, kept in (
+        ("outputs/train/new", "outputs/train/new", "outputs/train/other"),
+        ("fresh/train/new", "fresh", "outputs"),
+    ):
         chosen = Path(run_dir(None, str(tmp_path / base), 0))
         (chosen / ".hydra").mkdir(parents=True)  # what Hydra writes before the start is refused
         remove_refused_start(chosen)
@@ -196,8 +208,11 @@ def test_a_refused_start_removes_the_folders_it_created_and_nothing_else(tmp_pat
 def test_resume_auto_picks_the_newest_run_of_the_seed(tmp_path: Path, run: Path) -> None:
     base = tmp_path / "smoke"
     assert "_s0_" in run_dir("auto", str(base), 0)  # nothing yet: a new run
-    for name in ("2026-01-01_00-00-00_s0_aaaaaa", "2026-01-02_00-00-00_s0_bbbbbb",
-                 "2026-01-03_00-00-00_s1_cccccc"):
+    for name in (
+        "2026-01-01_00-00-00_s0_aaaaaa",
+        "2026-01-02_00-00-00_s0_bbbbbb",
+        "2026-01-03_00-00-00_s1_cccccc",
+    ):
         (base / name / "checkpoints").mkdir(parents=True)
         (base / name / "checkpoints" / "last.pt").write_bytes(b"")
     assert run_dir("auto", str(base), 0).endswith("2026-01-02_00-00-00_s0_bbbbbb")
@@ -221,8 +236,15 @@ def test_gym_make_honours_max_episode_steps() -> None:
 # --- through the command line -------------------------------------------------------------------
 def _train(args: list[str], cwd: Path, **kw) -> subprocess.Popen:
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    return subprocess.Popen([sys.executable, str(ROOT / "scripts" / "train.py"), *args], cwd=cwd, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **kw)
+    return subprocess.Popen(
+        [sys.executable, str(ROOT / "scripts" / "train.py"), *args],
+        cwd=cwd,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        **kw,
+    )
 
 
 @pytest.mark.full  # three training processes per signal
@@ -230,8 +252,14 @@ def _train(args: list[str], cwd: Path, **kw) -> subprocess.Popen:
 def test_stop_signal_saves_then_resume_auto_finishes_and_exits(tmp_path: Path, sig: int) -> None:
     """A stop signal saves a checkpoint and exits 0; the same command (resume=auto) continues the run
     to the end; resuming the finished run exits at once (no hang at interpreter exit)."""
-    cmd = [*SMOKE, "resume=auto", f"paths.root_dir={tmp_path}", "total_frames=4096",
-           "checkpoint.interval_frames=100000", "eval.interval_frames=100000"]
+    cmd = [
+        *SMOKE,
+        "resume=auto",
+        f"paths.root_dir={tmp_path}",
+        "total_frames=4096",
+        "checkpoint.interval_frames=100000",
+        "eval.interval_frames=100000",
+    ]
     proc = _train(cmd, tmp_path)
     try:
         runs = tmp_path / "outputs" / "train" / "smoke"
@@ -261,11 +289,20 @@ def test_a_resume_keeps_the_launch_config_in_dot_hydra(tmp_path: Path) -> None:
     """Hydra writes each start's config and overrides; a later start in the run (resume, requeue) goes
     to .hydra/resume_<n>/, so .hydra/ keeps the launch's. A refused resume leaves no resume_<n>."""
     run = tmp_path / "run"
-    tiny = ["collector=single", "collector.envs_per_worker=1", "collector.steps_per_env=16",
-            "algo.minibatch_size=16", "eval.episodes=1", "eval.final_episodes=1", "eval.num_envs=1"]
-    for args, code in (([*SMOKE, *tiny, f"hydra.run.dir={run}", "total_frames=16"], 0),
-                       ([f"resume={run}", "total_frames=32"], 0),
-                       ([f"resume={run}", "algo.gamma=0.5"], 2)):
+    tiny = [
+        "collector=single",
+        "collector.envs_per_worker=1",
+        "collector.steps_per_env=16",
+        "algo.minibatch_size=16",
+        "eval.episodes=1",
+        "eval.final_episodes=1",
+        "eval.num_envs=1",
+    ]
+    for args, code in (
+        ([*SMOKE, *tiny, f"hydra.run.dir={run}", "total_frames=16"], 0),
+        ([f"resume={run}", "total_frames=32"], 0),
+        ([f"resume={run}", "algo.gamma=0.5"], 2),
+    ):
         proc = _train(args, tmp_path)
         out, _ = proc.communicate(timeout=300)
         assert proc.returncode == code and "Traceback" not in out, out[-2000:]
@@ -281,8 +318,23 @@ def test_a_resume_keeps_the_launch_config_in_dot_hydra(tmp_path: Path) -> None:
 @pytest.mark.slow
 def test_soak_three_kill_9_cycles(tmp_path: Path) -> None:
     """benchmarks/soak_resume.py: 3 x (start or resume, random wait, kill -9 of the group), every check."""
-    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "soak_resume.py"), "--cycles", "3",
-                           "--out", str(tmp_path), "--wait", "15", "35"], capture_output=True, text=True,
-                          cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=1800)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            str(ROOT / "benchmarks" / "soak_resume.py"),
+            "--cycles",
+            "3",
+            "--out",
+            str(tmp_path),
+            "--wait",
+            "15",
+            "35",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+        timeout=1800,
+    )
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-2000:]
     assert "PASSED" in proc.stdout

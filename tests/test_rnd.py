@@ -29,8 +29,16 @@ def _batch(obs: torch.Tensor, next_obs: torch.Tensor) -> TensorDict:
     done = torch.zeros(ENVS, STEPS, 1, dtype=torch.bool)
     done[:, -1] = True
     return TensorDict(
-        {"observation": obs, "next": {"observation": next_obs, "reward": torch.zeros(ENVS, STEPS, 1),
-                                      "done": done, "terminated": done.clone(), "truncated": done.clone()}},
+        {
+            "observation": obs,
+            "next": {
+                "observation": next_obs,
+                "reward": torch.zeros(ENVS, STEPS, 1),
+                "done": done,
+                "terminated": done.clone(),
+                "truncated": done.clone(),
+            },
+        },
         [ENVS, STEPS],
     )
 
@@ -115,8 +123,9 @@ def test_a_run_with_rnd_logs_it_checkpoints_its_networks_and_resumes(tmp_path) -
     assert len(seen["charts/intrinsic_reward"]) == 2 and len(seen["losses/rnd_loss"]) == 2
     state = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
     assert torch.equal(state["rnd"]["obs_rms.mean"], trainer.algo.rnd.obs_rms.mean)
-    cfg, resumed = prepare_run(compose_train([*args, f"resume={run}", "total_frames=384"]),
-                               {"resume", "total_frames"})
+    cfg, resumed = prepare_run(
+        compose_train([*args, f"resume={run}", "total_frames=384"]), {"resume", "total_frames"}
+    )
     again = Trainer(cfg, resumed=resumed)
     predictor = {k: v for k, v in state["rnd"].items() if k.startswith("predictor.")}
     assert all(torch.equal(again.algo.rnd.state_dict()[k], v) for k, v in predictor.items())

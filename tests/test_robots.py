@@ -129,8 +129,12 @@ def test_the_robot_randomization_reaches_each_arm(robot, arm_env):
 
 @pytest.mark.parametrize("robot", ARMS)
 def test_a_wrist_camera_rides_on_each_arm(robot, arm_env):
-    env = arm_env(robot, randomization="none", objects="primitives",
-                  camera={"mount": "wrist", "modality": "depth", "width": 32, "height": 32})
+    env = arm_env(
+        robot,
+        randomization="none",
+        objects="primitives",
+        camera={"mount": "wrist", "modality": "depth", "width": 32, "height": 32},
+    )
     obs, _ = env.reset(seed=0)
     depth = obs["depth"]
     assert depth.shape == (1, 32, 32) and np.isfinite(depth).all()
@@ -143,8 +147,11 @@ def test_cameras_see_the_arms_links_as_boxes_and_the_physics_is_unchanged(robot,
     """The render model (``low_poly_meshes: boxes``) boxes every link but the gripper's and leaves
     every collision shape as it is: the arm moves as the arm without a camera does."""
     plain = arm_env(robot, control_mode="joint_delta")
-    seen = arm_env(robot, control_mode="joint_delta", camera={"mount": "fixed", "modality": "depth",
-                                                              "width": 32, "height": 32})
+    seen = arm_env(
+        robot,
+        control_mode="joint_delta",
+        camera={"mount": "fixed", "modality": "depth", "width": 32, "height": 32},
+    )
     shapes = {s[1]: s[2] for s in seen.client.getVisualShapeData(seen.robot.body)}
     keep = {j for j, name in seen.robot.link_names.items() if name in seen.robot.wrist_names}
     assert shapes and all(shape == pybullet.GEOM_BOX for link, shape in shapes.items() if link not in keep)
@@ -222,45 +229,116 @@ def test_a_user_arm_on_the_command_line_reaches_env_robot(train_cfg):
 
 PANDA_FINGERS = [{"joint": f"panda_finger_joint{i}", "open": 0.04} for i in (1, 2)]
 BAD_ARMS = [
-    ("missing model file", {"model": "/tmp/nowhere/arm.urdf"}, FileNotFoundError,
-     "robot.model: model file not found: /tmp/nowhere/arm.urdf"),
-    ("not a model file", {"model": "franka_panda/meshes/collision/hand.obj"}, ValueError,
-     "hand.obj': must be a .urdf or .sdf file"),
-    ("joint not in the model", {"arm_joints": [*PANDA.arm_joints[:6], "panda_joint9"]}, ValueError,
-     "robot.arm_joints: 'panda_joint9' is not a movable joint of .*panda.urdf; its movable joints: "
-     "panda_joint1"),
-    ("grasp link not in the model", {"grasp_link": "panda_tcp"}, ValueError,
-     "robot.grasp_link: 'panda_tcp' is not a link of .*; its links: panda_link1"),
-    ("finger joint not in the model", {"fingers": [{"joint": "panda_finger", "open": 0.04}]}, ValueError,
-     "robot.fingers: 'panda_finger' is not a movable joint"),
-    ("fingers that do not open", {"fingers": [{**f, "open": 0.0, "closed": 0.04} for f in PANDA_FINGERS]},
-     ValueError, "robot.fingers: the finger links panda_leftfinger, panda_rightfinger are 0.080 m apart "
-     "closed and 0.000 m open"),
-    ("finger position outside its limits", {"fingers": [{**f, "open": 0.4} for f in PANDA_FINGERS]},
-     ValueError, r"robot.fingers: panda_finger_joint1 open=0.4 is outside its limits \[0.0, 0.04\]"),
-    ("neutral pose outside the limits", {"neutral_pose": [0.0, 0.41, 0.0, 1.85, 0.0, 2.26, 0.79]},
-     ValueError, r"robot.neutral_pose: panda_joint4=1.85 is outside its limits \[-3.1416, 0.0\]"),
-    ("neutral pose of another size", {"neutral_pose": [0.0, 0.41]}, ValueError,
-     "robot.neutral_pose has 2 angles: must have one per arm joint"),
-    ("unknown render rule", {"low_poly_meshes": "spheres"}, ValueError,
-     "robot.low_poly_meshes='spheres': must be null, boxes or"),
-    ("unknown key", {"grasp_lnk": "x"}, ValueError,
-     "robot.grasp_lnk: unknown key; a robot has model, arm_joints"),
-    ("a finger entry that is not one", {"fingers": ["panda_finger_joint1"]}, ValueError,
-     r"robot.fingers\[0\]='panda_finger_joint1': must be \{joint: <name>, open: <position>"),
-    ("a mimic joint following no motor",
-     {"fingers": [{**PANDA_FINGERS[0], "mimic": "panda_finger_joint2"},
-                  {**PANDA_FINGERS[1], "mimic": "panda_finger_joint1"}]},
-     ValueError, "robot.fingers: panda_finger_joint1 mimics 'panda_finger_joint2', which must be a finger "
-     "joint with a motor of its own"),
-    ("an unknown expert setting", {"expert": {"reach": 0.05}}, ValueError,
-     "robot.expert.reach: unknown key; the expert's settings: finger_reach, floor_clearance, hover"),
-    ("an expert setting out of range", {"expert": {"finger_reach": -0.01}}, ValueError,
-     r"robot.expert.finger_reach=-0.01: must be a number of metres in \[0.0, 0.2\]"),
-    ("an expert setting that is not a number", {"expert": {"floor_clearance": "low"}}, ValueError,
-     r"robot.expert.floor_clearance='low': must be a number of metres"),
-    ("expert settings that are not a mapping", {"expert": [0.05]}, ValueError,
-     "robot.expert=\\[0.05\\]: must be a mapping of finger_reach, floor_clearance, hover"),
+    (
+        "missing model file",
+        {"model": "/tmp/nowhere/arm.urdf"},
+        FileNotFoundError,
+        "robot.model: model file not found: /tmp/nowhere/arm.urdf",
+    ),
+    (
+        "not a model file",
+        {"model": "franka_panda/meshes/collision/hand.obj"},
+        ValueError,
+        "hand.obj': must be a .urdf or .sdf file",
+    ),
+    (
+        "joint not in the model",
+        {"arm_joints": [*PANDA.arm_joints[:6], "panda_joint9"]},
+        ValueError,
+        "robot.arm_joints: 'panda_joint9' is not a movable joint of .*panda.urdf; its movable joints: "
+        "panda_joint1",
+    ),
+    (
+        "grasp link not in the model",
+        {"grasp_link": "panda_tcp"},
+        ValueError,
+        "robot.grasp_link: 'panda_tcp' is not a link of .*; its links: panda_link1",
+    ),
+    (
+        "finger joint not in the model",
+        {"fingers": [{"joint": "panda_finger", "open": 0.04}]},
+        ValueError,
+        "robot.fingers: 'panda_finger' is not a movable joint",
+    ),
+    (
+        "fingers that do not open",
+        {"fingers": [{**f, "open": 0.0, "closed": 0.04} for f in PANDA_FINGERS]},
+        ValueError,
+        "robot.fingers: the finger links panda_leftfinger, panda_rightfinger are 0.080 m apart "
+        "closed and 0.000 m open",
+    ),
+    (
+        "finger position outside its limits",
+        {"fingers": [{**f, "open": 0.4} for f in PANDA_FINGERS]},
+        ValueError,
+        r"robot.fingers: panda_finger_joint1 open=0.4 is outside its limits \[0.0, 0.04\]",
+    ),
+    (
+        "neutral pose outside the limits",
+        {"neutral_pose": [0.0, 0.41, 0.0, 1.85, 0.0, 2.26, 0.79]},
+        ValueError,
+        r"robot.neutral_pose: panda_joint4=1.85 is outside its limits \[-3.1416, 0.0\]",
+    ),
+    (
+        "neutral pose of another size",
+        {"neutral_pose": [0.0, 0.41]},
+        ValueError,
+        "robot.neutral_pose has 2 angles: must have one per arm joint",
+    ),
+    (
+        "unknown render rule",
+        {"low_poly_meshes": "spheres"},
+        ValueError,
+        "robot.low_poly_meshes='spheres': must be null, boxes or",
+    ),
+    (
+        "unknown key",
+        {"grasp_lnk": "x"},
+        ValueError,
+        "robot.grasp_lnk: unknown key; a robot has model, arm_joints",
+    ),
+    (
+        "a finger entry that is not one",
+        {"fingers": ["panda_finger_joint1"]},
+        ValueError,
+        r"robot.fingers\[0\]='panda_finger_joint1': must be \{joint: <name>, open: <position>",
+    ),
+    (
+        "a mimic joint following no motor",
+        {
+            "fingers": [
+                {**PANDA_FINGERS[0], "mimic": "panda_finger_joint2"},
+                {**PANDA_FINGERS[1], "mimic": "panda_finger_joint1"},
+            ]
+        },
+        ValueError,
+        "robot.fingers: panda_finger_joint1 mimics 'panda_finger_joint2', which must be a finger "
+        "joint with a motor of its own",
+    ),
+    (
+        "an unknown expert setting",
+        {"expert": {"reach": 0.05}},
+        ValueError,
+        "robot.expert.reach: unknown key; the expert's settings: finger_reach, floor_clearance, hover",
+    ),
+    (
+        "an expert setting out of range",
+        {"expert": {"finger_reach": -0.01}},
+        ValueError,
+        r"robot.expert.finger_reach=-0.01: must be a number of metres in \[0.0, 0.2\]",
+    ),
+    (
+        "an expert setting that is not a number",
+        {"expert": {"floor_clearance": "low"}},
+        ValueError,
+        r"robot.expert.floor_clearance='low': must be a number of metres",
+    ),
+    (
+        "expert settings that are not a mapping",
+        {"expert": [0.05]},
+        ValueError,
+        "robot.expert=\\[0.05\\]: must be a mapping of finger_reach, floor_clearance, hover",
+    ),
 ]
 
 
@@ -277,14 +355,22 @@ def test_an_arms_expert_settings_reach_its_expert(tmp_path, arm_env):
     keeps the defaults, and a user's YAML file sets it as a shipped arm's does."""
     panda = ScriptedExpert.for_env(arm_env("panda"))
     assert (panda.finger_reach, panda.floor_clearance, panda.hover) == (
-        expert_module.FINGER_REACH, expert_module.FLOOR_CLEARANCE, 0.06)
+        expert_module.FINGER_REACH,
+        expert_module.FLOOR_CLEARANCE,
+        0.06,
+    )
     xarm = ScriptedExpert.for_env(arm_env("xarm6"))
-    assert (xarm.finger_reach, xarm.floor_clearance) == (XARM6.expert["finger_reach"],
-                                                         XARM6.expert["floor_clearance"])
+    assert (xarm.finger_reach, xarm.floor_clearance) == (
+        XARM6.expert["finger_reach"],
+        XARM6.expert["floor_clearance"],
+    )
     mine = arm_env(_yaml_arm(tmp_path, PANDA, expert={"finger_reach": 0.05, "hover": 0.08}))
     expert = ScriptedExpert.for_env(mine, hover=0.1)  # an explicit setting wins over the arm's
     assert (expert.finger_reach, expert.floor_clearance, expert.hover) == (
-        0.05, expert_module.FLOOR_CLEARANCE, 0.1)
+        0.05,
+        expert_module.FLOOR_CLEARANCE,
+        0.1,
+    )
     # the grasp height follows: a 10 cm tall upright box resting on the floor (centre at 5 cm)
     upright, extents = np.array([0.0, 0.0, 0.0, 1.0]), np.array([0.04, 0.06, 0.10])
     assert expert_module.grasp_plan(upright, extents, 0.05)[1] == pytest.approx(0.1 - 0.035)
@@ -322,8 +408,9 @@ def test_torque_control_is_refused_where_the_model_says_it_is_not_meaningful(mon
 
 # --- a policy never leaks across arms ---------------------------------------------------------
 def test_a_checkpoint_of_one_arm_is_refused_by_an_env_of_another():
-    with pytest.raises(EvaluationError, match="was trained on the robot 'kuka_iiwa' and the env has the "
-                                              "robot 'panda'"):
+    with pytest.raises(
+        EvaluationError, match="was trained on the robot 'kuka_iiwa' and the env has the robot 'panda'"
+    ):
         check_robot({"robot": "kuka_iiwa"}, {"robot": "panda"}, "checkpoint x.pt")
     with pytest.raises(EvaluationError, match="trained on the robot 'panda' .* the robot 'mine'"):
         check_robot({}, {"robot": {"name": "mine", "model": "arm.urdf"}}, "checkpoint x.pt")  # old: the Panda

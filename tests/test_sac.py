@@ -21,11 +21,24 @@ from rlgrasp.train.parts import build_parts
 from rlgrasp.train.resume import prepare_run
 
 #: A SAC run small enough for a test: one in-process worker, tiny networks, updates from the start.
-SMALL = ["experiment=grasp_sac", "logger=none", "collector=single", "collector.envs_per_worker=2",
-         "collector.steps_per_env=32", "total_frames=256", "algo.learning_starts=64", "algo.batch_size=32",
-         "model.hidden_sizes=[16,16]", "algo.critic_hidden_sizes=[16,16]", "eval.interval_frames=0",
-         "eval.episodes=1", "eval.final_episodes=2", "eval.num_envs=1", "checkpoint.interval_frames=128",
-         "device=cpu"]
+SMALL = [
+    "experiment=grasp_sac",
+    "logger=none",
+    "collector=single",
+    "collector.envs_per_worker=2",
+    "collector.steps_per_env=32",
+    "total_frames=256",
+    "algo.learning_starts=64",
+    "algo.batch_size=32",
+    "model.hidden_sizes=[16,16]",
+    "algo.critic_hidden_sizes=[16,16]",
+    "eval.interval_frames=0",
+    "eval.episodes=1",
+    "eval.final_episodes=2",
+    "eval.num_envs=1",
+    "checkpoint.interval_frames=128",
+    "device=cpu",
+]
 
 
 def _sac(tmp_path: Path, *overrides: str) -> SAC:
@@ -40,11 +53,20 @@ def _batch(sac: SAC, n: int, reward_of=None) -> TensorDict:
     action = torch.rand(n, act_dim) * 2 - 1
     reward = reward_of(action) if reward_of else torch.rand(n, 1)
     false = torch.zeros(n, 1, dtype=torch.bool)
-    return TensorDict({
-        "observation": torch.randn(n, obs_dim), "action": action, "sample_log_prob": torch.zeros(n),
-        "next": {"observation": torch.randn(n, obs_dim), "reward": reward, "done": false,
-                 "terminated": false},
-    }, [n]).unsqueeze(0)
+    return TensorDict(
+        {
+            "observation": torch.randn(n, obs_dim),
+            "action": action,
+            "sample_log_prob": torch.zeros(n),
+            "next": {
+                "observation": torch.randn(n, obs_dim),
+                "reward": reward,
+                "done": false,
+                "terminated": false,
+            },
+        },
+        [n],
+    ).unsqueeze(0)
 
 
 def test_the_update_to_data_ratio_is_kept_across_batches_of_any_size(tmp_path: Path) -> None:
@@ -58,8 +80,15 @@ def test_the_update_to_data_ratio_is_kept_across_batches_of_any_size(tmp_path: P
 def test_the_actor_learns_the_action_the_reward_pays_for(tmp_path: Path) -> None:
     """Reward = -|action - 0.5| on every dimension: after a few hundred steps the deterministic
     action has moved towards 0.5 from the initial policy's 0."""
-    sac = _sac(tmp_path, "algo.utd_ratio=1", "algo.learning_starts=0", "algo.gamma=0.5",
-               "algo.actor_lr=3e-3", "algo.critic_lr=3e-3", "algo.alpha_init=0.01")
+    sac = _sac(
+        tmp_path,
+        "algo.utd_ratio=1",
+        "algo.learning_starts=0",
+        "algo.gamma=0.5",
+        "algo.actor_lr=3e-3",
+        "algo.critic_lr=3e-3",
+        "algo.alpha_init=0.01",
+    )
     paid = lambda a: -(a - 0.5).abs().mean(-1, keepdim=True)  # noqa: E731
     before = sac.actor.module[0](TensorDict({"observation": torch.zeros(1, sac.parts.spec["obs_dim"])}, [1]))
     for _ in range(12):
@@ -85,9 +114,17 @@ def test_the_bc_term_pulls_the_actor_to_the_demonstrated_actions(
 ) -> None:
     """``algo.bc_coeff`` > 0: after the same updates on the same data, the actor's deterministic
     action on the demonstrations' observations is nearer the demonstrated actions than without it."""
+
     def distance_after(bc_coeff: float) -> tuple[float, dict[str, float]]:
-        sac = _sac(tmp_path, f"algo.demos={recorded_demos}", f"algo.bc_coeff={bc_coeff}", "env.ee_yaw=false",
-                   "algo.utd_ratio=1", "algo.learning_starts=0", "algo.actor_lr=3e-3")
+        sac = _sac(
+            tmp_path,
+            f"algo.demos={recorded_demos}",
+            f"algo.bc_coeff={bc_coeff}",
+            "env.ee_yaw=false",
+            "algo.utd_ratio=1",
+            "algo.learning_starts=0",
+            "algo.actor_lr=3e-3",
+        )
         demos = demo_transitions(load_demos(recorded_demos, _layout_of(sac)), sac.cfg.env)
         torch.manual_seed(1)
         metrics = [sac.update(_batch(sac, 40), 0) for _ in range(5)][-1]
@@ -164,13 +201,16 @@ def test_a_ppo_checkpoint_is_not_resumed_as_sac(tmp_path: Path) -> None:
         _resumed(run)
 
 
-@pytest.mark.parametrize(("override", "message"), [
-    ("algo.utd_ratio=0", "algo.utd_ratio=0.0: must be > 0"),
-    ("algo.buffer_frames=16", "algo.buffer_frames=16: must be >= algo.batch_size (32)"),
-    ("algo.image_shift=-1", "algo.image_shift=-1: must be >= 0 (pixels)"),
-    ("algo.bc_coeff=-1", "algo.bc_coeff=-1.0: must be finite and >= 0"),
-    ("algo.bc_epochs=3", "algo.bc_epochs=3: needs algo.demos=<demonstrations>"),
-])
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        ("algo.utd_ratio=0", "algo.utd_ratio=0.0: must be > 0"),
+        ("algo.buffer_frames=16", "algo.buffer_frames=16: must be >= algo.batch_size (32)"),
+        ("algo.image_shift=-1", "algo.image_shift=-1: must be >= 0 (pixels)"),
+        ("algo.bc_coeff=-1", "algo.bc_coeff=-1.0: must be finite and >= 0"),
+        ("algo.bc_epochs=3", "algo.bc_epochs=3: needs algo.demos=<demonstrations>"),
+    ],
+)
 def test_bad_sac_input_is_one_line(tmp_path: Path, override: str, message: str) -> None:
     with pytest.raises(ConfigError) as info:
         validate_train(compose_train([*SMALL, f"paths.output_dir={tmp_path}", override]))
@@ -186,18 +226,36 @@ def test_a_short_sac_run_evaluates_and_exports_like_ppo(tmp_path: Path) -> None:
     assert 0.0 <= success <= 1.0
     last = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
     assert last["frames"] == 256 and last["config"]["algo"]["name"] == "sac" and last["updates"] > 0
-    metrics = evaluate(compose_config("eval", [f"ckpt={run}", "ckpt_kind=last", "episodes=2", "video=false",
-                                               "plots=false", f"out_dir={tmp_path / 'eval'}"]))
+    metrics = evaluate(
+        compose_config(
+            "eval",
+            [
+                f"ckpt={run}",
+                "ckpt_kind=last",
+                "episodes=2",
+                "video=false",
+                "plots=false",
+                f"out_dir={tmp_path / 'eval'}",
+            ],
+        )
+    )
     assert metrics["episodes"] == 2
     register_export_config()
-    results = export(compose_config("export", [f"ckpt={run}", "ckpt_kind=last", "format=torchscript",
-                                               f"out={tmp_path / 'policy.pt'}"]))
+    results = export(
+        compose_config(
+            "export", [f"ckpt={run}", "ckpt_kind=last", "format=torchscript", f"out={tmp_path / 'policy.pt'}"]
+        )
+    )
     assert results["torchscript"]["max_abs_action_diff"] < 1e-5 and (tmp_path / "policy.pt").is_file()
 
 
 #: A camera SAC run small enough for a test (the wrist depth camera at 64x64).
-CAMERA = ["experiment=grasp_vision_sac", "model.channels=[4,4,4]", "model.image_features=8",
-          "algo.buffer_frames=1024"]
+CAMERA = [
+    "experiment=grasp_vision_sac",
+    "model.channels=[4,4,4]",
+    "model.image_features=8",
+    "algo.buffer_frames=1024",
+]
 
 
 def _camera_batch(sac: SAC, n: int) -> TensorDict:
@@ -245,17 +303,32 @@ def test_a_short_camera_sac_run_resumes_evaluates_and_exports(tmp_path: Path) ->
     train(compose_train([*SMALL, *CAMERA, "total_frames=128", f"paths.output_dir={run}"]))
     last = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
     assert last["kind"] == "vision" and last["updates"] > 0
-    cfg, resumed = prepare_run(compose_train([*SMALL, *CAMERA, "total_frames=128", f"paths.output_dir={run}",
-                                              f"resume={run}"]))
+    cfg, resumed = prepare_run(
+        compose_train([*SMALL, *CAMERA, "total_frames=128", f"paths.output_dir={run}", f"resume={run}"])
+    )
     again = Trainer(cfg, resumed=resumed)
     assert len(again.algo.replay) == 128 and again.algo.replay[:]["depth"].dtype == torch.float16
     again.logger.close()
-    metrics = evaluate(compose_config("eval", [f"ckpt={run}", "ckpt_kind=last", "episodes=1", "video=false",
-                                               "plots=false", f"out_dir={tmp_path / 'eval'}"]))
+    metrics = evaluate(
+        compose_config(
+            "eval",
+            [
+                f"ckpt={run}",
+                "ckpt_kind=last",
+                "episodes=1",
+                "video=false",
+                "plots=false",
+                f"out_dir={tmp_path / 'eval'}",
+            ],
+        )
+    )
     assert metrics["episodes"] == 1
     register_export_config()
-    results = export(compose_config("export", [f"ckpt={run}", "ckpt_kind=last", "format=torchscript",
-                                               f"out={tmp_path / 'policy.pt'}"]))
+    results = export(
+        compose_config(
+            "export", [f"ckpt={run}", "ckpt_kind=last", "format=torchscript", f"out={tmp_path / 'policy.pt'}"]
+        )
+    )
     assert results["torchscript"]["max_abs_action_diff"] < 1e-4
 
 
@@ -296,8 +369,12 @@ def test_camera_demonstrations_fill_a_camera_learners_minibatch_and_others_are_r
     successors; a camera SAC samples them beside online data; a state run, or a camera run with
     another image size, refuses them naming the images."""
     out = tmp_path / "cam"
-    record_demos(compose_config("demos", ["episodes=1", f"out={out}", "workers=1", "keep=all",
-                                          "cameras=wrist_depth", "env.ee_yaw=true"]))
+    record_demos(
+        compose_config(
+            "demos",
+            ["episodes=1", f"out={out}", "workers=1", "keep=all", "cameras=wrist_depth", "env.ee_yaw=true"],
+        )
+    )
     sac = _sac(tmp_path, *CAMERA, f"algo.demos={out / 'demos'}", "algo.batch_size=8")
     demos = sac.demos[:]
     assert demos["depth"].shape[1:] == (1, 64, 64) and demos["depth"].dtype == torch.float16
@@ -313,5 +390,6 @@ def test_camera_demonstrations_fill_a_camera_learners_minibatch_and_others_are_r
     with pytest.raises(DemoError, match=r"recorded with the images \{'depth': \[1, 64, 64\]\}, this run's "):
         _sac(tmp_path, f"algo.demos={out / 'demos'}")
     with pytest.raises(DemoError, match=r"this run's camera gives \{'depth': \[1, 48, 48\]\}"):
-        _sac(tmp_path, *CAMERA, f"algo.demos={out / 'demos'}", "+env.camera.width=48",
-             "+env.camera.height=48")
+        _sac(
+            tmp_path, *CAMERA, f"algo.demos={out / 'demos'}", "+env.camera.width=48", "+env.camera.height=48"
+        )

@@ -26,9 +26,19 @@ TINY = ["collector=single", "collector.envs_per_worker=4", "total_frames=1024", 
 def _multirun(tmp_path: Path, *overrides: str) -> list[Path]:
     """Run scripts/train.py -m with the smoke experiment on two seeds; return the job dirs."""
     proc = subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "train.py"), "-m", "experiment=smoke", "seed=0,1",
-         f"paths.root_dir={tmp_path}", *overrides],
-        capture_output=True, text=True, cwd=tmp_path, timeout=600,
+        [
+            sys.executable,
+            str(ROOT / "scripts" / "train.py"),
+            "-m",
+            "experiment=smoke",
+            "seed=0,1",
+            f"paths.root_dir={tmp_path}",
+            *overrides,
+        ],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=600,
     )
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
     (sweep_dir,) = (tmp_path / "outputs" / "multirun" / "smoke").iterdir()
@@ -89,8 +99,16 @@ def test_ray_collector_runs_on_both_nodes(ray_cluster, tmp_path: Path) -> None:
 
     batches = {}
     for backend in ("ray", "process"):
-        cfg = _cfg(tmp_path, f"collector={backend}", f"collector.ray.address={ray_cluster.address}",
-                   "collector.ray.memory_per_worker_gb=0.25") if backend == "ray" else _cfg(tmp_path)
+        cfg = (
+            _cfg(
+                tmp_path,
+                f"collector={backend}",
+                f"collector.ray.address={ray_cluster.address}",
+                "collector.ray.memory_per_worker_gb=0.25",
+            )
+            if backend == "ray"
+            else _cfg(tmp_path)
+        )
         torch.manual_seed(0)
         collector = build_parts(cfg).make_collector(0, str(tmp_path / "errors"))
         try:

@@ -32,8 +32,16 @@ def test_shipped_policy_still_succeeds(
 ) -> None:
     m = evaluate(
         compose_eval(
-            [f"ckpt={POLICIES / name}", f"objects={objects}", "episodes=20", "video=false",
-             "plots=false", "teacher=none", f"outputs_root={tmp_path}", "name=ship"]
+            [
+                f"ckpt={POLICIES / name}",
+                f"objects={objects}",
+                "episodes=20",
+                "video=false",
+                "plots=false",
+                "teacher=none",
+                f"outputs_root={tmp_path}",
+                "name=ship",
+            ]
         )
     )
     successes = m["success_at_end"]["successes"]

@@ -48,18 +48,19 @@ def _sbatch_lines(params: dict) -> list[str]:
     kwargs = {k: params[k] for k in keys if params.get(k) is not None}
     if params.get("mem_gb") is not None:
         kwargs["mem"] = f"{params['mem_gb']}GB"
-    text = _make_sbatch_string(command="true", folder="/tmp/x", ntasks_per_node=params["tasks_per_node"],
-                               **kwargs)
+    text = _make_sbatch_string(
+        command="true", folder="/tmp/x", ntasks_per_node=params["tasks_per_node"], **kwargs
+    )
     return [line for line in text.splitlines() if line.startswith("#SBATCH")]
 
 
 @pytest.mark.parametrize(
     ("overrides", "cpus"),
     [
-        (["experiment=smoke"], 3),                                   # 2 workers + the learner
+        (["experiment=smoke"], 3),  # 2 workers + the learner
         (["experiment=smoke", "collector.num_workers=3"], 4),
         (["experiment=grasp_ppo", "collector.num_workers=8"], 9),
-        (["collector=single", "collector.num_workers=0"], 1),        # in-process collection
+        (["collector=single", "collector.num_workers=0"], 1),  # in-process collection
         (["experiment=smoke", "hydra.launcher.cpus_per_task=2"], 2),  # an explicit value wins
     ],
 )
@@ -75,9 +76,13 @@ def test_slurm_launcher_sizes_the_job_from_the_training_config(overrides: list[s
 
 
 def test_slurm_launcher_partition_account_and_total_memory_are_overridable() -> None:
-    params = _launcher_params("experiment=smoke", "hydra.launcher.partition=gpu",
-                              "hydra.launcher.account=lab", "hydra.launcher.mem_per_cpu=null",
-                              "hydra.launcher.mem_gb=8")
+    params = _launcher_params(
+        "experiment=smoke",
+        "hydra.launcher.partition=gpu",
+        "hydra.launcher.account=lab",
+        "hydra.launcher.mem_per_cpu=null",
+        "hydra.launcher.mem_gb=8",
+    )
     lines = _sbatch_lines(params)
     assert {"#SBATCH --partition=gpu", "#SBATCH --account=lab", "#SBATCH --mem=8GB"} <= set(lines)
     assert not any(line.startswith("#SBATCH --mem-per-cpu") for line in lines)
@@ -86,9 +91,9 @@ def test_slurm_launcher_partition_account_and_total_memory_are_overridable() -> 
 @pytest.mark.parametrize(
     ("shown_restarts", "env_restarts", "exits"),
     [
-        (1, None, True),    # first run, SLURM requeued it (scontrol requeue): pending again
-        (2, "1", True),     # the same in the rerun
-        (0, None, False),   # not requeued (submitit refused, e.g. timed out too often): the job ends
+        (1, None, True),  # first run, SLURM requeued it (scontrol requeue): pending again
+        (2, "1", True),  # the same in the rerun
+        (0, None, False),  # not requeued (submitit refused, e.g. timed out too often): the job ends
         (1, "1", False),
     ],
 )
@@ -104,7 +109,8 @@ def test_a_job_slurm_requeued_itself_exits_without_a_result(
     bin_dir = tmp_path / "bin"
     bin_dir.mkdir()
     (bin_dir / "scontrol").write_text(
-        f"#!/bin/sh\necho 'JobId=7 JobState=COMPLETING Reason=None Restarts={shown_restarts}'\n")
+        f"#!/bin/sh\necho 'JobId=7 JobState=COMPLETING Reason=None Restarts={shown_restarts}'\n"
+    )
     (bin_dir / "scontrol").chmod(0o755)
     monkeypatch.setenv("PATH", f"{bin_dir}{os.pathsep}{os.environ['PATH']}")
     monkeypatch.setenv("SLURM_JOB_ID", "7")
@@ -147,10 +153,19 @@ def test_sinfo_lines_become_nodes() -> None:
     assert len(nodes) == 4
 
 
-@pytest.mark.parametrize(("text", "minutes"), [
-    ("infinite", None), ("UNLIMITED", None), ("30", 30), ("30:30", 30.5), ("2:00:00", 120),
-    ("1-12", 36 * 60), ("1-00:30", 1470), ("2-00:00:30", 2880.5),
-])
+@pytest.mark.parametrize(
+    ("text", "minutes"),
+    [
+        ("infinite", None),
+        ("UNLIMITED", None),
+        ("30", 30),
+        ("30:30", 30.5),
+        ("2:00:00", 120),
+        ("1-12", 36 * 60),
+        ("1-00:30", 1470),
+        ("2-00:00:30", 2880.5),
+    ],
+)
 def test_slurm_time_limits_in_minutes(text: str, minutes: float | None) -> None:
     from rlgrasp.slurm import slurm_minutes
 
@@ -159,36 +174,60 @@ def test_slurm_time_limits_in_minutes(text: str, minutes: float | None) -> None:
 
 def _params(**overrides) -> dict:
     """The launcher parameters slurm.yaml gives the smoke experiment (2 workers + the learner)."""
-    return {"partition": None, "cpus_per_task": 3, "tasks_per_node": 1, "nodes": 1, "mem_per_cpu": "2G",
-            "mem_gb": None, "gpus_per_node": None, "gpus_per_task": None, "gres": None, "timeout_min": 240,
-            **overrides}
+    return {
+        "partition": None,
+        "cpus_per_task": 3,
+        "tasks_per_node": 1,
+        "nodes": 1,
+        "mem_per_cpu": "2G",
+        "mem_gb": None,
+        "gpus_per_node": None,
+        "gpus_per_task": None,
+        "gres": None,
+        "timeout_min": 240,
+        **overrides,
+    }
 
 
 def test_a_job_bigger_than_any_node_is_refused_in_one_line_naming_the_key_and_the_fix() -> None:
     from rlgrasp.slurm import refusal
 
     line = refusal(_params(), SINFO, workers=2)
-    assert line == ("error: SLURM partition debug can never run this job: hydra.launcher.cpus_per_task=3 "
-                    "(collector.num_workers=2 + 1 for the learner) asks for 3 CPUs per node, its nodes have "
-                    "at most 2; use collector.num_workers=1 or hydra.launcher.cpus_per_task=2")
+    assert line == (
+        "error: SLURM partition debug can never run this job: hydra.launcher.cpus_per_task=3 "
+        "(collector.num_workers=2 + 1 for the learner) asks for 3 CPUs per node, its nodes have "
+        "at most 2; use collector.num_workers=1 or hydra.launcher.cpus_per_task=2"
+    )
     # cpus_per_task given as a number: the workers are not what sizes the job, so not the fix
     line = refusal(_params(), SINFO, workers=None)
     assert "collector.num_workers" not in line and line.endswith("use hydra.launcher.cpus_per_task=2")
 
 
-@pytest.mark.parametrize(("overrides", "expected"), [
-    # memory judged for the CPUs a node can give; per CPU or in total
-    ({"cpus_per_task": 2, "mem_per_cpu": "12G"},
-     "hydra.launcher.mem_per_cpu=12G x 2 CPUs asks for 24.0 GB per node, its nodes have at most 21.2 GB "
-     "(21694 MB); use hydra.launcher.mem_per_cpu=10847M"),
-    ({"cpus_per_task": 1, "mem_per_cpu": None, "mem_gb": 64},
-     "hydra.launcher.mem_gb=64 asks for 64.0 GB per node, its nodes have at most 21.2 GB (21694 MB); "
-     "use hydra.launcher.mem_gb=21"),
-    ({"cpus_per_task": 1, "gpus_per_node": 1}, "hydra.launcher.gpus_per_node=1 asks for 1 GPU(s) per node, "
-     "its nodes have none; use a partition with GPUs (hydra.launcher.partition=<name>)"),
-    ({"cpus_per_task": 1, "nodes": 2}, "hydra.launcher.nodes=2: only 1 of its nodes have 1 CPUs, 2.0 GB; "
-     "use hydra.launcher.nodes=1"),
-])
+@pytest.mark.parametrize(
+    ("overrides", "expected"),
+    [
+        # memory judged for the CPUs a node can give; per CPU or in total
+        (
+            {"cpus_per_task": 2, "mem_per_cpu": "12G"},
+            "hydra.launcher.mem_per_cpu=12G x 2 CPUs asks for 24.0 GB per node, its nodes have at most "
+            "21.2 GB (21694 MB); use hydra.launcher.mem_per_cpu=10847M",
+        ),
+        (
+            {"cpus_per_task": 1, "mem_per_cpu": None, "mem_gb": 64},
+            "hydra.launcher.mem_gb=64 asks for 64.0 GB per node, its nodes have at most 21.2 GB (21694 MB); "
+            "use hydra.launcher.mem_gb=21",
+        ),
+        (
+            {"cpus_per_task": 1, "gpus_per_node": 1},
+            "hydra.launcher.gpus_per_node=1 asks for 1 GPU(s) per node, "
+            "its nodes have none; use a partition with GPUs (hydra.launcher.partition=<name>)",
+        ),
+        (
+            {"cpus_per_task": 1, "nodes": 2},
+            "hydra.launcher.nodes=2: only 1 of its nodes have 1 CPUs, 2.0 GB; use hydra.launcher.nodes=1",
+        ),
+    ],
+)
 def test_each_resource_is_compared_with_the_partitions_nodes(overrides: dict, expected: str) -> None:
     from rlgrasp.slurm import refusal
 
@@ -200,19 +239,24 @@ def test_partition_names_and_time_limits_are_checked() -> None:
     from rlgrasp.slurm import refusal
 
     assert refusal(_params(partition="gpus"), SINFO) == (
-        "error: hydra.launcher.partition=gpus: no SLURM partition gpus; sinfo lists debug, long, gpu")
+        "error: hydra.launcher.partition=gpus: no SLURM partition gpus; sinfo lists debug, long, gpu"
+    )
     assert refusal(_params(partition="gpu", gpus_per_node=2), SINFO) == (
         "error: SLURM partition gpu can never run this job: hydra.launcher.timeout_min=240: its time limit "
-        "is 120 min; use hydra.launcher.timeout_min=120")
+        "is 120 min; use hydra.launcher.timeout_min=120"
+    )
     assert "no default partition" in refusal(_params(), SINFO.replace("debug*", "debug"))
 
 
-@pytest.mark.parametrize("overrides", [
-    {"cpus_per_task": 2},                                         # fits the default partition
-    {"partition": "long", "cpus_per_task": 32, "mem_per_cpu": "4000M", "nodes": 2},
-    {"partition": "gpu", "gres": "gpu:a100:4", "timeout_min": 120},
-    {"partition": "debug,long", "cpus_per_task": 8},              # sbatch takes the first that can
-])
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        {"cpus_per_task": 2},  # fits the default partition
+        {"partition": "long", "cpus_per_task": 32, "mem_per_cpu": "4000M", "nodes": 2},
+        {"partition": "gpu", "gres": "gpu:a100:4", "timeout_min": 120},
+        {"partition": "debug,long", "cpus_per_task": 8},  # sbatch takes the first that can
+    ],
+)
 def test_a_job_some_node_can_run_is_not_refused(overrides: dict) -> None:
     from rlgrasp.slurm import refusal
 
@@ -224,8 +268,9 @@ def test_a_mixed_partition_needs_one_node_with_everything_at_once() -> None:
 
     # big1 has the memory, big2 too few; 2 nodes of 200 GB: only one has it
     line = refusal(_params(partition="long", cpus_per_task=32, mem_per_cpu="6400M", nodes=2), SINFO)
-    assert line.endswith("hydra.launcher.nodes=2: only 1 of its nodes have 32 CPUs, 200.0 GB; "
-                         "use hydra.launcher.nodes=1")
+    assert line.endswith(
+        "hydra.launcher.nodes=2: only 1 of its nodes have 32 CPUs, 200.0 GB; use hydra.launcher.nodes=1"
+    )
     assert refusal(_params(), "") is None  # nothing to judge by: submit
 
 
@@ -238,10 +283,14 @@ def test_the_training_config_reaches_the_check() -> None:
 
     register_configs()
     with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base="1.3"):
-        cfg = compose("train", overrides=["hydra/launcher=slurm", "experiment=smoke"],
-                      return_hydra_config=True)
-        fixed = compose("train", overrides=["hydra/launcher=slurm", "experiment=smoke",
-                                            "hydra.launcher.cpus_per_task=3"], return_hydra_config=True)
+        cfg = compose(
+            "train", overrides=["hydra/launcher=slurm", "experiment=smoke"], return_hydra_config=True
+        )
+        fixed = compose(
+            "train",
+            overrides=["hydra/launcher=slurm", "experiment=smoke", "hydra.launcher.cpus_per_task=3"],
+            return_hydra_config=True,
+        )
     assert (_workers(cfg), _workers(fixed)) == (2, None)
     line = refusal(_launcher_params("experiment=smoke"), SINFO, _workers(cfg))
     assert "use collector.num_workers=1 or hydra.launcher.cpus_per_task=2" in line
@@ -263,8 +312,11 @@ def test_scontrol_records_are_keyed_like_submitit_job_ids() -> None:
     from rlgrasp.slurm import parse_scontrol_jobs
 
     assert parse_scontrol_jobs(SCONTROL) == {
-        "12_2": ("PENDING", "Priority"), "12_3": ("PENDING", "Priority"), "12_0": ("RUNNING", "None"),
-        "12_1": ("CANCELLED", "None"), "20": ("PENDING", "ReqNodeNotAvail,_UnavailableNodes:vm"),
+        "12_2": ("PENDING", "Priority"),
+        "12_3": ("PENDING", "Priority"),
+        "12_0": ("RUNNING", "None"),
+        "12_1": ("CANCELLED", "None"),
+        "20": ("PENDING", "ReqNodeNotAvail,_UnavailableNodes:vm"),
         "30": ("CANCELLED", "None"),  # the whole array, cancelled before it started
     }
 
@@ -274,8 +326,11 @@ class _Job:
 
     def __init__(self, job_id: str, folder: Path) -> None:
         self.job_id, self.num_tasks = job_id, 1
-        self.paths = type("Paths", (), {"result_pickle": folder / f"{job_id}_0_result.pkl",
-                                        "stderr": folder / f"{job_id}_0_log.err"})()
+        self.paths = type(
+            "Paths",
+            (),
+            {"result_pickle": folder / f"{job_id}_0_result.pkl", "stderr": folder / f"{job_id}_0_log.err"},
+        )()
 
     def task(self, i: int) -> _Job:
         return self
@@ -299,8 +354,9 @@ def _watch(tmp_path: Path, answers: dict, ids=("5_0", "5_1"), results_at: float 
 
     def query(left: list[str]):  # scontrol is asked about whole arrays
         arrays = {j.split("_")[0] for j in left}
-        states = {j: (a(clock.now) if callable(a) else a) for j, a in answers.items()
-                  if j.split("_")[0] in arrays}
+        states = {
+            j: (a(clock.now) if callable(a) else a) for j, a in answers.items() if j.split("_")[0] in arrays
+        }
         return {j: state for j, state in states.items() if state is not None}
 
     watch = Watch(jobs, query=query, clock=clock)
@@ -323,13 +379,17 @@ def test_a_cancelled_job_ends_the_wait_naming_it_and_its_state(tmp_path: Path) -
     from rlgrasp.slurm import GRACE_S
 
     (tmp_path / "5_0_0_log.err").write_text("starting\nslurmstepd: error: *** JOB 5 CANCELLED ***\n")
-    answers = {"5_0": lambda t: ("RUNNING", "None") if t < 30 else ("CANCELLED", "None"),
-               "5_1": ("RUNNING", "None")}
+    answers = {
+        "5_0": lambda t: ("RUNNING", "None") if t < 30 else ("CANCELLED", "None"),
+        "5_1": ("RUNNING", "None"),
+    }
     ended_at, lost, _ = _watch(tmp_path, answers)
     assert 30 + GRACE_S <= ended_at <= 30 + 5 + GRACE_S + 1  # seen at the next query, then the grace
-    assert str(lost) == (f"SLURM job 5_0 ended with JobState=CANCELLED without writing a result; log "
-                         f"{tmp_path / '5_0_0_log.err'} ends with: slurmstepd: error: *** JOB 5 CANCELLED "
-                         "***; 1 other job(s) of this sweep are still queued or running (squeue -j 5)")
+    assert str(lost) == (
+        f"SLURM job 5_0 ended with JobState=CANCELLED without writing a result; log "
+        f"{tmp_path / '5_0_0_log.err'} ends with: slurmstepd: error: *** JOB 5 CANCELLED "
+        "***; 1 other job(s) of this sweep are still queued or running (squeue -j 5)"
+    )
     assert lost.cancel == []
 
 
@@ -354,30 +414,45 @@ def test_a_job_slurm_forgot_ends_the_wait_and_a_late_result_does_not(tmp_path: P
 
 def test_a_requeued_job_is_not_lost(tmp_path: Path) -> None:
     """Preempted: ended for a moment, then PENDING again (SLURM requeued it), then its rerun's result."""
+
     def requeued(t: float):
-        return ("PREEMPTED", "None") if 20 <= t < 30 else ("PENDING", "BeginTime") if t < 100 else (
-            "RUNNING", "None")
+        return (
+            ("PREEMPTED", "None")
+            if 20 <= t < 30
+            else ("PENDING", "BeginTime")
+            if t < 100
+            else ("RUNNING", "None")
+        )
 
     ended_at, lost, _ = _watch(tmp_path, {"5_0": requeued}, ids=("5_0",), results_at=200)
     assert lost is None and ended_at == 200
 
 
 def test_a_job_slurm_can_never_start_ends_the_wait_and_is_cancelled(tmp_path: Path) -> None:
-    ended_at, lost, _ = _watch(tmp_path, {"5_0": ("PENDING", "PartitionConfig"),
-                                          "5_1": ("PENDING", "PartitionConfig")})
+    ended_at, lost, _ = _watch(
+        tmp_path, {"5_0": ("PENDING", "PartitionConfig"), "5_1": ("PENDING", "PartitionConfig")}
+    )
     assert ended_at == 0  # the first answer says it
-    assert str(lost) == ("SLURM job 5_0 can never start: pending with Reason=PartitionConfig (it asks for "
-                         "more than the partition's nodes or limits allow); cancelled 5_0, 5_1")
+    assert str(lost) == (
+        "SLURM job 5_0 can never start: pending with Reason=PartitionConfig (it asks for "
+        "more than the partition's nodes or limits allow); cancelled 5_0, 5_1"
+    )
     assert lost.cancel == ["5_0", "5_1"]
 
 
-def test_a_job_waiting_for_an_administrator_is_said_at_once_and_given_up_later(tmp_path: Path,
-                                                                               caplog) -> None:
+def test_a_job_waiting_for_an_administrator_is_said_at_once_and_given_up_later(
+    tmp_path: Path, caplog
+) -> None:
     from rlgrasp.slurm import BLOCKED_LIMIT_S
 
     with caplog.at_level("WARNING", logger="rlgrasp.slurm"):
-        ended_at, lost, _ = _watch(tmp_path, {"5_0": ("PENDING", "ReqNodeNotAvail,_UnavailableNodes:vm"),
-                                              "5_1": ("PENDING", "ReqNodeNotAvail,_UnavailableNodes:vm")})
+        ended_at, lost, _ = _watch(
+            tmp_path,
+            {
+                "5_0": ("PENDING", "ReqNodeNotAvail,_UnavailableNodes:vm"),
+                "5_1": ("PENDING", "ReqNodeNotAvail,_UnavailableNodes:vm"),
+            },
+        )
     (warning,) = caplog.messages  # once for the array, when first seen
     assert warning.startswith("SLURM job 5_0 is pending with Reason=ReqNodeNotAvail, UnavailableNodes:vm")
     assert BLOCKED_LIMIT_S <= ended_at <= BLOCKED_LIMIT_S + 60
@@ -434,8 +509,9 @@ def _job_env() -> dict[str, str]:
 
 
 def _scontrol_job(job_id: str) -> dict[str, str]:
-    out = subprocess.run(["scontrol", "-o", "show", "job", job_id], capture_output=True, text=True,
-                         check=True, timeout=30).stdout
+    out = subprocess.run(
+        ["scontrol", "-o", "show", "job", job_id], capture_output=True, text=True, check=True, timeout=30
+    ).stdout
     return dict(re.findall(r"(\w+)=(\S*)", out))
 
 
@@ -454,9 +530,22 @@ def test_two_seed_multirun_on_slurm(slurm, tmp_path: Path) -> None:
     """Two seeds as a SLURM job array through hydra/launcher=slurm, sized by the config (1 CPU each)."""
     start = time.monotonic()
     proc = subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "train.py"), "-m", "hydra/launcher=slurm", "experiment=smoke",
-         "seed=0,1", f"paths.root_dir={tmp_path}", "hydra.launcher.timeout_min=10", *TINY],
-        capture_output=True, text=True, cwd=tmp_path, env=_job_env(), timeout=600,
+        [
+            sys.executable,
+            str(ROOT / "scripts" / "train.py"),
+            "-m",
+            "hydra/launcher=slurm",
+            "experiment=smoke",
+            "seed=0,1",
+            f"paths.root_dir={tmp_path}",
+            "hydra.launcher.timeout_min=10",
+            *TINY,
+        ],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env=_job_env(),
+        timeout=600,
     )
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
     (sweep_dir,) = (tmp_path / "outputs" / "multirun" / "smoke").iterdir()
@@ -497,16 +586,33 @@ def test_preempted_job_resumes_in_its_run_dir(slurm, tmp_path: Path, how: str) -
     # timeout_min over 10: submitit takes any signal in a job of at most 10 minutes for its time limit
     # (it guarantees min(0.8 T, T - 10 min) of walltime) and, with max_num_timeout=0, does not requeue.
     proc = subprocess.Popen(
-        [sys.executable, str(ROOT / "scripts" / "train.py"), "-m", "hydra/launcher=slurm", "experiment=smoke",
-         "seed=0", f"paths.root_dir={tmp_path}", f"total_frames={frames}", "checkpoint.interval_frames=1024",
-         "eval.interval_frames=4096", "hydra.launcher.timeout_min=30", "logger=none", *IN_PROCESS],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=tmp_path, env=_job_env(),
+        [
+            sys.executable,
+            str(ROOT / "scripts" / "train.py"),
+            "-m",
+            "hydra/launcher=slurm",
+            "experiment=smoke",
+            "seed=0",
+            f"paths.root_dir={tmp_path}",
+            f"total_frames={frames}",
+            "checkpoint.interval_frames=1024",
+            "eval.interval_frames=4096",
+            "hydra.launcher.timeout_min=30",
+            "logger=none",
+            *IN_PROCESS,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        cwd=tmp_path,
+        env=_job_env(),
     )
     try:
         sweeps = tmp_path / "outputs" / "multirun" / "smoke"
         job = wait_for(lambda: next(sweeps.glob("*/0/checkpoints/last.pt"), None), timeout=300).parents[1]
-        (job_id,) = re.findall(r"^\s+id: '?(\d+(?:_\d+)?)'?$", (job / ".hydra" / "hydra.yaml").read_text(),
-                               re.M)
+        (job_id,) = re.findall(
+            r"^\s+id: '?(\d+(?:_\d+)?)'?$", (job / ".hydra" / "hydra.yaml").read_text(), re.M
+        )
         if how == "requeue":
             subprocess.run(["scontrol", "requeue", job_id], check=True, timeout=30)
         else:
@@ -533,30 +639,45 @@ def test_preempted_job_resumes_in_its_run_dir(slurm, tmp_path: Path, how: str) -
     assert status == "success" and isinstance(value.return_value, float)
 
 
-
 def _default_partition_cpus() -> int:
     """The most CPUs a node of the cluster's default partition has."""
     from rlgrasp.slurm import SINFO_FORMAT, parse_sinfo
 
-    text = subprocess.run(["sinfo", "-h", "-N", "-o", SINFO_FORMAT], capture_output=True, text=True,
-                          check=True, timeout=30).stdout
+    text = subprocess.run(
+        ["sinfo", "-h", "-N", "-o", SINFO_FORMAT], capture_output=True, text=True, check=True, timeout=30
+    ).stdout
     return max(n.cpus for n in parse_sinfo(text) if n.default)
 
 
 def _queued(name: str) -> list[str]:
     """Ids of the jobs named ``name`` SLURM still lists."""
-    return subprocess.run(["squeue", "-h", "-r", "-n", name, "-o", "%i"], capture_output=True, text=True,
-                          check=True, timeout=30).stdout.split()
+    return subprocess.run(
+        ["squeue", "-h", "-r", "-n", name, "-o", "%i"], capture_output=True, text=True, check=True, timeout=30
+    ).stdout.split()
 
 
-def _sweep(tmp_path: Path, name: str, *overrides: str, env: dict[str, str] | None = None,
-           seeds: str = "0,1") -> subprocess.Popen:
+def _sweep(
+    tmp_path: Path, name: str, *overrides: str, env: dict[str, str] | None = None, seeds: str = "0,1"
+) -> subprocess.Popen:
     """A smoke multirun over ``seeds`` through hydra/launcher=slurm, its jobs named ``name``."""
     return subprocess.Popen(
-        [sys.executable, str(ROOT / "scripts" / "train.py"), "-m", "hydra/launcher=slurm", "experiment=smoke",
-         f"seed={seeds}", f"paths.root_dir={tmp_path}", f"hydra.launcher.name={name}", "logger=none",
-         *overrides],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path, env=env or _job_env(),
+        [
+            sys.executable,
+            str(ROOT / "scripts" / "train.py"),
+            "-m",
+            "hydra/launcher=slurm",
+            "experiment=smoke",
+            f"seed={seeds}",
+            f"paths.root_dir={tmp_path}",
+            f"hydra.launcher.name={name}",
+            "logger=none",
+            *overrides,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=tmp_path,
+        env=env or _job_env(),
     )
 
 
@@ -566,8 +687,9 @@ def _finish(proc: subprocess.Popen, timeout: float) -> tuple[str, str]:
     except subprocess.TimeoutExpired:
         proc.kill()
         out, err = proc.communicate()
-        raise AssertionError(f"the launcher still waits after {timeout} s:\n{out[-2000:]}{err[-2000:]}") \
-            from None
+        raise AssertionError(
+            f"the launcher still waits after {timeout} s:\n{out[-2000:]}{err[-2000:]}"
+        ) from None
 
 
 def test_a_job_no_node_can_run_is_refused_before_submitting(slurm, tmp_path: Path) -> None:
@@ -581,8 +703,10 @@ def test_a_job_no_node_can_run_is_refused_before_submitting(slurm, tmp_path: Pat
     assert len(lines) == 1, err[-3000:]
     assert lines[0].startswith("error: SLURM partition ") and "Traceback" not in out + err
     assert f"hydra.launcher.cpus_per_task={cpus + 1} (collector.num_workers={cpus} + 1" in lines[0]
-    assert f"its nodes have at most {cpus}; use collector.num_workers={cpus - 1} or " \
-           f"hydra.launcher.cpus_per_task={cpus}" in lines[0]
+    assert (
+        f"its nodes have at most {cpus}; use collector.num_workers={cpus - 1} or "
+        f"hydra.launcher.cpus_per_task={cpus}" in lines[0]
+    )
     assert _queued(name) == []
     after = subprocess.run(["squeue", "-h", "-o", "%i"], capture_output=True, text=True, timeout=30).stdout
     assert set(after.split()) <= set(before.split())  # nothing new in the queue
@@ -594,8 +718,9 @@ def _wait_queued(name: str, proc: subprocess.Popen, state: str, timeout: float =
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         assert proc.poll() is None, proc.communicate()
-        out = subprocess.run(["squeue", "-h", "-r", "-n", name, "-o", "%i %T"], capture_output=True,
-                             text=True, timeout=30).stdout.split()
+        out = subprocess.run(
+            ["squeue", "-h", "-r", "-n", name, "-o", "%i %T"], capture_output=True, text=True, timeout=30
+        ).stdout.split()
         if out and out[1::2] == [state] * (len(out) // 2):
             return out[0::2]
         time.sleep(0.5)
@@ -617,8 +742,9 @@ def test_a_cancelled_job_ends_the_wait_with_its_id_and_state(slurm, tmp_path: Pa
         subprocess.run(["scancel", "-n", name], timeout=30)
     assert proc.returncode == 1, out[-2000:] + err[-3000:]
     (first, second) = sorted(ids)
-    assert err.strip().splitlines()[-1] == (f"error: SLURM job {first} ended with JobState=CANCELLED without "
-                                            f"writing a result; so did {second}"), err[-3000:]
+    assert err.strip().splitlines()[-1] == (
+        f"error: SLURM job {first} ended with JobState=CANCELLED without writing a result; so did {second}"
+    ), err[-3000:]
     assert "Traceback" not in err and "Bypassing sacct error" not in out + err
     print(f"pending jobs cancelled: the launcher ended {time.monotonic() - cancelled:.1f} s later")
 
@@ -629,12 +755,20 @@ def test_a_job_killed_while_it_runs_ends_the_wait_with_its_log(slurm, tmp_path: 
     result and the launcher says so, with the end of the job's log. (A plain scancel of a running
     job is taken by training as a preemption: the job requeues itself and is waited for.)"""
     name = f"rlgrasp-killed-{os.getpid()}"
-    proc = _sweep(tmp_path, name, *IN_PROCESS, "total_frames=10000000", "hydra.launcher.timeout_min=30",
-                  seeds="0")
+    proc = _sweep(
+        tmp_path, name, *IN_PROCESS, "total_frames=10000000", "hydra.launcher.timeout_min=30", seeds="0"
+    )
     try:
         (job_id,) = _wait_queued(name, proc, "RUNNING")
-        task = wait_for(lambda: subprocess.run(["pgrep", "-f", f"submitit.core._submit {tmp_path}"],
-                                               capture_output=True, text=True).stdout.split() or None, 120)
+        task = wait_for(
+            lambda: (
+                subprocess.run(
+                    ["pgrep", "-f", f"submitit.core._submit {tmp_path}"], capture_output=True, text=True
+                ).stdout.split()
+                or None
+            ),
+            120,
+        )
         os.kill(int(task[0]), signal.SIGKILL)
         killed = time.monotonic()
         out, err = _finish(proc, timeout=120)
@@ -643,8 +777,9 @@ def test_a_job_killed_while_it_runs_ends_the_wait_with_its_log(slurm, tmp_path: 
         subprocess.run(["scancel", "-n", name], timeout=30)
     assert proc.returncode == 1, out[-2000:] + err[-3000:]
     last = err.strip().splitlines()[-1]
-    assert last.startswith(f"error: SLURM job {job_id} ended with JobState=FAILED without writing a result; "
-                           f"log {tmp_path}"), err[-3000:]
+    assert last.startswith(
+        f"error: SLURM job {job_id} ended with JobState=FAILED without writing a result; log {tmp_path}"
+    ), err[-3000:]
     assert "ends with: " in last and "Traceback" not in err
     print(f"running job killed: the launcher ended {time.monotonic() - killed:.1f} s later")
 
@@ -667,6 +802,9 @@ def test_a_too_big_job_submitted_unchecked_is_cancelled_by_the_launcher(slurm, t
         subprocess.run(["scancel", "-n", name], timeout=30)
     assert proc.returncode == 1, out[-2000:] + err[-3000:]
     last = err.strip().splitlines()[-1]
-    assert re.fullmatch(r"error: SLURM job \d+_[01] can never start: pending with Reason=PartitionConfig "
-                        r"\(.*\); cancelled \d+_[01], \d+_[01]", last), err[-3000:]
+    assert re.fullmatch(
+        r"error: SLURM job \d+_[01] can never start: pending with Reason=PartitionConfig "
+        r"\(.*\); cancelled \d+_[01], \d+_[01]",
+        last,
+    ), err[-3000:]
     assert wait_for(lambda: True if not _queued(name) else None, timeout=30)

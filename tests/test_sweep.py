@@ -100,9 +100,7 @@ def test_sweep_fails_prunes_resumes_and_summarizes(tmp_path: Path) -> None:
 
     # 2) the same command resumes: trial 2's parameters run again (retry), here under a pruner
     # that stops it at its first eval; the on_eval callback saves a checkpoint before it stops.
-    result = run_sweep(
-        [*sweep, "sweep.pruner.name=threshold", "+sweep.pruner.kwargs.lower=1.0e9"], train
-    )
+    result = run_sweep([*sweep, "sweep.pruner.name=threshold", "+sweep.pruner.kwargs.lower=1.0e9"], train)
     assert not result["interrupted"] and result["finished"] == 3
     trials = optuna.load_study(study_name="smoke", storage=storage).get_trials()
     assert [t.state.name for t in trials] == ["FAIL", "COMPLETE", "FAIL", "PRUNED"]
@@ -119,9 +117,19 @@ def test_sweep_fails_prunes_resumes_and_summarizes(tmp_path: Path) -> None:
     best = result["best_config"]
     assert result["best_number"] == 1 and best == study_dir / "configs" / "experiment" / "smoke_best.yaml"
     job = subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "train.py"), "--config-dir", str(best.parents[1]),
-         "experiment=smoke_best", "--cfg", "job"],
-        capture_output=True, text=True, check=True, cwd=tmp_path,
+        [
+            sys.executable,
+            str(ROOT / "scripts" / "train.py"),
+            "--config-dir",
+            str(best.parents[1]),
+            "experiment=smoke_best",
+            "--cfg",
+            "job",
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=tmp_path,
     ).stdout
     assert "experiment_name: smoke_best" in job and "collectors.SingleCollector" in job
     assert f"lr: {trials[1].params['algo.lr']!r}" in job and "epochs: 1\n" in job
@@ -138,12 +146,23 @@ def test_sweep_fails_prunes_resumes_and_summarizes(tmp_path: Path) -> None:
 @pytest.mark.slow
 def test_two_processes_share_one_study(tmp_path: Path) -> None:
     root = tmp_path / "sweeps"
-    common = ["sweep=smoke", f"sweep.root_dir={root}", "sweep.n_trials=4", "sweep.plots=false",
-              "experiment=smoke", "total_frames=512"]
+    common = [
+        "sweep=smoke",
+        f"sweep.root_dir={root}",
+        "sweep.n_trials=4",
+        "sweep.plots=false",
+        "experiment=smoke",
+        "total_frames=512",
+    ]
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     procs = [
-        subprocess.Popen([sys.executable, str(ROOT / "scripts" / "sweep.py"), *common, f"sweep.worker={w}"],
-                         cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        subprocess.Popen(
+            [sys.executable, str(ROOT / "scripts" / "sweep.py"), *common, f"sweep.worker={w}"],
+            cwd=tmp_path,
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
         for w in (0, 1)
     ]
     try:
@@ -207,8 +226,9 @@ def _run_trial(study: optuna.Study, evals: list[tuple[int, float]]) -> bool:
 def test_median_pruner_compares_first_reach_reports_like_with_like() -> None:
     """The reports are projections onto the trial's budget: a slow learner is pruned at once. (A
     projection onto the frames so far would make a trial's first report its best: never pruned.)"""
-    study = optuna.create_study(direction="minimize", pruner=optuna.pruners.MedianPruner(
-        n_startup_trials=3, n_warmup_steps=0))
+    study = optuna.create_study(
+        direction="minimize", pruner=optuna.pruners.MedianPruner(n_startup_trials=3, n_warmup_steps=0)
+    )
     steps = (20480, 40960, 61440, BUDGET)
     for curve in ((0.4, 0.9, 0.95, 0.97), (0.3, 0.6, 0.9, 0.95), (0.2, 0.6, 0.7, 0.8)):
         assert not _run_trial(study, list(zip(steps, curve)))
@@ -237,13 +257,24 @@ def test_bad_objective_keys_are_refused_in_one_line(tmp_path: Path, capsys: pyte
 
 
 def test_named_choice_sets_several_keys_and_the_lr_schedule_can_stay_the_experiments() -> None:
-    space = parse_space({"control": {"type": "categorical", "choices": {
-        "joint_delta": {"env": {"control_mode": "joint_delta", "ee_yaw": False}},
-        "ee_delta_yaw": {"env": {"control_mode": "ee_delta", "ee_yaw": True}},
-    }}, "algo": {"epochs": {"type": "int", "low": 1, "high": 3}}})
+    space = parse_space(
+        {
+            "control": {
+                "type": "categorical",
+                "choices": {
+                    "joint_delta": {"env": {"control_mode": "joint_delta", "ee_yaw": False}},
+                    "ee_delta_yaw": {"env": {"control_mode": "ee_delta", "ee_yaw": True}},
+                },
+            },
+            "algo": {"epochs": {"type": "int", "low": 1, "high": 3}},
+        }
+    )
     assert space.dists["control"].choices == ("joint_delta", "ee_delta_yaw") and "control" in space
     assert space.overrides({"control": "ee_delta_yaw", "algo.epochs": 2}) == [
-        "env.control_mode=ee_delta", "env.ee_yaw=true", "algo.epochs=2"]
+        "env.control_mode=ee_delta",
+        "env.ee_yaw=true",
+        "algo.epochs=2",
+    ]
     with pytest.raises(ValueError, match="control='ee': must be one of joint_delta, ee_delta_yaw"):
         space.overrides({"control": "ee"})
     with pytest.raises(ValueError, match="sweep.params.control.choices.a: must map training keys"):
@@ -262,9 +293,15 @@ def test_named_choice_sets_several_keys_and_the_lr_schedule_can_stay_the_experim
 def test_several_seeds_per_trial_mean_and_first_seed_pruning(tmp_path: Path) -> None:
     root = tmp_path / "sweeps"
     sweep = [
-        "sweep=smoke", f"sweep.root_dir={root}", "sweep.plots=false", "sweep.pruner.name=none",
-        "sweep.metric=success_rate", "sweep.direction=null", "sweep.objective.kind=first_reach",
-        "sweep.trial.seeds=[3,4]", "sweep.trial.lr_schedule=experiment",
+        "sweep=smoke",
+        f"sweep.root_dir={root}",
+        "sweep.plots=false",
+        "sweep.pruner.name=none",
+        "sweep.metric=success_rate",
+        "sweep.direction=null",
+        "sweep.objective.kind=first_reach",
+        "sweep.trial.seeds=[3,4]",
+        "sweep.trial.lr_schedule=experiment",
     ]
     # 1) one trial, two seeds: its value is their mean, each is kept and shown
     result = run_sweep([*sweep, "sweep.n_trials=1"], ["experiment=smoke"])
@@ -292,8 +329,10 @@ def test_several_seeds_per_trial_mean_and_first_seed_pruning(tmp_path: Path) -> 
     assert "anneal_lr_frames" not in result["best_config"].read_text()  # the experiment's own schedule
 
     # 2) the pruner sees the first seed; pruned, the trial ends there (the second seed never runs)
-    run_sweep([*sweep, "sweep.n_trials=2", "sweep.pruner.name=threshold", "+sweep.pruner.kwargs.upper=1000"],
-              ["experiment=smoke"])
+    run_sweep(
+        [*sweep, "sweep.n_trials=2", "sweep.pruner.name=threshold", "+sweep.pruner.kwargs.upper=1000"],
+        ["experiment=smoke"],
+    )
     pruned = optuna.load_study(study_name="smoke", storage=storage).get_trials()[1]
     assert pruned.state.name == "PRUNED" and pruned.last_step == 512
     assert pruned.intermediate_values[512] > 1000 and "runs" not in pruned.user_attrs

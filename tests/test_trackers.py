@@ -29,8 +29,15 @@ def _offline(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def _train(train_cfg, run_dir: Path, frames: int, *overrides: str) -> None:
     resume = [f"resume={run_dir}"] if (run_dir / "checkpoints").is_dir() else []
-    cfg = train_cfg("experiment=smoke", "collector=single", f"total_frames={frames}", "eval.final_episodes=4",
-                    *overrides, *resume, run_dir=run_dir)
+    cfg = train_cfg(
+        "experiment=smoke",
+        "collector=single",
+        f"total_frames={frames}",
+        "eval.final_episodes=4",
+        *overrides,
+        *resume,
+        run_dir=run_dir,
+    )
     cfg.env = STAND_IN
     train(cfg)
 
@@ -40,8 +47,12 @@ def test_mlflow_gets_tags_config_and_resumes_the_same_run(tmp_path: Path, train_
     from mlflow.tracking import MlflowClient  # an optional extra: skipped above without it
 
     run_dir, store = tmp_path / "run", tmp_path / "mlruns"
-    over = ("logger=mlflow", f"logger.tracking_uri=file://{store}", "logger.project=unit",
-            "logger.tags=[panda,smoke]")
+    over = (
+        "logger=mlflow",
+        f"logger.tracking_uri=file://{store}",
+        "logger.project=unit",
+        "logger.tags=[panda,smoke]",
+    )
     _train(train_cfg, run_dir, 1024, *over)
     run_id = json.loads((run_dir / "tracker.json").read_text())["mlflow"]["run_id"]
     _train(train_cfg, run_dir, 2048, *over)
@@ -118,11 +129,16 @@ def test_wandb_offline_gets_tags_config_and_resumes_the_same_run(tmp_path: Path,
     assert runs and all(r.run_id == run_id for r in runs)
     assert {"panda", "smoke"} <= set(runs[0].tags) and runs[0].display_name.startswith("smoke/")
     config = {i.key: json.loads(i.value_json) for r in runs for i in r.config.update}
-    config |= {i.key: json.loads(i.value_json) for r in records if r.WhichOneof("record_type") == "config"
-               for i in r.config.update}
+    config |= {
+        i.key: json.loads(i.value_json)
+        for r in records
+        if r.WhichOneof("record_type") == "config"
+        for i in r.config.update
+    }
     assert config["algo"]["lr"] == 3e-4 and config["experiment_name"] == "smoke"
-    history = [dict(_item(i) for i in r.history.item) for r in records
-               if r.WhichOneof("record_type") == "history"]
+    history = [
+        dict(_item(i) for i in r.history.item) for r in records if r.WhichOneof("record_type") == "history"
+    ]
     assert set(TAGS) <= {k for h in history for k in h}
     frames = {int(h["frames"]) for h in history if "losses/policy_loss" in h}
     assert {1024, 2048} <= frames

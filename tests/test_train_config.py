@@ -83,8 +83,10 @@ def test_the_command_lines_of_the_string_backends_still_work(train_cfg) -> None:
 @pytest.mark.parametrize(
     ("override", "message"),
     [
-        ("collector._target_=rlgrasp.train.collectors.Bogus",
-         "collector._target_='rlgrasp.train.collectors.Bogus' cannot be built: Error locating target"),
+        (
+            "collector._target_=rlgrasp.train.collectors.Bogus",
+            "collector._target_='rlgrasp.train.collectors.Bogus' cannot be built: Error locating target",
+        ),
         ("logger._target_=nowhere.Logger", "logger._target_='nowhere.Logger' cannot be built"),
         ("collector.num_workers=-1", "collector.num_workers=-1: must be >= 0"),
     ],

@@ -144,8 +144,14 @@ def test_evaluating_in_the_background_gives_the_same_run(tmp_path: Path, train_c
 def test_the_seed_check_catches_an_unseeded_worker(tmp_path: Path, train_cfg) -> None:
     """The check above is not vacuous: workers that draw their torch seed from the OS (a forgotten
     worker seed) sample other actions each run, and the check names what moved."""
-    first, second = train_twice(train_cfg, tmp_path, "collector.num_workers=1", "collector.steps_per_env=128",
-                           "total_frames=512", env_target="tests.standins.unseeded_worker_grasp_env")
+    first, second = train_twice(
+        train_cfg,
+        tmp_path,
+        "collector.num_workers=1",
+        "collector.steps_per_env=128",
+        "total_frames=512",
+        env_target="tests.standins.unseeded_worker_grasp_env",
+    )
     differ = record_differences(first, second)
     assert "losses/policy_loss" in differ and any(name.endswith("weight") for name in differ), differ
 
@@ -181,8 +187,13 @@ time_budget_min: null
 resume: null
 """
 #: The env's spec under experiment=smoke (ee_delta control).
-SMOKE_SPEC = {"obs_key": "observation", "obs_dim": 45, "action_dim": 4, "action_low": [-1.0] * 4,
-              "action_high": [1.0] * 4}
+SMOKE_SPEC = {
+    "obs_key": "observation",
+    "obs_dim": 45,
+    "action_dim": 4,
+    "action_low": [-1.0] * 4,
+    "action_high": [1.0] * 4,
+}
 #: Each weight matrix after the seeded init: shape, L1 norm and its first three entries. The init is
 #: orthogonal, from LAPACK's QR: another CPU's rounding moves these by ~1e-7, a seed change by ~1e-1.
 SMOKE_INIT = {
@@ -195,8 +206,12 @@ SMOKE_INIT = {
 }
 #: First reset observation of each env of the first batch (worker 0's two envs, then worker 1's): its
 #: sum and L1 norm. Seeded numpy and PyBullet only, no policy involved.
-SMOKE_FIRST_OBS = [(3.9892926, 9.8073111), (4.8802624, 9.4366169), (4.0817728, 9.9534740),
-                   (4.4125991, 10.040336)]
+SMOKE_FIRST_OBS = [
+    (3.9892926, 9.8073111),
+    (4.8802624, 9.4366169),
+    (4.0817728, 9.9534740),
+    (4.4125991, 10.040336),
+]
 
 
 def test_guard_the_composed_smoke_config(train_cfg) -> None:

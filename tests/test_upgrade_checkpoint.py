@@ -22,7 +22,9 @@ def _format_one(tmp_path: Path) -> Path:
     state = read_checkpoint(make_run(tmp_path) / "checkpoints" / "last.pt")
     state["format"] = 1
     state["rng"] = {
-        "python": random.getstate(), "numpy": np.random.get_state(), "torch": torch.get_rng_state()
+        "python": random.getstate(),
+        "numpy": np.random.get_state(),
+        "torch": torch.get_rng_state(),
     }
     path = tmp_path / "v1.pt"
     torch.save(state, path)

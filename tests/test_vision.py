@@ -117,9 +117,13 @@ def test_the_keypoint_encoder_has_fewer_weights_and_the_same_interface():
 
 @pytest.mark.parametrize(
     "change, message",
-    [({"pooling": "max"}, "model.pooling='max': must be one of flat, keypoints"),
-     ({"strides": [2, 2]},
-      r"model.strides=\[2, 2\]: needs one entry per layer of model.channels=\[8, 16, 16\]")],
+    [
+        ({"pooling": "max"}, "model.pooling='max': must be one of flat, keypoints"),
+        (
+            {"strides": [2, 2]},
+            r"model.strides=\[2, 2\]: needs one entry per layer of model.channels=\[8, 16, 16\]",
+        ),
+    ],
 )
 def test_a_bad_encoder_setting_is_refused_in_one_line(change, message):
     with pytest.raises(ValueError, match=message):
@@ -131,8 +135,9 @@ def test_the_auxiliary_head_learns_the_object_from_the_images_alone():
     the encoder's features learns to read it back, trained with the encoder as distillation does."""
     torch.manual_seed(0)
     actor = build_vision_actor(SPEC, MODEL)
-    aux = ObjectFromImages(actor.module[0].module.encoders, {"object_minus_grasp": [2, 5]},
-                           ["object_minus_grasp"])
+    aux = ObjectFromImages(
+        actor.module[0].module.encoders, {"object_minus_grasp": [2, 5]}, ["object_minus_grasp"]
+    )
     batch = frames(128)
     column = torch.randint(0, 64, (128,))
     batch["depth"] = torch.zeros(128, 1, 64, 64)
@@ -153,8 +158,10 @@ def test_the_auxiliary_head_learns_the_object_from_the_images_alone():
 
 def test_an_unknown_auxiliary_part_is_refused_in_one_line():
     actor = build_vision_actor(SPEC, MODEL)
-    with pytest.raises(ConfigError, match="algo.aux_parts: unknown part 'object_pose'; parts of the "
-                                          "privileged state: object_minus_grasp"):
+    with pytest.raises(
+        ConfigError,
+        match="algo.aux_parts: unknown part 'object_pose'; parts of the privileged state: object_minus_grasp",
+    ):
         ObjectFromImages(actor.module[0].module.encoders, {"object_minus_grasp": [2, 5]}, ["object_pose"])
 
 
@@ -187,8 +194,10 @@ def test_random_shift_moves_each_image_by_whole_pixels_and_repeats_the_border():
     for before, after in zip(images, moved):
         # The offset that explains the middle 4x4 pixels must explain the whole image, border included.
         found = [
-            (dy, dx) for dy in range(-2, 3) for dx in range(-2, 3)
-            if torch.equal(after[:, 2:6, 2:6], before[:, 2 + dy:6 + dy, 2 + dx:6 + dx])
+            (dy, dx)
+            for dy in range(-2, 3)
+            for dx in range(-2, 3)
+            if torch.equal(after[:, 2:6, 2:6], before[:, 2 + dy : 6 + dy, 2 + dx : 6 + dx])
         ]
         assert len(found) == 1
         dy, dx = found[0]
@@ -251,13 +260,16 @@ def test_a_teacher_of_another_control_mode_is_refused():
 def test_a_teacher_of_another_arm_is_refused(robot):
     # The iiwa's state has the Panda's size (7 joints): only the arm's name tells them apart.
     spec = dict(SPEC, privileged_dim=49)
-    with pytest.raises(CheckpointError, match=f"it was trained on the robot 'panda' and this env has the "
-                                              f"robot '{robot}'") as info:
-        load_teacher("policies/grasp_ppo.pt", spec, {"control_mode": "joint_delta", "ee_yaw": False,
-                                                     "robot": robot})
+    with pytest.raises(
+        CheckpointError, match=f"it was trained on the robot 'panda' and this env has the robot '{robot}'"
+    ) as info:
+        load_teacher(
+            "policies/grasp_ppo.pt", spec, {"control_mode": "joint_delta", "ee_yaw": False, "robot": robot}
+        )
     assert "\n" not in str(info.value)
-    load_teacher("policies/grasp_ppo.pt", spec, {"control_mode": "joint_delta", "ee_yaw": False,
-                                                 "robot": "panda"})
+    load_teacher(
+        "policies/grasp_ppo.pt", spec, {"control_mode": "joint_delta", "ee_yaw": False, "robot": "panda"}
+    )
 
 
 SMALL_DISTILL = (

@@ -58,8 +58,10 @@ def test_policy_from_checkpoint_rebuilds_the_camera_policy(student: Path) -> Non
         obs, _ = env.reset(seed=0)
     finally:
         env.close()
-    td = TensorDict({"observation": torch.as_tensor(obs["state"])[None],
-                     "depth": torch.as_tensor(obs["depth"])[None]}, [1])
+    td = TensorDict(
+        {"observation": torch.as_tensor(obs["state"])[None], "depth": torch.as_tensor(obs["depth"])[None]},
+        [1],
+    )
     td2 = td.clone()
     td2["depth"] = torch.full_like(td["depth"], 0.5)
     with torch.no_grad():
@@ -75,8 +77,16 @@ def test_camera_policy_beside_its_teacher_on_held_out_visuals(student: Path, tmp
     """The student and its teacher on the same seeds, under visuals the student never saw: both
     successes with Wilson intervals, their ratio, the paired outcomes, success per visual parameter,
     and videos with the camera's view beside the scene."""
-    m = evaluate(_cfg(f"ckpt={student}", "visual=heldout", "episodes=4", "video_episodes=1",
-                      "tensorboard=false", f"out_dir={tmp_path / 'e'}"))
+    m = evaluate(
+        _cfg(
+            f"ckpt={student}",
+            "visual=heldout",
+            "episodes=4",
+            "video_episodes=1",
+            "tensorboard=false",
+            f"out_dir={tmp_path / 'e'}",
+        )
+    )
     out = tmp_path / "e"
     t = m["teacher"]
     assert t["path"] == str(TEACHER)
@@ -131,16 +141,21 @@ def test_teacher_options(student: Path, tmp_path: Path) -> None:
     run = make_run(tmp_path)  # an ee_delta state policy
     state = prepare("checkpoint", str(run))
     assert prepare_teacher("auto", state) is None  # a state policy has no teacher
-    with pytest.raises(EvaluationError, match="teacher=.*only a camera policy is compared with a teacher, "
-                                              r"this is a state policy \(\d+ state values\)"):
+    with pytest.raises(
+        EvaluationError,
+        match="teacher=.*only a camera policy is compared with a teacher, "
+        r"this is a state policy \(\d+ state values\)",
+    ):
         prepare_teacher(str(TEACHER), state)
     with pytest.raises(EvaluationError, match="control_mode='ee_delta' in the teacher, 'joint_delta' here"):
         prepare_teacher(str(run), source)
     with pytest.raises(EvaluationError, match="teacher=.*nowhere.pt: missing checkpoint"):
         prepare_teacher(str(tmp_path / "nowhere.pt"), source)
     gone = make_student(tmp_path, name="orphan.pt", teacher=str(tmp_path / "moved.pt"))
-    with pytest.raises(EvaluationError, match="teacher=auto: the checkpoint's teacher .*moved.pt does not "
-                                              "exist here; give teacher="):
+    with pytest.raises(
+        EvaluationError,
+        match="teacher=auto: the checkpoint's teacher .*moved.pt does not exist here; give teacher=",
+    ):
         prepare_teacher("auto", prepare("checkpoint", str(gone)))
     with pytest.raises(EvaluationError, match="the teacher must be a state policy"):
         prepare_teacher(str(student), source)
@@ -156,13 +171,19 @@ def test_a_policy_and_an_env_of_the_other_kind_are_refused(student: Path, tmp_pa
     assert "the env has no camera (env.camera=null): drop cameras=none" in line
     run = make_run(tmp_path)
     cfg = _cfg(f"ckpt={run}", "cameras=wrist_depth")
-    with pytest.raises(EvaluationError, match=r"is a state policy \(\d+ state values\) and the env has a "
-                                              r"camera \(env.camera=\{mount: wrist, modality: depth, "
-                                              r"64x64\}\): use cameras=none"):
+    with pytest.raises(
+        EvaluationError,
+        match=r"is a state policy \(\d+ state values\) and the env has a "
+        r"camera \(env.camera=\{mount: wrist, modality: depth, "
+        r"64x64\}\): use cameras=none",
+    ):
         prepare(cfg.policy, cfg.ckpt, cfg.ckpt_kind, None, OmegaConf.to_container(cfg.env))
     cfg = _cfg(f"ckpt={student}", "cameras=wrist_rgb")
-    with pytest.raises(EvaluationError, match=r"image mismatch: checkpoint reads depth \[1, 64, 64\], "
-                                              r"env gives rgb \[3, 64, 64\]"):
+    with pytest.raises(
+        EvaluationError,
+        match=r"image mismatch: checkpoint reads depth \[1, 64, 64\], "
+        r"env gives rgb \[3, 64, 64\]",
+    ):
         prepare(cfg.policy, cfg.ckpt, cfg.ckpt_kind, None, OmegaConf.to_container(cfg.env))
 
 
@@ -201,8 +222,14 @@ def test_depth_view_colours_and_upscaling() -> None:
     assert frame.shape == (240, 320 + 4 + 720, 3)
     assert camera_view(np.zeros(5), 0.02, 1.0) is None
     # stacked frames (env.camera.frames=2): the view shows the newest image of each
-    stacked = camera_view({"depth": np.concatenate([np.full_like(depth, 0.9), depth]),
-                           "rgb": np.concatenate([np.full_like(rgb, 50), rgb])}, 0.02, 1.0)
+    stacked = camera_view(
+        {
+            "depth": np.concatenate([np.full_like(depth, 0.9), depth]),
+            "rgb": np.concatenate([np.full_like(rgb, 50), rgb]),
+        },
+        0.02,
+        1.0,
+    )
     np.testing.assert_array_equal(stacked, view)
 
 
@@ -264,8 +291,9 @@ def test_example_drives_the_camera_env_with_the_file(tmp_path: Path) -> None:
         "bad = [m for m in sys.modules if m.startswith(('rlgrasp.train', 'rlgrasp.evaluation', 'torchrl'))];"
         "assert not bad, bad"
     )
-    done = subprocess.run([sys.executable, "-c", probe, str(out)], capture_output=True, text=True,
-                          cwd=tmp_path, timeout=300)
+    done = subprocess.run(
+        [sys.executable, "-c", probe, str(out)], capture_output=True, text=True, cwd=tmp_path, timeout=300
+    )
     assert done.returncode == 0, done.stderr[-2000:]
     assert "success " in done.stdout and "/1 " in done.stdout
 
@@ -324,8 +352,10 @@ def test_enjoy_shows_the_camera_preview_panes(modality: str, rgb: int, depth: in
 
 def test_enjoy_plays_a_camera_policy_headless(student: Path) -> None:
     lines: list[str] = []
-    results = play(_enjoy_cfg(f"ckpt={student}", "episodes=1", "speed=0", "render=none", "visual=heldout"),
-                   out=lines.append)
+    results = play(
+        _enjoy_cfg(f"ckpt={student}", "episodes=1", "speed=0", "render=none", "visual=heldout"),
+        out=lines.append,
+    )
     assert lines[1].startswith("camera: wrist depth 64x64")
     assert lines[-1] == f"success {int(results[0].success_at_end)}/1"
     assert 0.75 <= results[0].randomization["visual_object_hue"] <= 0.95
@@ -338,8 +368,19 @@ def test_camera_evaluation_does_not_depend_on_the_worker_count(student: Path, tm
     """Student and teacher in spawned workers: the same figures as in this process."""
     out = {}
     for w in (1, 2):
-        m = evaluate(_cfg(f"ckpt={student}", "episodes=6", f"workers={w}", "video_episodes=1",
-                          "tensorboard=false", f"out_dir={tmp_path / str(w)}"))
-        out[w] = {k: v for k, v in m.items()
-                  if k not in ("timing", "config", "output_dir", "summary_markdown", "files")}
+        m = evaluate(
+            _cfg(
+                f"ckpt={student}",
+                "episodes=6",
+                f"workers={w}",
+                "video_episodes=1",
+                "tensorboard=false",
+                f"out_dir={tmp_path / str(w)}",
+            )
+        )
+        out[w] = {
+            k: v
+            for k, v in m.items()
+            if k not in ("timing", "config", "output_dir", "summary_markdown", "files")
+        }
     assert out[1] == out[2] and out[1]["teacher"]["success_at_end"]["episodes"] == 6

@@ -29,8 +29,13 @@ class PPO(Algorithm):
         super().__init__(cfg, parts, device)
         self.critic = parts.critic
         self.learner = PPOLearner(
-            self.actor, parts.critic, parts.norms, cfg.algo, device,
-            stale_batches=parts.collector.collects_ahead, extras=self._extras(),
+            self.actor,
+            parts.critic,
+            parts.norms,
+            cfg.algo,
+            device,
+            stale_batches=parts.collector.collects_ahead,
+            extras=self._extras(),
         )
 
     def _extras(self) -> list[Any]:

@@ -42,8 +42,14 @@ from rlgrasp.train.algorithm import Algorithm, finite_or_raise
 from rlgrasp.vision.augment import random_shift
 
 #: The entries a transition keeps in the replay buffer (the collector's batch has more).
-TRANSITION_KEYS = (OBS_KEY, "action", ("next", OBS_KEY), ("next", "reward"), ("next", "done"),
-                   ("next", "terminated"))
+TRANSITION_KEYS = (
+    OBS_KEY,
+    "action",
+    ("next", OBS_KEY),
+    ("next", "reward"),
+    ("next", "done"),
+    ("next", "terminated"),
+)
 #: The replay buffer's file in the run directory (plain tensors, read with ``weights_only=True``).
 REPLAY_FILE = "replay.pt"
 #: Where a camera learner puts the images' features in a minibatch (the actor head and critics read it).
@@ -61,15 +67,19 @@ class QNet(nn.Module):
     critic's parameters and buffers into its ensemble, and a copied normalizer would stop following
     the running statistics the actor (and so the deployed policy) uses."""
 
-    def __init__(self, norm: RunningNorm, in_dim: int, hidden: list[int], activation: str,
-                 layer_norm: bool) -> None:
+    def __init__(
+        self, norm: RunningNorm, in_dim: int, hidden: list[int], activation: str, layer_norm: bool
+    ) -> None:
         super().__init__()
         object.__setattr__(self, "norm", norm)  # a reference, not a submodule (see above)
         layers: list[nn.Module] = []
         width = in_dim
         for size in hidden:
-            layers += [nn.Linear(width, size), *([nn.LayerNorm(size)] if layer_norm else []),
-                       ACTIVATIONS[activation]()]
+            layers += [
+                nn.Linear(width, size),
+                *([nn.LayerNorm(size)] if layer_norm else []),
+                ACTIVATIONS[activation](),
+            ]
             width = size
         layers.append(nn.Linear(width, 1))
         self.mlp = nn.Sequential(*layers)
@@ -80,8 +90,13 @@ class QNet(nn.Module):
 
 
 def build_qvalue(norm: RunningNorm, in_keys: list[Any], in_dim: int, algo_cfg: Any) -> TensorDictModule:
-    net = QNet(norm, in_dim, list(algo_cfg.critic_hidden_sizes), algo_cfg.critic_activation,
-               algo_cfg.critic_layer_norm)
+    net = QNet(
+        norm,
+        in_dim,
+        list(algo_cfg.critic_hidden_sizes),
+        algo_cfg.critic_activation,
+        algo_cfg.critic_layer_norm,
+    )
     return TensorDictModule(net, in_keys=in_keys, out_keys=["state_action_value"])
 
 
@@ -98,8 +113,11 @@ class SAC(Algorithm):
         self.transition_keys = _transition_keys(self.images, a.get("critic_privileged", False))
         act_dim = len(parts.spec["action_low"])
         self.loss = SACLoss(
-            self._loss_actor(), self._qvalue(act_dim).to(device),
-            num_qvalue_nets=a.num_critics, loss_function="l2", alpha_init=a.alpha_init,
+            self._loss_actor(),
+            self._qvalue(act_dim).to(device),
+            num_qvalue_nets=a.num_critics,
+            loss_function="l2",
+            alpha_init=a.alpha_init,
             target_entropy=a.target_entropy if a.target_entropy is not None else -float(act_dim),
             delay_qvalue=True,
         )
@@ -146,8 +164,9 @@ class SAC(Algorithm):
         worker starts)."""
         a = self.cfg.algo
         frames = demo_transitions(demos_for(a.demos, self.parts.make_env, self.cfg.env), self.cfg.env)
-        demos = _buffer(frames.numel(), min(a.batch_size - 1, max(1, round(a.batch_size * a.demo_ratio))),
-                        self.device)
+        demos = _buffer(
+            frames.numel(), min(a.batch_size - 1, max(1, round(a.batch_size * a.demo_ratio))), self.device
+        )
         demos.extend(_compact(frames.select(*self.transition_keys)).to(self.device))
         return demos
 
@@ -175,8 +194,14 @@ class SAC(Algorithm):
             loss.backward()
             optimizer.step()
             losses.append(float(loss.detach()))
-        log_scalars({"pretrain/bc_loss_first": losses[0], "pretrain/bc_loss_last": losses[-1],
-                     "pretrain/steps": float(steps)}, 0)
+        log_scalars(
+            {
+                "pretrain/bc_loss_first": losses[0],
+                "pretrain/bc_loss_last": losses[-1],
+                "pretrain/steps": float(steps),
+            },
+            0,
+        )
 
     def update(self, batch: TensorDictBase, frames: int) -> dict[str, float]:
         """Store the batch, then take ``utd_ratio`` gradient steps per new frame once the buffer
@@ -233,9 +258,12 @@ class SAC(Algorithm):
             self.optimizers["actor"].step()
             self.optimizers["alpha"].step()
         self.target_update.step()
-        metrics = {"loss_qvalue": float(loss_qvalue.detach()), "loss_actor": float(loss_actor.detach()),
-                   "alpha": float(self.loss.log_alpha.detach().exp()),
-                   "entropy": float(-actor_info["log_prob"].mean())}
+        metrics = {
+            "loss_qvalue": float(loss_qvalue.detach()),
+            "loss_actor": float(loss_actor.detach()),
+            "alpha": float(self.loss.log_alpha.detach().exp()),
+            "entropy": float(-actor_info["log_prob"].mean()),
+        }
         if loss_bc is not None:
             metrics["loss_bc"] = float(loss_bc.detach())
         return metrics
@@ -251,7 +279,7 @@ class SAC(Algorithm):
         if self.bc is None:
             return None
         with set_exploration_type(ExplorationType.DETERMINISTIC):
-            return self.bc(for_critic[-self.demos.batch_size:])["loss_bc"]
+            return self.bc(for_critic[-self.demos.batch_size :])["loss_bc"]
 
     def _inputs(self, sample: TensorDictBase) -> tuple[TensorDictBase, TensorDictBase]:
         """The minibatch as the critics' loss reads it and as the actor's does. With a camera: each
@@ -312,8 +340,9 @@ class SAC(Algorithm):
 
         path = run_dir / REPLAY_FILE
         if not path.is_file():
-            log.warning("no %s in %s: the resumed run starts with an empty replay buffer",
-                        REPLAY_FILE, run_dir)
+            log.warning(
+                "no %s in %s: the resumed run starts with an empty replay buffer", REPLAY_FILE, run_dir
+            )
             return
         saved = torch.load(path, map_location="cpu", weights_only=True)
         data = TensorDict(saved["data"], batch_size=[saved["frames"]])
@@ -346,8 +375,11 @@ def replay_bytes_per_frame(spec: dict[str, Any], keys: tuple[Any, ...]) -> int:
             numel = int(torch.Size(spec["images"][name]).numel())
             size += numel * STORED_DTYPES[name].itemsize
         else:
-            dims = {OBS_KEY: spec["obs_dim"], PRIVILEGED_KEY: spec.get("privileged_dim", 0),
-                    "action": len(spec["action_low"])}
+            dims = {
+                OBS_KEY: spec["obs_dim"],
+                PRIVILEGED_KEY: spec.get("privileged_dim", 0),
+                "action": len(spec["action_low"]),
+            }
             size += 4 * dims.get(name, 1)
     return size
 

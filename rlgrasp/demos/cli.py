@@ -99,13 +99,27 @@ def record_demos(cfg: DictConfig) -> dict[str, Any]:
         e["kept"] = cfg.keep == "all" or e["success"]
     kept = [e for e in episodes if e["kept"]]
     info = summary(episodes, len(kept))
-    meta = {**layout, "policy": cfg.policy, "keep": cfg.keep, "seed": cfg.seed,
-            "env": OmegaConf.to_container(cfg.env, resolve=True), "summary": info}
+    meta = {
+        **layout,
+        "policy": cfg.policy,
+        "keep": cfg.keep,
+        "seed": cfg.seed,
+        "env": OmegaConf.to_container(cfg.env, resolve=True),
+        "summary": info,
+    }
     path = write_demos(Path(cfg.out), to_frames(kept), meta)
     (Path(cfg.out) / "summary.json").write_text(json.dumps(info, indent=1))
-    log.info("success %.3f over %d episodes; kept %d (%d frames); length mean %.1f [%d, %d]; %s",
-             info["success_rate"], info["episodes"], info["kept"], info["frames"], info["mean_length"],
-             info["min_length"], info["max_length"], _objects_line(info["objects"], cfg.out))
+    log.info(
+        "success %.3f over %d episodes; kept %d (%d frames); length mean %.1f [%d, %d]; %s",
+        info["success_rate"],
+        info["episodes"],
+        info["kept"],
+        info["frames"],
+        info["mean_length"],
+        info["min_length"],
+        info["max_length"],
+        _objects_line(info["objects"], cfg.out),
+    )
     log.info("wrote %s (train with algo.demos=%s)", path, path)
     return info
 

@@ -120,8 +120,10 @@ def _frames(path: Path, folder: Path) -> TensorDict:
     """The transitions of ``folder``; a folder copied without them (only ``demos.json``), or cut short,
     is refused naming it, not with TensorDict's traceback from inside the learner."""
     if not (folder / "meta.json").is_file():
-        raise DemoError(f"algo.demos={path}: {folder} is missing (its {META} came without the "
-                        "transitions; copy the whole demos folder, or record it again with rlgrasp-demos)")
+        raise DemoError(
+            f"algo.demos={path}: {folder} is missing (its {META} came without the "
+            "transitions; copy the whole demos folder, or record it again with rlgrasp-demos)"
+        )
     try:  # load_memmap unpickles what is not a plain tensor: check the folder first
         check_plain_memmap(folder, f"algo.demos={path}")
     except UntrustedConfigError as exc:
@@ -129,8 +131,10 @@ def _frames(path: Path, folder: Path) -> TensorDict:
     try:
         return TensorDict.load_memmap(folder).to_tensordict()
     except (OSError, ValueError, RuntimeError, KeyError) as exc:
-        raise DemoError(f"algo.demos={path}: unreadable {folder} ({type(exc).__name__}: "
-                        f"{str(exc).splitlines()[0][:200] if str(exc) else ''})") from None
+        raise DemoError(
+            f"algo.demos={path}: unreadable {folder} ({type(exc).__name__}: "
+            f"{str(exc).splitlines()[0][:200] if str(exc) else ''})"
+        ) from None
 
 
 def summary(episodes: list[dict[str, Any]], kept: int) -> dict[str, Any]:
@@ -176,9 +180,12 @@ def demo_transitions(demos: Demos, env_cfg: Any) -> TensorDict:
         next_obs = torch.roll(f["observation"], -1, 0)
         terminated = torch.zeros(f.numel(), dtype=torch.bool)
     n = int(keep.sum())
-    nxt = {"observation": next_obs[keep], "reward": f["reward"][keep].reshape(n, 1),
-           "done": f["done"][keep].reshape(n, 1) | terminated[keep].reshape(n, 1),
-           "terminated": terminated[keep].reshape(n, 1)}
+    nxt = {
+        "observation": next_obs[keep],
+        "reward": f["reward"][keep].reshape(n, 1),
+        "done": f["done"][keep].reshape(n, 1) | terminated[keep].reshape(n, 1),
+        "terminated": terminated[keep].reshape(n, 1),
+    }
     now = {"observation": f["observation"][keep], "action": f["action"][keep]}
     for key in (*IMAGE_KEYS, PRIVILEGED_KEY):  # a camera's entries (recorded with their next_)
         if key in f.keys():

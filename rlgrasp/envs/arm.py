@@ -21,8 +21,14 @@ from rlgrasp.envs.scene import data_path
 class ArmRobot(Robot):
     """One arm body in one physics client, built from its spec."""
 
-    def __init__(self, spec: RobotSpec, client: BulletClient, model: str | None = None,
-                 render: str | None = None, collision: str = "mesh"):
+    def __init__(
+        self,
+        spec: RobotSpec,
+        client: BulletClient,
+        model: str | None = None,
+        render: str | None = None,
+        collision: str = "mesh",
+    ):
         """``model`` overrides the spec's model file; ``render``: None (the model as it is),
         ``low_poly`` or ``wrist`` (low-poly, wrist links only) when the spec has a low-poly rule;
         ``collision``: a name of ``rlgrasp.envs.collision_model.COLLISION_MODELS``."""
@@ -95,8 +101,11 @@ class ArmRobot(Robot):
         self.max_torque = np.array(spec.max_torque) if spec.max_torque else np.array([i[10] for i in infos])
         self.movable = self.arm + self.fingers
         # Every joint with a degree of freedom, in index order: what IK returns and inverse dynamics reads.
-        self._dofs = [j for j in range(c.getNumJoints(self.body))
-                      if c.getJointInfo(self.body, j)[2] != pybullet.JOINT_FIXED]
+        self._dofs = [
+            j
+            for j in range(c.getNumJoints(self.body))
+            if c.getJointInfo(self.body, j)[2] != pybullet.JOINT_FIXED
+        ]
         self._arm_in_dofs = [self._dofs.index(j) for j in self.arm]
         self._offset = np.array(spec.grasp_offset, dtype=float)
 
@@ -109,13 +118,21 @@ class ArmRobot(Robot):
             lead = by_name[f.mimic]
             ratio = (f.open - f.closed) / (lead.open - lead.closed)
             tie = self.client.createConstraint(
-                self.body, joints[f.mimic], self.body, joints[f.joint], pybullet.JOINT_GEAR, [1, 0, 0],
-                [0, 0, 0], [0, 0, 0],
+                self.body,
+                joints[f.mimic],
+                self.body,
+                joints[f.joint],
+                pybullet.JOINT_GEAR,
+                [1, 0, 0],
+                [0, 0, 0],
+                [0, 0, 0],
             )
             self.client.changeConstraint(tie, gearRatio=-ratio, maxForce=self.spec.hold_force, erp=1.0)
         if mimics:
             self.client.setJointMotorControlArray(
-                self.body, [joints[f.joint] for f in mimics], pybullet.VELOCITY_CONTROL,
+                self.body,
+                [joints[f.joint] for f in mimics],
+                pybullet.VELOCITY_CONTROL,
                 forces=[0.0] * len(mimics),
             )
         self._driven = [i for i, f in enumerate(self.spec.fingers) if not f.mimic]
@@ -199,8 +216,11 @@ class ArmRobot(Robot):
         )
         if self.hold:
             self.client.setJointMotorControlArray(
-                self.body, [j for j, _, _ in self.hold], pybullet.POSITION_CONTROL,
-                targetPositions=[q for _, q, _ in self.hold], forces=[f for _, _, f in self.hold],
+                self.body,
+                [j for j, _, _ in self.hold],
+                pybullet.POSITION_CONTROL,
+                targetPositions=[q for _, q, _ in self.hold],
+                forces=[f for _, _, f in self.hold],
             )
 
     def apply_torques(self, tau: np.ndarray) -> None:
@@ -225,7 +245,11 @@ class ArmRobot(Robot):
             rotation = np.array(self.client.getMatrixFromQuaternion(orientation)).reshape(3, 3)
             position = np.asarray(position) - rotation @ self._offset
         q = self.client.calculateInverseKinematics(
-            self.body, self.grasp_link, position, orientation, maxNumIterations=self.spec.ik_iterations,
+            self.body,
+            self.grasp_link,
+            position,
+            orientation,
+            maxNumIterations=self.spec.ik_iterations,
         )
         return np.clip(np.array(q)[self._arm_in_dofs], self.lower, self.upper)
 
@@ -241,6 +265,11 @@ def hold_target(value: Any, default_force: float) -> tuple[float, float]:
 class Panda(ArmRobot):
     """The Franka Panda of ``pybullet_data``; a subclass may set its own ``neutral_pose``."""
 
-    def __init__(self, client: BulletClient, urdf: str | None = None, render: str | None = None,
-                 collision: str = "mesh"):
+    def __init__(
+        self,
+        client: BulletClient,
+        urdf: str | None = None,
+        render: str | None = None,
+        collision: str = "mesh",
+    ):
         super().__init__(builtin_spec("panda"), client, urdf, render, collision)

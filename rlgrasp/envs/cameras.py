@@ -58,8 +58,10 @@ class CameraSpec:
         unknown = sorted(set(cfg) - known)
         if unknown:
             raise ValueError(f"camera: unknown key {unknown[0]!r}; valid keys: {', '.join(sorted(known))}")
-        values = {k: tuple(float(x) for x in v) if k in ("eye", "target", "up") and v is not None else v
-                  for k, v in cfg.items()}
+        values = {
+            k: tuple(float(x) for x in v) if k in ("eye", "target", "up") and v is not None else v
+            for k, v in cfg.items()
+        }
         spec = CameraSpec(**values)
         spec.validate()
         return spec
@@ -161,8 +163,9 @@ def ray_grid(spec: CameraSpec) -> np.ndarray:
     return grid
 
 
-def ground_depth(rays: np.ndarray, eye: np.ndarray, target: np.ndarray, up: np.ndarray,
-                 height: float = 0.0) -> np.ndarray:
+def ground_depth(
+    rays: np.ndarray, eye: np.ndarray, target: np.ndarray, up: np.ndarray, height: float = 0.0
+) -> np.ndarray:
     """Depth (m, along the view axis) of the plane z = ``height`` at each pixel; inf where a ray
     never meets it. Hand-written: TinyRenderer shades every ground pixel, which a depth image
     does not need."""
@@ -230,8 +233,9 @@ class Camera:
         only prints a warning that it does not free it."""
         probe = self.client.createCollisionShape(pybullet.GEOM_SPHERE, radius=1e-3)
         eye = self.world_pose(mount_pose)[0]
-        hits = self.client.getClosestPoints(bodyA=-1, bodyB=body, distance=0.0, collisionShapeA=probe,
-                                            collisionShapePositionA=eye.tolist())
+        hits = self.client.getClosestPoints(
+            bodyA=-1, bodyB=body, distance=0.0, collisionShapeA=probe, collisionShapePositionA=eye.tolist()
+        )
         inside = [hit[4] for hit in hits if hit[8] < 0.0]
         if inside:
             link = inside[0]
@@ -239,7 +243,8 @@ class Camera:
             frame = "the hand's frame" if mount_pose is not None else "the world frame"
             raise ValueError(
                 f"camera.eye={[round(float(x), 3) for x in self.base_pose['eye']]} ({frame}): inside the "
-                f"robot's link {name} at its neutral pose; move the camera outside the robot")
+                f"robot's link {name} at its neutral pose; move the camera outside the robot"
+            )
 
     def render(self, mount_pose: tuple[np.ndarray, np.ndarray] | None) -> dict[str, np.ndarray]:
         s = self.spec
@@ -248,8 +253,12 @@ class Camera:
         projection = self.client.computeProjectionMatrixFOV(self.fov, s.width / s.height, s.near, s.far)
         masked = self.masked_body is not None
         _, _, rgba, depth_buffer, segmentation = self.client.getCameraImage(
-            s.width, s.height, view, projection,
-            renderer=pybullet.ER_TINY_RENDERER, flags=0 if masked else pybullet.ER_NO_SEGMENTATION_MASK,
+            s.width,
+            s.height,
+            view,
+            projection,
+            renderer=pybullet.ER_TINY_RENDERER,
+            flags=0 if masked else pybullet.ER_NO_SEGMENTATION_MASK,
             **self.lighting.keywords(),
         )
         out = {}

@@ -45,8 +45,10 @@ class Box:
     def urdf(self) -> str:
         centre = " ".join(f"{(a + b) / 2:.6g}" for a, b in zip(self.low, self.high))
         size = " ".join(f"{b - a + 2 * MARGIN:.6g}" for a, b in zip(self.low, self.high))
-        return (f'<collision><origin xyz="{centre}" rpy="0 0 0"/>'
-                f'<geometry><box size="{size}"/></geometry></collision>')
+        return (
+            f'<collision><origin xyz="{centre}" rpy="0 0 0"/>'
+            f'<geometry><box size="{size}"/></geometry></collision>'
+        )
 
 
 @dataclass(frozen=True)
@@ -60,12 +62,15 @@ class Capsule:
 
     def urdf(self) -> str:
         xyz, rpy = (" ".join(f"{v:.6g}" for v in t) for t in (self.xyz, self.rpy))
-        return (f'<collision><origin xyz="{xyz}" rpy="{rpy}"/><geometry>'
-                f'<capsule radius="{self.radius:.6g}" length="{self.length:.6g}"/></geometry></collision>')
+        return (
+            f'<collision><origin xyz="{xyz}" rpy="{rpy}"/><geometry>'
+            f'<capsule radius="{self.radius:.6g}" length="{self.length:.6g}"/></geometry></collision>'
+        )
 
 
 def _finger(side: float) -> tuple[Box, ...]:
     """The Panda finger (``side`` +1 left, -1 right: the right one is the left turned about z)."""
+
     def box(low, high):
         ys = sorted((side * low[1], side * high[1]))
         return Box((low[0], ys[0], low[2]), (high[0], ys[1], high[2]))
@@ -97,8 +102,10 @@ def collision_variant(path: str, robot: str, model: str) -> str:
     if model == "mesh":
         return path
     if robot not in PRIMITIVES:
-        raise ValueError(f"collision_model=primitive: no primitive shapes for robot {robot!r}; "
-                         f"arms that have them: {', '.join(PRIMITIVES)}")
+        raise ValueError(
+            f"collision_model=primitive: no primitive shapes for robot {robot!r}; "
+            f"arms that have them: {', '.join(PRIMITIVES)}"
+        )
     if not path.lower().endswith(".urdf"):
         raise ValueError(f"collision_model=primitive: {path!r} is not a URDF")
     return primitive_urdf(path, PRIMITIVES[robot])
@@ -114,7 +121,7 @@ def primitive_urdf(path: str, shapes: Mapping[str, Sequence[Box | Capsule]]) -> 
             raise ValueError(f"collision_model=primitive: link {link!r} not found in {path}")
         body = re.sub(r"\s*<collision>.*?</collision>", "", found.group(1), flags=re.S)
         body += "".join(part.urdf() for part in parts) + "\n"
-        text = text[: found.start(1)] + body + text[found.end(1):]
+        text = text[: found.start(1)] + body + text[found.end(1) :]
     return write_once(text, "rlgrasp-primitive")
 
 

@@ -40,8 +40,13 @@ class ControlMode(ABC):
         self.robot.use_position_control(episode["position_gain_scale"], episode["finger_force"])
         self.robot.command_arm(self.robot.joint_state()[0])
 
-    def apply(self, action: np.ndarray, substeps: int, step: Callable[[], None],
-              readings: Mapping[str, Any] | None = None) -> None:
+    def apply(
+        self,
+        action: np.ndarray,
+        substeps: int,
+        step: Callable[[], None],
+        readings: Mapping[str, Any] | None = None,
+    ) -> None:
         """``readings``: the robot's readings taken since the last physics step (the env's last
         observation), so that the target need not read the joints or the grasp point again."""
         robot = self.robot
@@ -50,8 +55,9 @@ class ControlMode(ABC):
         for _ in range(substeps):
             step()
 
-    def arm_target(self, action: np.ndarray, readings: Mapping[str, Any] | None = None
-                   ) -> np.ndarray:  # pragma: no cover - position modes
+    def arm_target(
+        self, action: np.ndarray, readings: Mapping[str, Any] | None = None
+    ) -> np.ndarray:  # pragma: no cover - position modes
         raise NotImplementedError
 
 
@@ -113,8 +119,13 @@ class JointTorque(ControlMode):
     def reset(self, episode: dict[str, Any]) -> None:
         self.robot.use_torque_control(episode["finger_force"])
 
-    def apply(self, action: np.ndarray, substeps: int, step: Callable[[], None],
-              readings: Mapping[str, Any] | None = None) -> None:
+    def apply(
+        self,
+        action: np.ndarray,
+        substeps: int,
+        step: Callable[[], None],
+        readings: Mapping[str, Any] | None = None,
+    ) -> None:
         robot = self.robot
         robot.command_fingers((action[-1] + 1.0) / 2.0 * robot.max_finger_width)
         tau = action[: self.motion_dim] * self.torque_fraction * robot.max_torque
@@ -134,7 +145,9 @@ def make_control(mode: str, robot: Robot, **settings: Any) -> ControlMode:
         return JointDelta(robot, settings["joint_step"])
     if mode == "joint_torque":
         if not robot.torque_control:
-            raise ValueError("control_mode=joint_torque: this arm's model has no meaningful dynamics "
-                             "(robot.torque_control=false); use ee_delta or joint_delta")
+            raise ValueError(
+                "control_mode=joint_torque: this arm's model has no meaningful dynamics "
+                "(robot.torque_control=false); use ee_delta or joint_delta"
+            )
         return JointTorque(robot, settings["torque_fraction"], settings["gravity_compensation"])
     raise ValueError(f"unknown control_mode {mode!r}; valid modes: {', '.join(CONTROL_MODES)}")

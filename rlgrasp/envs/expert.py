@@ -36,8 +36,13 @@ def _wrap_half_turn(angle: float) -> float:
     return (angle + math.pi / 2) % math.pi - math.pi / 2
 
 
-def grasp_plan(quat: np.ndarray, extents: np.ndarray, centre_z: float, finger_reach: float = FINGER_REACH,
-               floor_clearance: float = FLOOR_CLEARANCE) -> tuple[float, float, float]:
+def grasp_plan(
+    quat: np.ndarray,
+    extents: np.ndarray,
+    centre_z: float,
+    finger_reach: float = FINGER_REACH,
+    floor_clearance: float = FLOOR_CLEARANCE,
+) -> tuple[float, float, float]:
     """(hand yaw, grasp-point height, width across the fingers) for a top-down grasp: the grasp
     point ``finger_reach`` below the object's top, at least ``floor_clearance`` above its bottom.
 
@@ -112,8 +117,13 @@ class ScriptedExpert:
         s = self.s
         grasp = obs[s["grasp_pos"]].astype(float)
         centre = grasp + obs[s["object_minus_grasp"]]
-        yaw, grasp_z, _ = grasp_plan(obs[s["object_quat"]], obs[s["object_extents"]], centre[2],
-                                     self.finger_reach, self.floor_clearance)
+        yaw, grasp_z, _ = grasp_plan(
+            obs[s["object_quat"]],
+            obs[s["object_extents"]],
+            centre[2],
+            self.finger_reach,
+            self.floor_clearance,
+        )
         yaw = yaw if self.use_yaw else 0.0
         target = np.array([centre[0], centre[1], grasp_z])
         flat = np.linalg.norm(target[:2] - grasp[:2])

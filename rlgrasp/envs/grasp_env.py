@@ -23,7 +23,11 @@ from rlgrasp.envs.visuals import VisualRandomizer
 
 
 def _check_args(
-    control_mode: str, render_mode: str | None, max_episode_steps: int, substeps: int, time_step: float,
+    control_mode: str,
+    render_mode: str | None,
+    max_episode_steps: int,
+    substeps: int,
+    time_step: float,
     collision_model: str,
 ) -> None:
     """Bad constructor values fail here, naming the argument, before a physics client exists."""
@@ -101,8 +105,13 @@ class GraspEnv(gym.Env):
         weights = RewardWeights.from_mapping(reward_weights)
         self.max_episode_steps, self.substeps = int(max_episode_steps), int(substeps)
         self.terminate_on_success, self.render_mode = terminate_on_success, render_mode
-        self.viewer = dict(width=render_width, height=render_height, distance=camera_distance,
-                           yaw=camera_yaw, pitch=camera_pitch)
+        self.viewer = dict(
+            width=render_width,
+            height=render_height,
+            distance=camera_distance,
+            yaw=camera_yaw,
+            pitch=camera_pitch,
+        )
         self.metadata = {**self.metadata, "render_fps": round(1.0 / (time_step * substeps))}
 
         self._build_world(
@@ -112,8 +121,13 @@ class GraspEnv(gym.Env):
         self.control_mode = control_mode
         try:  # an arm may refuse a mode (joint_torque without meaningful dynamics)
             self.control = make_control(
-                control_mode, self.robot, ee_step=ee_step, ee_yaw=ee_yaw, yaw_step=yaw_step,
-                joint_step=joint_step, torque_fraction=torque_fraction,
+                control_mode,
+                self.robot,
+                ee_step=ee_step,
+                ee_yaw=ee_yaw,
+                yaw_step=yaw_step,
+                joint_step=joint_step,
+                torque_fraction=torque_fraction,
                 gravity_compensation=gravity_compensation,
             )
         except BaseException:
@@ -122,8 +136,14 @@ class GraspEnv(gym.Env):
         self._build_spaces()
 
     def _build_world(
-        self, time_step: float, solver_iterations: int, robot: str | Mapping[str, Any],
-        robot_urdf: str | None, camera_spec: CameraSpec | None, visual: str | None, collision_model: str,
+        self,
+        time_step: float,
+        solver_iterations: int,
+        robot: str | Mapping[str, Any],
+        robot_urdf: str | None,
+        camera_spec: CameraSpec | None,
+        visual: str | None,
+        collision_model: str,
     ) -> None:
         """The physics client, the robot (its cheap render model when a camera looks), the camera and
         the visual randomizer; the saved world each reset restores."""
@@ -233,8 +253,12 @@ class GraspEnv(gym.Env):
         step_noise = self.np_random.normal(0.0, self.episode["action_noise_step"], self.action_dim)
         noise = self._action_offset + step_noise
         # The last observation's readings are the robot's state now: nothing steps between the two.
-        self.control.apply(np.minimum(np.maximum(applied + noise, -1.0), 1.0), self.substeps,
-                           self.client.stepSimulation, self._readings)
+        self.control.apply(
+            np.minimum(np.maximum(applied + noise, -1.0), 1.0),
+            self.substeps,
+            self.client.stepSimulation,
+            self._readings,
+        )
         self._prev_action = action
         self._steps += 1
 

@@ -148,8 +148,10 @@ def _check_solid(path: str, points: np.ndarray) -> None:
     orientation."""
     spread = np.linalg.svd(points - points.mean(0), compute_uv=False)
     if spread[-1] <= 1e-6 * max(spread[0], 1e-12):
-        raise ValueError(f"mesh {path} has zero volume (its vertices lie on one plane or line); an object "
-                         "needs a solid mesh")
+        raise ValueError(
+            f"mesh {path} has zero volume (its vertices lie on one plane or line); an object "
+            "needs a solid mesh"
+        )
 
 
 def mesh_geometry(path: str, scale: float) -> Geometry:
@@ -212,8 +214,11 @@ def _parse(spec: Any) -> tuple[list[str], list[str], float, Any]:
         paths = [paths] if isinstance(paths, (str, os.PathLike)) else list(paths)
         if not sets and not paths:
             raise ValueError("objects mapping needs 'sets' or 'paths' (or both)")
-        return sets, [str(p) for p in paths], float(spec.get("max_width", DEFAULT_MAX_WIDTH)), spec.get(
-            "scale", "fit"
+        return (
+            sets,
+            [str(p) for p in paths],
+            float(spec.get("max_width", DEFAULT_MAX_WIDTH)),
+            spec.get("scale", "fit"),
         )
     if isinstance(spec, Sequence) and spec and all(isinstance(s, str) for s in spec):
         return list(spec), [], DEFAULT_MAX_WIDTH, "fit"

@@ -59,9 +59,11 @@ class ObservationLayout:
         self.size = start
         noisy = [p for p in self.parts if p.noisy]
         # Noise is drawn for the noisy parts' entries, in layout order.
-        self.noisy_index = np.concatenate(
-            [np.arange(self.slices[p.name].start, self.slices[p.name].stop) for p in noisy]
-        ) if noisy else np.zeros(0, np.int64)
+        self.noisy_index = (
+            np.concatenate([np.arange(self.slices[p.name].start, self.slices[p.name].stop) for p in noisy])
+            if noisy
+            else np.zeros(0, np.int64)
+        )
 
     @property
     def noisy_size(self) -> int:

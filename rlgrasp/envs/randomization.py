@@ -148,9 +148,7 @@ def _as_range(name: str, value: Any) -> Range:
 
 def _validate(name: str, rng: Range) -> None:
     if name not in PARAMS:
-        raise ValueError(
-            f"unknown randomization parameter {name!r}; valid parameters: {', '.join(PARAMS)}"
-        )
+        raise ValueError(f"unknown randomization parameter {name!r}; valid parameters: {', '.join(PARAMS)}")
     spec = PARAMS[name]
     if not (math.isfinite(rng.low) and math.isfinite(rng.high)):
         raise ValueError(f"randomization parameter {name!r}: bounds must be finite, got {rng}")

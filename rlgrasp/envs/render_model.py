@@ -75,6 +75,7 @@ def _strip_visuals(text: str, visible_links: Sequence[str]) -> str:
 def _absolute_mesh_paths(text: str, folder: str, sdf: bool) -> str:
     """Mesh references that still resolve from the temp directory: ``package://`` and relative
     names (an SDF's ``/meshes/x.stl`` too, which PyBullet reads relative to the file) under ``folder``."""
+
     def absolute(name: str) -> str:
         name = name.removeprefix("package://")
         return name if os.path.isfile(name) else os.path.join(folder, name.lstrip("/"))
@@ -126,8 +127,10 @@ def _origin(visual: str, sdf: bool, pose: re.Match | None) -> tuple[np.ndarray, 
     origin = re.search(r"<origin\b[^>]*/>", visual)
     xyz = origin and re.search(r'xyz="([^"]*)"', origin.group(0))
     rpy = origin and re.search(r'rpy="([^"]*)"', origin.group(0))
-    return (np.array(xyz.group(1).split(), float) if xyz else np.zeros(3),
-            [float(v) for v in rpy.group(1).split()] if rpy else [0.0, 0.0, 0.0])
+    return (
+        np.array(xyz.group(1).split(), float) if xyz else np.zeros(3),
+        [float(v) for v in rpy.group(1).split()] if rpy else [0.0, 0.0, 0.0],
+    )
 
 
 def mesh_bounds(path: str) -> tuple[np.ndarray, np.ndarray] | None:
@@ -140,8 +143,9 @@ def mesh_bounds(path: str) -> tuple[np.ndarray, np.ndarray] | None:
         return None
     kind = os.path.splitext(path)[1].lower()
     if kind == ".obj":
-        vertices = [line.split()[1:4] for line in data.decode(errors="replace").splitlines()
-                    if line.startswith("v ")]
+        vertices = [
+            line.split()[1:4] for line in data.decode(errors="replace").splitlines() if line.startswith("v ")
+        ]
     elif kind == ".stl":
         vertices = _stl_vertices(data)
     else:
@@ -158,11 +162,15 @@ def _stl_vertices(data: bytes) -> np.ndarray | list:
     if len(data) >= 84:
         count = struct.unpack("<I", data[80:84])[0]
         if len(data) == 84 + 50 * count:
-            records = np.frombuffer(data, np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")]),
-                                    count, 84)
+            records = np.frombuffer(
+                data, np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")]), count, 84
+            )
             return records["v"].reshape(-1, 3)
-    return [line.split()[1:4] for line in data.decode(errors="replace").splitlines()
-            if line.strip().startswith("vertex")]
+    return [
+        line.split()[1:4]
+        for line in data.decode(errors="replace").splitlines()
+        if line.strip().startswith("vertex")
+    ]
 
 
 def _write_once(text: str, suffix: str) -> str:

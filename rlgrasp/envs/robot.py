@@ -18,8 +18,17 @@ from rlgrasp.envs.arm import ArmRobot, Panda, low_poly_urdf
 from rlgrasp.envs.robot_base import GRIPPER_DOWN, Robot
 from rlgrasp.envs.robot_spec import BUILTIN_ROBOTS, RobotSpec, builtin_spec, spec_from_mapping
 
-__all__ = ["GRIPPER_DOWN", "ROBOTS", "ArmRobot", "Panda", "Robot", "low_poly_urdf", "make_robot",
-           "resolve_robot", "robot_label"]
+__all__ = [
+    "GRIPPER_DOWN",
+    "ROBOTS",
+    "ArmRobot",
+    "Panda",
+    "Robot",
+    "low_poly_urdf",
+    "make_robot",
+    "resolve_robot",
+    "robot_label",
+]
 
 #: ``env.robot`` names -> the arm's spec (or a ``Robot`` class, built with ``(client, model, render)``);
 #: the built-in arms' specs are read from ``rlgrasp/envs/robots/<name>.yaml``.
@@ -33,8 +42,10 @@ def resolve_robot(robot: str | Mapping[str, Any] | RobotSpec) -> RobotSpec | typ
     if isinstance(robot, Mapping):
         return spec_from_mapping(robot)
     if not isinstance(robot, str) or robot not in ROBOTS:
-        raise ValueError(f"unknown robot {robot!r}; valid robots: {', '.join(ROBOTS)} or a mapping "
-                         "{model: ..., arm_joints: [...], ...} (docs/robots.md)")
+        raise ValueError(
+            f"unknown robot {robot!r}; valid robots: {', '.join(ROBOTS)} or a mapping "
+            "{model: ..., arm_joints: [...], ...} (docs/robots.md)"
+        )
     return ROBOTS[robot]
 
 
@@ -51,8 +62,13 @@ def robot_label(robot: Any) -> str:
     return "panda" if robot is None else str(robot)
 
 
-def make_robot(name: str | Mapping[str, Any] | RobotSpec, client: BulletClient, model: str | None = None,
-               render: str | None = None, collision: str = "mesh") -> Robot:
+def make_robot(
+    name: str | Mapping[str, Any] | RobotSpec,
+    client: BulletClient,
+    model: str | None = None,
+    render: str | None = None,
+    collision: str = "mesh",
+) -> Robot:
     """The arm ``name`` (see ``resolve_robot``); ``model`` overrides its model file (a path or a
     pybullet_data name); ``render`` asks for the model cameras render cheaply (``low_poly``, or
     ``wrist``: only what a wrist camera sees); ``collision`` for its collision shapes

@@ -66,8 +66,13 @@ class Robot(ABC):
         """The robot's proprioception, by observation part name."""
         q, qd, width = self.joint_state()
         grasp_pos, grasp_vel = self.grasp_point()
-        return {"arm_q": q, "arm_qd": qd, "finger_width": np.array([width]), "grasp_pos": grasp_pos,
-                "grasp_vel": grasp_vel}
+        return {
+            "arm_q": q,
+            "arm_qd": qd,
+            "finger_width": np.array([width]),
+            "grasp_pos": grasp_pos,
+            "grasp_vel": grasp_vel,
+        }
 
     @abstractmethod
     def wrist_links(self) -> list[int]:

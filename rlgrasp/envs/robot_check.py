@@ -21,11 +21,14 @@ def check_spec_values(spec: RobotSpec) -> None:
     if n == 0:
         raise ValueError("robot.arm_joints=[]: must name at least one joint")
     if len(spec.neutral_pose) != n:
-        raise ValueError(f"robot.neutral_pose has {len(spec.neutral_pose)} angles: must have one per arm "
-                         f"joint ({n}: {', '.join(spec.arm_joints)})")
+        raise ValueError(
+            f"robot.neutral_pose has {len(spec.neutral_pose)} angles: must have one per arm "
+            f"joint ({n}: {', '.join(spec.arm_joints)})"
+        )
     if spec.max_torque is not None and len(spec.max_torque) != n:
-        raise ValueError(f"robot.max_torque has {len(spec.max_torque)} values: must be null or one per arm "
-                         f"joint ({n})")
+        raise ValueError(
+            f"robot.max_torque has {len(spec.max_torque)} values: must be null or one per arm joint ({n})"
+        )
     if len(spec.finger_links) != 2:
         raise ValueError(f"robot.finger_links={list(spec.finger_links)!r}: must name two links (left, right)")
 
@@ -34,22 +37,31 @@ def _joint_name(client: BulletClient, body: int, j: int) -> str:
     return client.getJointInfo(body, j)[1].decode()
 
 
-def check_model(spec: RobotSpec, client: BulletClient, body: int, joints: dict[str, int],
-                links: dict[str, int], path: str) -> None:
+def check_model(
+    spec: RobotSpec, client: BulletClient, body: int, joints: dict[str, int], links: dict[str, int], path: str
+) -> None:
     """Names the spec uses exist in the model, the neutral pose is inside the limits, the fingers open."""
     movable = [n for n, j in joints.items() if client.getJointInfo(body, j)[2] != pybullet.JOINT_FIXED]
-    names = {"arm_joints": list(spec.arm_joints), "fingers": [f.joint for f in spec.fingers],
-             "hold_joints": list(spec.hold_joints)}
+    names = {
+        "arm_joints": list(spec.arm_joints),
+        "fingers": [f.joint for f in spec.fingers],
+        "hold_joints": list(spec.hold_joints),
+    }
     _require(names, movable, "a movable joint", path)
-    link_keys = {"grasp_link": [spec.grasp_link], "finger_links": list(spec.finger_links),
-                 "camera_link": [spec.camera_link] if spec.camera_link else [],
-                 "wrist_links": list(spec.wrist_links)}
+    link_keys = {
+        "grasp_link": [spec.grasp_link],
+        "finger_links": list(spec.finger_links),
+        "camera_link": [spec.camera_link] if spec.camera_link else [],
+        "wrist_links": list(spec.wrist_links),
+    }
     _require(link_keys, list(links), "a link", path)
     driven = [f.joint for f in spec.fingers if not f.mimic]
     for f in spec.fingers:
         if f.mimic and f.mimic not in driven:
-            raise ValueError(f"robot.fingers: {f.joint} mimics {f.mimic!r}, which must be a finger joint "
-                             f"with a motor of its own: {', '.join(driven) or 'none is'}")
+            raise ValueError(
+                f"robot.fingers: {f.joint} mimics {f.mimic!r}, which must be a finger joint "
+                f"with a motor of its own: {', '.join(driven) or 'none is'}"
+            )
     _check_neutral_pose(spec, client, body, [joints[n] for n in spec.arm_joints])
     _check_fingers(spec, client, body, joints, links)
 
@@ -61,8 +73,9 @@ def _check_neutral_pose(spec: RobotSpec, client: BulletClient, body: int, arm: l
             raise ValueError(f"robot.neutral_pose: {name}={q} is outside its limits [{low}, {high}]")
 
 
-def _check_fingers(spec: RobotSpec, client: BulletClient, body: int, joints: dict[str, int],
-                   links: dict[str, int]) -> None:
+def _check_fingers(
+    spec: RobotSpec, client: BulletClient, body: int, joints: dict[str, int], links: dict[str, int]
+) -> None:
     """Each finger position inside its joint's limits, and the finger links apart when open and
     together when closed (teleported, then put back: no physics step)."""
     for f in spec.fingers:
@@ -75,8 +88,9 @@ def _check_fingers(spec: RobotSpec, client: BulletClient, body: int, joints: dic
     for what in ("open", "closed"):
         for f in spec.fingers:
             client.resetJointState(body, joints[f.joint], getattr(f, what))
-        left, right = (client.getLinkState(body, links[n], computeForwardKinematics=1)[4]
-                       for n in spec.finger_links)
+        left, right = (
+            client.getLinkState(body, links[n], computeForwardKinematics=1)[4] for n in spec.finger_links
+        )
         gap[what] = float(np.linalg.norm(np.subtract(left, right)))
     for f, q in zip(spec.fingers, saved):
         client.resetJointState(body, joints[f.joint], q)
@@ -94,6 +108,6 @@ def _require(wanted_by_key: dict[str, list[str]], available: list[str], what: st
     for key, wanted in wanted_by_key.items():
         for name in wanted:
             if name not in available:
-                raise ValueError(f"robot.{key}: {name!r} is not {what} of {path}; its {plural}: "
-                                 f"{', '.join(available)}")
-
+                raise ValueError(
+                    f"robot.{key}: {name!r} is not {what} of {path}; its {plural}: {', '.join(available)}"
+                )

@@ -93,10 +93,28 @@ class RobotSpec:
         return out
 
 
-_TUPLES = {"arm_joints", "finger_links", "neutral_pose", "grasp_offset", "gripper_down", "base_position",
-           "base_orientation", "max_torque", "wrist_links", "low_poly_meshes"}
-_LENGTHS = {"finger_links": 2, "grasp_offset": 3, "gripper_down": 3, "base_position": 3,
-            "base_orientation": 3, "low_poly_meshes": 2}
+_TUPLES = {
+    "arm_joints",
+    "finger_links",
+    "neutral_pose",
+    "grasp_offset",
+    "gripper_down",
+    "base_position",
+    "base_orientation",
+    "max_torque",
+    "wrist_links",
+    "low_poly_meshes",
+}
+_LENGTHS = {
+    "finger_links": 2,
+    "grasp_offset": 3,
+    "gripper_down": 3,
+    "base_position": 3,
+    "base_orientation": 3,
+    "low_poly_meshes": 2,
+}
+
+
 def _required() -> list[str]:
     return [f.name for f in fields(RobotSpec) if f.default is MISSING and f.default_factory is MISSING]
 
@@ -117,8 +135,10 @@ def spec_from_mapping(mapping: Mapping[str, Any]) -> RobotSpec:
             continue
         if key == "low_poly_meshes" and isinstance(value, str):
             if value != "boxes":
-                raise ValueError(f"robot.low_poly_meshes={value!r}: must be null, boxes or [visual mesh "
-                                 "folder, collision mesh folder]")
+                raise ValueError(
+                    f"robot.low_poly_meshes={value!r}: must be null, boxes or [visual mesh "
+                    "folder, collision mesh folder]"
+                )
             continue
         if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
             raise ValueError(f"robot.{key}={value!r}: must be a list")
@@ -155,8 +175,9 @@ def _expert(value: Any) -> dict[str, float]:
     out = {}
     for key, v in value.items():
         if key not in EXPERT_KEYS:
-            raise ValueError(f"robot.expert.{key}: unknown key; the expert's settings: "
-                             f"{', '.join(EXPERT_KEYS)}")
+            raise ValueError(
+                f"robot.expert.{key}: unknown key; the expert's settings: {', '.join(EXPERT_KEYS)}"
+            )
         low, high = EXPERT_KEYS[key]
         if not (_number(v) and low <= v <= high):
             raise ValueError(f"robot.expert.{key}={v!r}: must be a number of metres in [{low}, {high}]")
@@ -177,10 +198,18 @@ def _fingers(value: Any) -> tuple[FingerJoint, ...]:
         ok = isinstance(entry, Mapping) and set(entry) <= keys and "joint" in entry
         ok = ok and "open" in entry and all(_number(entry[k]) for k in ("open", "closed") if k in entry)
         if not ok:
-            raise ValueError(f"robot.fingers[{i}]={entry!r}: must be {{joint: <name>, open: <position>, "
-                             "closed: <position>[, mimic: <finger joint>]}")
-        out.append(FingerJoint(str(entry["joint"]), float(entry["open"]), float(entry.get("closed", 0.0)),
-                               str(entry.get("mimic") or "")))
+            raise ValueError(
+                f"robot.fingers[{i}]={entry!r}: must be {{joint: <name>, open: <position>, "
+                "closed: <position>[, mimic: <finger joint>]}"
+            )
+        out.append(
+            FingerJoint(
+                str(entry["joint"]),
+                float(entry["open"]),
+                float(entry.get("closed", 0.0)),
+                str(entry.get("mimic") or ""),
+            )
+        )
     return tuple(out)
 
 

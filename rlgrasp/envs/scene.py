@@ -144,9 +144,7 @@ class Scene:
             return c.createCollisionShape(**args), c.createVisualShape(**args, rgbaColor=PRIMITIVE_COLOUR)
         shape = pybullet.GEOM_CYLINDER if choice.kind == "cylinder" else pybullet.GEOM_CAPSULE
         frame = [0, 0, 0, 1] if choice.kind == "cylinder" else lying
-        collision = c.createCollisionShape(
-            shape, radius=d[0], height=d[1], collisionFrameOrientation=frame
-        )
+        collision = c.createCollisionShape(shape, radius=d[0], height=d[1], collisionFrameOrientation=frame)
         visual = c.createVisualShape(
             shape, radius=d[0], length=d[1], visualFrameOrientation=frame, rgbaColor=PRIMITIVE_COLOUR
         )

@@ -35,8 +35,9 @@ class RewardWeights:
         names = [f.name for f in fields(RewardWeights)]
         unknown = sorted(set(weights or {}) - set(names))
         if unknown:
-            raise ValueError(f"unknown reward weight {unknown[0]!r} (env.reward_weights); weights: "
-                             + ", ".join(names))
+            raise ValueError(
+                f"unknown reward weight {unknown[0]!r} (env.reward_weights); weights: " + ", ".join(names)
+            )
         return RewardWeights(**(weights or {}))
 
     def __post_init__(self):

@@ -111,8 +111,15 @@ def _rings(rng, n):
 
 
 GENERATORS: dict[str, Callable[[np.random.Generator, int], np.ndarray]] = {
-    "noise": _noise, "checker": _checker, "stripes": _stripes, "gradient": _gradient,
-    "dots": _dots, "waves": _waves, "cells": _cells, "blobs": _blobs, "rings": _rings,
+    "noise": _noise,
+    "checker": _checker,
+    "stripes": _stripes,
+    "gradient": _gradient,
+    "dots": _dots,
+    "waves": _waves,
+    "cells": _cells,
+    "blobs": _blobs,
+    "rings": _rings,
 }
 
 
@@ -170,25 +177,47 @@ DEFAULT_TEXTURES = ("noise", "checker", "stripes", "gradient")
 # yet help: docs/benchmarks/cameras.md).
 TRAIN_TEXTURES = DEFAULT_TEXTURES + ("dots", "waves", "cells", "blobs")
 _DEFAULT = VisualPreset(
-    textures=DEFAULT_TEXTURES, texture_prob=0.7, hues=Range(0.0, 0.7),
-    light_azimuth=Range(-math.pi, math.pi), light_elevation=Range(0.7, 1.45),
-    light_ambient=Range(0.45, 0.75), light_diffuse=Range(0.2, 0.5), light_specular=Range(0.0, 0.1),
-    light_warmth=Range(-0.3, 0.3), robot_grey=Range(0.3, 0.9),
-    camera_shift=0.01, camera_tilt=0.01, fov_jitter=2.0,
-    depth_noise=Range(0.0, 0.004), depth_dropout=Range(0.0, 0.2), depth_quantum=Range(0.0, 0.002),
-    rgb_noise=Range(0.0, 4.0), recolour=True,
+    textures=DEFAULT_TEXTURES,
+    texture_prob=0.7,
+    hues=Range(0.0, 0.7),
+    light_azimuth=Range(-math.pi, math.pi),
+    light_elevation=Range(0.7, 1.45),
+    light_ambient=Range(0.45, 0.75),
+    light_diffuse=Range(0.2, 0.5),
+    light_specular=Range(0.0, 0.1),
+    light_warmth=Range(-0.3, 0.3),
+    robot_grey=Range(0.3, 0.9),
+    camera_shift=0.01,
+    camera_tilt=0.01,
+    fov_jitter=2.0,
+    depth_noise=Range(0.0, 0.004),
+    depth_dropout=Range(0.0, 0.2),
+    depth_quantum=Range(0.0, 0.002),
+    rgb_noise=Range(0.0, 4.0),
+    recolour=True,
 )
 VISUAL_PRESETS: dict[str, VisualPreset] = {
     "none": VisualPreset(),
     "default": _DEFAULT,
     "wide": VisualPreset(
-        textures=TRAIN_TEXTURES, texture_prob=0.8, hues=Range(0.0, 0.7),
-        light_azimuth=Range(-math.pi, math.pi), light_elevation=Range(0.6, 1.5),
-        light_ambient=Range(0.4, 0.8), light_diffuse=Range(0.15, 0.6), light_specular=Range(0.0, 0.15),
-        light_warmth=Range(-0.5, 0.5), robot_grey=Range(0.2, 1.0),
-        camera_shift=0.02, camera_tilt=0.02, fov_jitter=4.0,
-        depth_noise=Range(0.0, 0.008), depth_dropout=Range(0.0, 0.35), depth_quantum=Range(0.0, 0.004),
-        rgb_noise=Range(0.0, 8.0), recolour=True,
+        textures=TRAIN_TEXTURES,
+        texture_prob=0.8,
+        hues=Range(0.0, 0.7),
+        light_azimuth=Range(-math.pi, math.pi),
+        light_elevation=Range(0.6, 1.5),
+        light_ambient=Range(0.4, 0.8),
+        light_diffuse=Range(0.15, 0.6),
+        light_specular=Range(0.0, 0.15),
+        light_warmth=Range(-0.5, 0.5),
+        robot_grey=Range(0.2, 1.0),
+        camera_shift=0.02,
+        camera_tilt=0.02,
+        fov_jitter=4.0,
+        depth_noise=Range(0.0, 0.008),
+        depth_dropout=Range(0.0, 0.35),
+        depth_quantum=Range(0.0, 0.004),
+        rgb_noise=Range(0.0, 8.0),
+        recolour=True,
     ),
     # `default`, with half the RGB frames' ground replaced by a random pattern at the image's own
     # scale, a new one each frame: a wrist camera sees one or two cells of a ground texture, so

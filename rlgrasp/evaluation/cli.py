@@ -83,8 +83,12 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
     )
 
     # --- run the episodes
-    run = {"episodes": cfg.episodes, "base_seed": cfg.seed, "workers": cfg.workers,
-           "deterministic": cfg.deterministic}
+    run = {
+        "episodes": cfg.episodes,
+        "base_seed": cfg.seed,
+        "workers": cfg.workers,
+        "deterministic": cfg.deterministic,
+    }
     results, seconds = timed_run(
         source=source, video_episodes=cfg.video_episodes if fmt else 0, progress=Progress(log), **run
     )
@@ -102,8 +106,9 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
     out.parent.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
     try:
-        files = _write_artefacts(stage, out.name, cfg, source, (results, teacher_results), metrics, table,
-                                 seconds, fmt)
+        files = _write_artefacts(
+            stage, out.name, cfg, source, (results, teacher_results), metrics, table, seconds, fmt
+        )
         if out.exists():  # an empty folder made in the meantime
             out.rmdir()
         os.replace(stage, out)
@@ -244,7 +249,9 @@ def _write_artefacts(
     M.write_json(out / "metrics.json", metrics)
     visual_section = (
         f"## Success per visual parameter, most influential first (all bins: metrics.json)\n\n"
-        f"{M.parameter_table(metrics['success_by_visual'])}\n\n" if visual else ""
+        f"{M.parameter_table(metrics['success_by_visual'])}\n\n"
+        if visual
+        else ""
     )
     (out / "summary.md").write_text(
         f"# Evaluation {name}\n\n{table}\n\n## Outcomes\n\n{M.outcome_table(metrics)}\n\n"

@@ -58,7 +58,7 @@ def no_display_reason(environ: dict[str, str] | None = None, platform: str | Non
     if platform.startswith("linux") and not (environ.get("DISPLAY") or environ.get("WAYLAND_DISPLAY")):
         return (
             "no display: the PyBullet GUI needs one (DISPLAY is unset). Use a desktop session, ssh -X, "
-            'or xvfb-run; without a screen, scripts/evaluate.py writes videos instead.'
+            "or xvfb-run; without a screen, scripts/evaluate.py writes videos instead."
         )
     return None
 
@@ -132,8 +132,10 @@ def camera_line(env: Any) -> str | None:
     if camera is None:
         return None
     s = camera.spec
-    return (f"camera: {s.mount} {s.modality} {s.width}x{s.height}; the GUI's preview panes show what it "
-            "renders (before the sensor noise the policy also gets)")
+    return (
+        f"camera: {s.mount} {s.modality} {s.width}x{s.height}; the GUI's preview panes show what it "
+        "renders (before the sensor noise the policy also gets)"
+    )
 
 
 def _print(line: str) -> None:

@@ -118,8 +118,10 @@ def episode_rows(
             "max_lift_height": round(r.max_lift_height, 6),
         }
         if teacher:
-            row.update(teacher_success_at_end=int(teacher[i].success_at_end),
-                       teacher_return=round(teacher[i].episode_return, 6))
+            row.update(
+                teacher_success_at_end=int(teacher[i].success_at_end),
+                teacher_return=round(teacher[i].episode_return, 6),
+            )
         row.update({k: r.randomization.get(k, "") for k in params})
         rows.append(row)
     return list(EPISODE_FIELDS) + extra + params, rows
@@ -177,8 +179,10 @@ def teacher_rows(t: dict[str, Any] | None) -> list[tuple[str, str]]:
         ("teacher", t["path"]),
         ("teacher success at end, same episodes [95% Wilson]", _fmt_rate(t["success_at_end"])),
         ("student / teacher success at end", _fmt(t["student_over_teacher"])),
-        ("episodes solved by both / student only / teacher only / neither",
-         f"{p['both']} / {p['student_only']} / {p['teacher_only']} / {p['neither']}"),
+        (
+            "episodes solved by both / student only / teacher only / neither",
+            f"{p['both']} / {p['student_only']} / {p['teacher_only']} / {p['neither']}",
+        ),
     ]
 
 
@@ -192,8 +196,14 @@ def outcome_table(metrics: dict[str, Any]) -> str:
 def object_table(metrics: dict[str, Any], most: int = 20) -> str:
     """The ``most`` objects with the lowest success (the whole list is in ``objects.csv``)."""
     rows = [
-        (r["object"], r["episodes"], r["successes"], f"{r['rate']:.0%}",
-         f"[{r['ci95'][0]:.0%}, {r['ci95'][1]:.0%}]", r["main_failure"])
+        (
+            r["object"],
+            r["episodes"],
+            r["successes"],
+            f"{r['rate']:.0%}",
+            f"[{r['ci95'][0]:.0%}, {r['ci95'][1]:.0%}]",
+            r["main_failure"],
+        )
         for r in metrics["success_by_object"][:most]
     ]
     return markdown_table(("object", "episodes", "successes", "rate", "95% Wilson", "main failure"), rows)
@@ -221,8 +231,17 @@ def write_objects_csv(path: Path, metrics: dict[str, Any]) -> Path:
         writer = csv.writer(f)
         writer.writerow(fields)
         for r in metrics["success_by_object"]:
-            writer.writerow([r["object"], r["episodes"], r["successes"], round(r["rate"], 4),
-                             round(r["ci95"][0], 4), round(r["ci95"][1], 4), r["main_failure"]])
+            writer.writerow(
+                [
+                    r["object"],
+                    r["episodes"],
+                    r["successes"],
+                    round(r["rate"], 4),
+                    round(r["ci95"][0], 4),
+                    round(r["ci95"][1], 4),
+                    r["main_failure"],
+                ]
+            )
     return path
 
 

@@ -175,11 +175,14 @@ def success_by_object_plot(metrics: dict[str, Any], path: Path, most: int = 30) 
     ):
         rates = [k / n for n, k in counts]
         bounds = [wilson_interval(k, n) for n, k in counts]
-        err = [[max(0.0, r - lo) for r, (lo, _) in zip(rates, bounds)],
-               [max(0.0, hi - r) for r, (_, hi) in zip(rates, bounds)]]
+        err = [
+            [max(0.0, r - lo) for r, (lo, _) in zip(rates, bounds)],
+            [max(0.0, hi - r) for r, (_, hi) in zip(rates, bounds)],
+        ]
         ax.barh(range(len(labels)), rates, xerr=err, color="tab:blue", capsize=2)
-        ax.set_yticks(range(len(labels)), [f"{lab} (n={n})" for lab, (n, _) in zip(labels, counts)],
-                      fontsize=7)
+        ax.set_yticks(
+            range(len(labels)), [f"{lab} (n={n})" for lab, (n, _) in zip(labels, counts)], fontsize=7
+        )
         ax.set_xlim(0, 1.02)
         ax.set_xlabel("success at end")
     left.set_title("per object group", fontsize=9)

@@ -99,8 +99,12 @@ def training_evaluation(run: Path) -> dict[str, Any] | None:
     wins = round(rate * episodes)
     return {
         "episodes": episodes,
-        "success_at_end": {"rate": rate, "successes": wins, "episodes": episodes,
-                           "ci95": list(wilson_interval(wins, episodes))},
+        "success_at_end": {
+            "rate": rate,
+            "successes": wins,
+            "episodes": episodes,
+            "ci95": list(wilson_interval(wins, episodes)),
+        },
         "success_once": None,
         "return": {"mean": float(last["mean_reward"])},
         "checkpoint": {"path": str(run / CHECKPOINTS / "last.pt"), "frames": ckpt["frames"]},
@@ -279,8 +283,14 @@ def runs_table(records: Sequence[RunRecord], root: Path | None = None) -> tuple[
 
 
 def aggregate_table(agg: dict[str, dict[str, Any]]) -> tuple[list[str], list[list[str]]]:
-    head = ["group", "runs", "success mean [95% CI]", "success IQM [95% CI]", "return mean [95% CI]",
-            "source"]
+    head = [
+        "group",
+        "runs",
+        "success mean [95% CI]",
+        "success IQM [95% CI]",
+        "return mean [95% CI]",
+        "source",
+    ]
     rows = []
     for name, a in agg.items():
         s, ret = a["success_at_end"], a["return_mean"]

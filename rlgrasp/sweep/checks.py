@@ -41,12 +41,24 @@ def _objective_checks(cfg: Any) -> list[tuple[str, Any, bool, str]]:
     return [
         ("objective.kind", o.kind, o.kind in KINDS, f"must be one of {', '.join(KINDS)}"),
         ("objective.threshold", o.threshold, 0 < o.threshold <= 1, "must be in (0, 1] (a success rate)"),
-        ("objective.tie_break", o.tie_break, 0 <= o.tie_break < 1,
-         "must be in [0, 1) (a fraction of the frames; 0: no tie-break)"),
-        ("metric", cfg.metric, not reach or cfg.metric == "success_rate",
-         "objective.kind=first_reach compares the success rate to its threshold: must be success_rate"),
-        ("direction", cfg.direction, not reach or cfg.direction in (None, "minimize"),
-         "objective.kind=first_reach counts frames (fewer is better): must be minimize or null"),
+        (
+            "objective.tie_break",
+            o.tie_break,
+            0 <= o.tie_break < 1,
+            "must be in [0, 1) (a fraction of the frames; 0: no tie-break)",
+        ),
+        (
+            "metric",
+            cfg.metric,
+            not reach or cfg.metric == "success_rate",
+            "objective.kind=first_reach compares the success rate to its threshold: must be success_rate",
+        ),
+        (
+            "direction",
+            cfg.direction,
+            not reach or cfg.direction in (None, "minimize"),
+            "objective.kind=first_reach counts frames (fewer is better): must be minimize or null",
+        ),
     ]
 
 
@@ -56,18 +68,34 @@ def check_values(cfg: Any) -> None:
     checks = [
         ("n_trials", cfg.n_trials, cfg.n_trials >= 1, "must be >= 1"),
         ("metric", cfg.metric, cfg.metric in METRICS, f"must be one of {', '.join(METRICS)}"),
-        ("direction", cfg.direction, cfg.direction is None or cfg.direction in DIRECTIONS,
-         f"must be one of {', '.join(DIRECTIONS)} or null (the objective's)"),
+        (
+            "direction",
+            cfg.direction,
+            cfg.direction is None or cfg.direction in DIRECTIONS,
+            f"must be one of {', '.join(DIRECTIONS)} or null (the objective's)",
+        ),
         *_objective_checks(cfg),
         ("trial.seeds", seeds, len(set(seeds)) == len(seeds), "must not repeat a seed"),
-        ("trial.lr_schedule", cfg.trial.lr_schedule, cfg.trial.lr_schedule in LR_SCHEDULES,
-         f"must be one of {', '.join(LR_SCHEDULES)}"),
-        ("sampler.name", cfg.sampler.name, cfg.sampler.name in SAMPLERS,
-         f"must be one of {', '.join(SAMPLERS)}"),
+        (
+            "trial.lr_schedule",
+            cfg.trial.lr_schedule,
+            cfg.trial.lr_schedule in LR_SCHEDULES,
+            f"must be one of {', '.join(LR_SCHEDULES)}",
+        ),
+        (
+            "sampler.name",
+            cfg.sampler.name,
+            cfg.sampler.name in SAMPLERS,
+            f"must be one of {', '.join(SAMPLERS)}",
+        ),
         ("pruner.name", cfg.pruner.name, cfg.pruner.name in PRUNERS, f"must be one of {', '.join(PRUNERS)}"),
         ("worker", cfg.worker, cfg.worker >= 0, "must be >= 0"),
-        ("timeout_min", cfg.timeout_min, cfg.timeout_min is None or cfg.timeout_min > 0,
-         "must be > 0 or null"),
+        (
+            "timeout_min",
+            cfg.timeout_min,
+            cfg.timeout_min is None or cfg.timeout_min > 0,
+            "must be > 0 or null",
+        ),
     ]
     for key, value, ok, allowed in checks:
         if not ok:
@@ -98,7 +126,7 @@ def storage_problem(storage: str | None) -> str | None:
     if "://" not in storage:
         path = Path(storage)
     elif storage.startswith("sqlite:///"):
-        path = Path(storage[len("sqlite:///"):])
+        path = Path(storage[len("sqlite:///") :])
         if not str(path) or str(path) == ":memory:":
             return None
     else:
@@ -169,8 +197,10 @@ def load_existing(cfg: Any) -> optuna.Study:
     if where is None:
         path = Path(cfg.storage) if cfg.storage else study_dir(cfg) / "journal.log"
         if not path.is_file():
-            raise SweepError(f"no study to summarize: {path} does not exist (sweep={cfg.study_name}, "
-                             f"sweep.root_dir={cfg.root_dir})")
+            raise SweepError(
+                f"no study to summarize: {path} does not exist (sweep={cfg.study_name}, "
+                f"sweep.root_dir={cfg.root_dir})"
+            )
         where = str(path)
     try:
         return open_study(cfg, create=False)

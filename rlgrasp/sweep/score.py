@@ -77,9 +77,11 @@ def describe(cfg: Any) -> str:
     """What a trial's value is, in words (the summary's header)."""
     o, metric = cfg.objective, cfg.metric
     if o.kind == "first_reach":
-        text = (f"Value: env frames at the first evaluation with {metric} >= {o.threshold}, x (1 - "
-                f"{o.tie_break} x the final {metric}); a run that never reaches it: "
-                f"{cfg.trial.total_frames:,} x (2 - the final {metric}). Lower is better.")
+        text = (
+            f"Value: env frames at the first evaluation with {metric} >= {o.threshold}, x (1 - "
+            f"{o.tie_break} x the final {metric}); a run that never reaches it: "
+            f"{cfg.trial.total_frames:,} x (2 - the final {metric}). Lower is better."
+        )
     else:
         text = f"Value: the final evaluation's {metric}."
     seeds = list(cfg.trial.seeds)

@@ -36,12 +36,16 @@ def distribution(key: str, spec: Mapping[str, Any]) -> BaseDistribution:
     try:
         if kind == "float":
             return FloatDistribution(
-                float(spec["low"]), float(spec["high"]), log=bool(spec.get("log", False)),
+                float(spec["low"]),
+                float(spec["high"]),
+                log=bool(spec.get("log", False)),
                 step=None if spec.get("step") is None else float(spec["step"]),
             )
         if kind == "int":
             return IntDistribution(
-                int(spec["low"]), int(spec["high"]), log=bool(spec.get("log", False)),
+                int(spec["low"]),
+                int(spec["high"]),
+                log=bool(spec.get("log", False)),
                 step=int(spec.get("step") or 1),
             )
         if kind == "categorical":
@@ -90,8 +94,10 @@ def _named_choices(key: str, spec: Mapping[str, Any]) -> dict[str, dict[str, Any
     out = {}
     for name, keys in choices.items():
         if not isinstance(keys, Mapping) or not keys:
-            raise ValueError(f"sweep.params.{key}.choices.{name}: must map training keys to values, "
-                             f"e.g. {{env: {{control_mode: ee_delta}}}}")
+            raise ValueError(
+                f"sweep.params.{key}.choices.{name}: must map training keys to values, "
+                f"e.g. {{env: {{control_mode: ee_delta}}}}"
+            )
         out[str(name)] = flatten(keys)
     return out
 

@@ -27,8 +27,15 @@ log = logging.getLogger("rlgrasp.sweep")
 
 #: Override keys that describe where/how long a trial ran, not what it was: left out of the best config
 #: (``algo.anneal_lr_frames``: ``trial.lr_schedule=experiment`` sets it to the experiment's frames).
-RUN_KEYS = ("paths.", "total_frames", "time_budget_min", "resume", "hydra.", "experiment_name",
-            "algo.anneal_lr_frames")
+RUN_KEYS = (
+    "paths.",
+    "total_frames",
+    "time_budget_min",
+    "resume",
+    "hydra.",
+    "experiment_name",
+    "algo.anneal_lr_frames",
+)
 
 
 def _seed_values(t: FrozenTrial) -> dict[str, float]:

@@ -90,10 +90,13 @@ class AdrSync:
         log = {p.name: p.log for p in self.settings.params}
         ranges = {name: (r.low, r.high, r.log) for name, r in self.fixed.items()}
         ranges.update({name: (*r, log[name]) for name, r in self.state.ranges.items()})
-        spec = {"preset": "none", **{
-            name: {"low": float(low), "high": float(high), **({"log": True} if log else {})}
-            for name, (low, high, log) in ranges.items()
-        }}
+        spec = {
+            "preset": "none",
+            **{
+                name: {"low": float(low), "high": float(high), **({"log": True} if log else {})}
+                for name, (low, high, log) in ranges.items()
+            },
+        }
         path = Path(run_dir) / RANGES_FILE
         header = "# The ADR ranges this run reached: rlgrasp-eval ... +env.randomization=<this file>\n"
         path.write_text(header + yaml.safe_dump(spec, sort_keys=False))

@@ -47,8 +47,13 @@ class Batches(Iterator[TensorDictBase]):
     not dies, would otherwise keep the learner waiting for ever; None: no limit)."""
 
     def __init__(
-        self, collector: BaseCollector, actor: torch.nn.Module, behaviour: torch.nn.Module, overlap: bool,
-        env_sync: EnvSync | None = None, timeout_s: float | None = None,
+        self,
+        collector: BaseCollector,
+        actor: torch.nn.Module,
+        behaviour: torch.nn.Module,
+        overlap: bool,
+        env_sync: EnvSync | None = None,
+        timeout_s: float | None = None,
     ) -> None:
         self.collector, self.actor, self.behaviour, self.overlap = collector, actor, behaviour, overlap
         self.env_sync, self.timeout_s = env_sync, timeout_s

@@ -27,8 +27,12 @@ from rlgrasp.utils import die_with_parent
 
 ERROR_FILE_PREFIX = "env_error_"
 # Info entries copied into the tensordict (those the env provides).
-INFO_DTYPES = {"is_success": torch.bool, "grasped": torch.bool, "lift_height": torch.float32,
-               "adr_boundary": torch.int64}  # rlgrasp.adr: the episode's boundary code (ADR runs only)
+INFO_DTYPES = {
+    "is_success": torch.bool,
+    "grasped": torch.bool,
+    "lift_height": torch.float32,
+    "adr_boundary": torch.int64,
+}  # rlgrasp.adr: the episode's boundary code (ADR runs only)
 
 
 def env_spec(make_env: EnvFactory) -> dict[str, Any]:

@@ -63,23 +63,41 @@ class CollectorBackend:
         return self.overlap and not self.in_process
 
     def build(
-        self, make_env: EnvFactory, policy: torch.nn.Module, seed: int, generation: int = 0,
+        self,
+        make_env: EnvFactory,
+        policy: torch.nn.Module,
+        seed: int,
+        generation: int = 0,
         error_dir: str | None = None,
     ) -> BaseCollector:
         """TorchRL's collector running ``policy`` in the workers; ``generation`` shifts the seeds on
         resume; a failing env leaves its report in ``error_dir``."""
-        common = {"frames_per_batch": self.frames_per_batch, "total_frames": -1,
-                  "auto_register_policy_transforms": False}
+        common = {
+            "frames_per_batch": self.frames_per_batch,
+            "total_frames": -1,
+            "auto_register_policy_transforms": False,
+        }
         if self.in_process:
             env = make_batched_env(
-                make_env, self.envs_per_worker, worker_seed(seed, 0, generation), 0, torch.get_num_threads(),
-                error_dir, stagger=self.stagger_starts,
+                make_env,
+                self.envs_per_worker,
+                worker_seed(seed, 0, generation),
+                0,
+                torch.get_num_threads(),
+                error_dir,
+                stagger=self.stagger_starts,
             )
             return Collector(env, policy, **common)
         workers = [
             functools.partial(
-                make_batched_env, make_env, self.envs_per_worker, worker_seed(seed, w, generation), w,
-                self.torch_threads, error_dir, stagger=self.stagger_starts,
+                make_batched_env,
+                make_env,
+                self.envs_per_worker,
+                worker_seed(seed, w, generation),
+                w,
+                self.torch_threads,
+                error_dir,
+                stagger=self.stagger_starts,
             )
             for w in range(self.num_workers)
         ]

@@ -133,7 +133,11 @@ class BackgroundEvaluator:
         log.info("periodic evaluations run in process %d", self._proc.pid)
 
     def submit(
-        self, frames: int, weights: dict[str, torch.Tensor], episodes: int, keep: Any = None,
+        self,
+        frames: int,
+        weights: dict[str, torch.Tensor],
+        episodes: int,
+        keep: Any = None,
         part: tuple[int, int] | None = None,
     ) -> None:
         """Evaluate ``weights`` (the actor's ``state_dict`` at ``frames``) on ``episodes`` episodes, or

@@ -265,8 +265,10 @@ class Trainer:
             self.save()
             kept = f"checkpoint saved; resume with resume={self.run_dir}"
         except Exception as save_exc:  # noqa: BLE001 - e.g. the same full disk
-            kept = (f"the checkpoint could not be saved ({type(save_exc).__name__}); "
-                    f"the last good one is in {self.ckpt_dir}")
+            kept = (
+                f"the checkpoint could not be saved ({type(save_exc).__name__}); "
+                f"the last good one is in {self.ckpt_dir}"
+            )
         raise TrainingError(f"{cause} at {self.frames:,} frames; {kept}") from exc
 
     def _check_stop(self) -> None:
@@ -281,8 +283,14 @@ class Trainer:
         with self.phases("first batch"):  # the workers' start-up: spawned, imports, envs built
             collector = self.parts.make_collector(self.generation, str(self.error_dir), behaviour)
         backend = self.parts.collector
-        batches = Batches(collector, self.algo.behaviour, behaviour, backend.collects_ahead, self.adr,
-                          timeout_s=None if backend.in_process else backend.worker_timeout_s)
+        batches = Batches(
+            collector,
+            self.algo.behaviour,
+            behaviour,
+            backend.collects_ahead,
+            self.adr,
+            timeout_s=None if backend.in_process else backend.worker_timeout_s,
+        )
         try:
             yield batches
         finally:
@@ -541,9 +549,7 @@ class Trainer:
         return success
 
 
-def train(
-    cfg: DictConfig, on_eval: EvalCallback | None = None, changed: set[str] | None = None
-) -> float:
+def train(cfg: DictConfig, on_eval: EvalCallback | None = None, changed: set[str] | None = None) -> float:
     """Train PPO as configured; returns the final evaluation success rate (NaN if the env has none).
 
     Raises ``TrainingError`` on an env crash (after saving a checkpoint) or a NaN/inf (keeping the

@@ -93,8 +93,9 @@ def slurm_requeued_already() -> bool:
     if not job:
         return False
     try:
-        proc = subprocess.run(["scontrol", "-o", "show", "job", job], capture_output=True, text=True,
-                              timeout=60)
+        proc = subprocess.run(
+            ["scontrol", "-o", "show", "job", job], capture_output=True, text=True, timeout=60
+        )
     except (OSError, subprocess.TimeoutExpired):
         return False
     restarts = re.search(r"\bRestarts=(\d+)", proc.stdout)

@@ -160,6 +160,7 @@ def _drop_keys_of_the_old_class(
 ) -> None:
     """Remove from ``base``'s ``node`` the keys (first level) the command line's node does not have:
     the old class's own keys, which the new class would refuse."""
+
     def children(flat: dict[str, Any]) -> set[str]:
         return {k[len(node) + 1 :].split(".")[0] for k in flat if k.startswith(node + ".")}
 

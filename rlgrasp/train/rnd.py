@@ -52,7 +52,10 @@ class RND(nn.Module):
         self.value = _net(obs_dim, 1)  # reads PPO's normalized observation
         self.norm = [norm]  # a list: the normalizer is the actor's, not this module's state
         self.predictor_loss = RNDLoss(
-            self.predictor, self.target, obs_rms=self.obs_rms, obs_clip=OBS_CLIP,
+            self.predictor,
+            self.target,
+            obs_rms=self.obs_rms,
+            obs_clip=OBS_CLIP,
             update_fraction=algo.rnd_update_fraction,
         )
         self.algo = algo
@@ -104,8 +107,13 @@ class RND(nn.Module):
         reward = batch[INTRINSIC_REWARD]
         never = torch.zeros_like(reward, dtype=torch.bool)
         adv, target = generalized_advantage_estimate(
-            self.algo.rnd_gamma, self.algo.gae_lambda, self._value(batch[OBS_KEY]),
-            self._value(batch["next", OBS_KEY]), reward, never, never,
+            self.algo.rnd_gamma,
+            self.algo.gae_lambda,
+            self._value(batch[OBS_KEY]),
+            self._value(batch["next", OBS_KEY]),
+            reward,
+            never,
+            never,
         )
         batch["advantage"] = batch["advantage"] + self.algo.rnd_coeff * adv
         batch[INTRINSIC_TARGET] = target

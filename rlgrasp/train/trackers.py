@@ -51,8 +51,10 @@ def unreachable(
         return f"{key}={uri}: not a valid URI ({exc})"
     except OSError as exc:
         reason = "no answer" if isinstance(exc, TimeoutError) else (exc.strerror or type(exc).__name__)
-        return (f"{key}={uri}: no tracking server answers ({reason}; waited up to {timeout_s:g} s); "
-                "start it, or log to a folder (logger.tracking_uri=file:<dir>)")
+        return (
+            f"{key}={uri}: no tracking server answers ({reason}; waited up to {timeout_s:g} s); "
+            "start it, or log to a folder (logger.tracking_uri=file:<dir>)"
+        )
 
 
 class Tracker:
@@ -256,8 +258,11 @@ class MlflowLogger(TrackedLogger):
         tracking_uri: str | None = None,
     ) -> None:
         self.tracking_uri = tracking_uri
-        problem = (unreachable(tracking_uri) if tracking_uri
-                   else unreachable(os.environ.get("MLFLOW_TRACKING_URI"), "$MLFLOW_TRACKING_URI"))
+        problem = (
+            unreachable(tracking_uri)
+            if tracking_uri
+            else unreachable(os.environ.get("MLFLOW_TRACKING_URI"), "$MLFLOW_TRACKING_URI")
+        )
         if problem:  # before TensorBoard's folder: a refused start leaves nothing in the run directory
             raise ConfigError(problem)
         super().__init__(run_dir, config, resumed_frames, console_interval_s, project, tags, run_name)

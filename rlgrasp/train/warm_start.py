@@ -73,8 +73,6 @@ def _env_differences(trained: dict[str, Any], here: dict[str, Any]) -> list[tupl
     ]
 
 
-
-
 def _model_keys(model: dict[str, Any]) -> str:
     shown = ("channels", "kernel_sizes", "strides", "pooling", "image_features", "hidden_sizes")
     return " ".join(f"model.{k}={model[k]}" for k in shown if k in model)

@@ -38,8 +38,9 @@ class ObjectFromImages(nn.Module):
     The features are tapped from the student's encoders as the action loss runs the student, so
     the auxiliary loss costs one small matrix product, not a second encoder pass."""
 
-    def __init__(self, encoders: Mapping[str, nn.Module], parts: Mapping[str, Sequence[int]],
-                 names: Sequence[str]) -> None:
+    def __init__(
+        self, encoders: Mapping[str, nn.Module], parts: Mapping[str, Sequence[int]], names: Sequence[str]
+    ) -> None:
         super().__init__()
         unknown = [n for n in names if n not in parts]
         if unknown or not names:
