@@ -578,9 +578,24 @@ def _positive(value: Any) -> bool:
 def _train_problems(cfg: Any, batch: int) -> list[str]:
     """Each bad value of a composed training config as ``key=value: what is allowed``; ``batch``: the
     collector's frames per batch."""
-    c, a, m, e, k = cfg.collector, cfg.algo, cfg.model, cfg.eval, cfg.checkpoint
-    distribution = m.get("distribution", "tanh_normal")  # a camera model has no such key
     checks = [
+        *_run_checks(cfg),
+        *_collector_checks(cfg.collector),
+        *_algo_checks(cfg.algo, batch, cfg.env.get("camera")),
+        *_model_checks(cfg.model),
+        *_model_camera_checks(cfg.model, cfg.env.get("camera"), cfg.algo.name),
+        *_eval_checkpoint_checks(cfg.eval, cfg.checkpoint),
+    ]
+    return (
+        [f"{key}={value!r}: {allowed}" for key, value, ok, allowed in checks if not ok]
+        + _device_problems(cfg.device)
+        + _eval_randomization_problems(cfg.eval.get("randomization"))
+    )
+
+
+def _run_checks(cfg: Any) -> list[tuple[str, Any, bool, str]]:
+    """The run's own keys: its seed, its name (a folder) and its budgets."""
+    return [
         ("seed", cfg.seed, 0 <= cfg.seed < 2**32, "must be an integer in [0, 2**32)"),
         (
             "experiment_name",
@@ -595,6 +610,11 @@ def _train_problems(cfg: Any, batch: int) -> list[str]:
             cfg.time_budget_min is None or cfg.time_budget_min > 0,
             "must be > 0 or null",
         ),
+    ]
+
+
+def _collector_checks(c: Any) -> list[tuple[str, Any, bool, str]]:
+    return [
         ("collector.num_workers", c.num_workers, c.num_workers >= 0, "must be >= 0 (0: in-process)"),
         ("collector.envs_per_worker", c.envs_per_worker, c.envs_per_worker >= 1, "must be >= 1"),
         ("collector.steps_per_env", c.steps_per_env, c.steps_per_env >= 1, "must be >= 1"),
@@ -605,7 +625,13 @@ def _train_problems(cfg: Any, batch: int) -> list[str]:
             _positive(c.worker_timeout_s),
             "must be > 0 (seconds a batch may take)",
         ),
-        *_algo_checks(a, batch, cfg.env.get("camera")),
+    ]
+
+
+def _model_checks(m: Any) -> list[tuple[str, Any, bool, str]]:
+    """The MLP's keys (a camera model's own are ``_model_camera_checks``')."""
+    distribution = m.get("distribution", "tanh_normal")  # a camera model has no such key
+    return [
         (
             "model.hidden_sizes",
             list(m.hidden_sizes),
@@ -625,7 +651,11 @@ def _train_problems(cfg: Any, batch: int) -> list[str]:
             "must be tanh_normal or normal",
         ),
         ("model.obs_clip", m.obs_clip, m.obs_clip > 0, "must be > 0 (the normalized observation's bound)"),
-        *_model_camera_checks(m, cfg.env.get("camera"), a.name),
+    ]
+
+
+def _eval_checkpoint_checks(e: Any, k: Any) -> list[tuple[str, Any, bool, str]]:
+    return [
         ("eval.episodes", e.episodes, e.episodes >= 1, "must be >= 1"),
         (
             "eval.final_episodes",
@@ -642,11 +672,6 @@ def _train_problems(cfg: Any, batch: int) -> list[str]:
             "must be >= 0 (0: only at the end)",
         ),
     ]
-    return (
-        [f"{key}={value!r}: {allowed}" for key, value, ok, allowed in checks if not ok]
-        + _device_problems(cfg.device)
-        + _eval_randomization_problems(e.get("randomization"))
-    )
 
 
 def _eval_randomization_problems(spec: Any) -> list[str]:

@@ -119,21 +119,24 @@ class GraspEnv(gym.Env):
         )
         self._build_task(objects, reward, weights, success_height)
         self.control_mode = control_mode
-        try:  # an arm may refuse a mode (joint_torque without meaningful dynamics)
-            self.control = make_control(
-                control_mode,
-                self.robot,
-                ee_step=ee_step,
-                ee_yaw=ee_yaw,
-                yaw_step=yaw_step,
-                joint_step=joint_step,
-                torque_fraction=torque_fraction,
-                gravity_compensation=gravity_compensation,
-            )
+        self._build_control(
+            ee_step=ee_step,
+            ee_yaw=ee_yaw,
+            yaw_step=yaw_step,
+            joint_step=joint_step,
+            torque_fraction=torque_fraction,
+            gravity_compensation=gravity_compensation,
+        )
+        self._build_spaces()
+
+    def _build_control(self, **settings: Any) -> None:
+        """The control mode's part, on the arm just built; the world is closed if the arm refuses
+        the mode (joint_torque without meaningful dynamics)."""
+        try:
+            self.control = make_control(self.control_mode, self.robot, **settings)
         except BaseException:
             self.close()
             raise
-        self._build_spaces()
 
     def _build_world(
         self,

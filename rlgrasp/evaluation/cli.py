@@ -102,19 +102,7 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
         metrics["teacher"] = M.compare_with_teacher(results, teacher_results, teacher.ckpt_path)
     table = metrics["summary_markdown"] = M.summary_table(metrics)
 
-    # --- write: into a hidden staging folder renamed at the end, so an evaluation is complete or absent
-    out.parent.mkdir(parents=True, exist_ok=True)
-    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
-    try:
-        files = _write_artefacts(
-            stage, out.name, cfg, source, (results, teacher_results), metrics, table, seconds, fmt
-        )
-        if out.exists():  # an empty folder made in the meantime
-            out.rmdir()
-        os.replace(stage, out)
-    except BaseException:
-        shutil.rmtree(stage, ignore_errors=True)
-        raise
+    files = _write_staged(out, cfg, source, (results, teacher_results), metrics, table, seconds, fmt)
     if cfg.tensorboard and source.run_dir:
         step = int((source.info or {}).get("frames") or 0)
         tb = log_to_tensorboard(source.run_dir, out.name, metrics, [r for r in results if r.frames], step)
@@ -124,6 +112,31 @@ def evaluate(cfg: DictConfig) -> dict[str, Any]:
     log.info("wrote %s in %.1f s", out, seconds)
     metrics["output_dir"] = str(out)
     return metrics
+
+
+def _write_staged(
+    out: Path,
+    cfg: DictConfig,
+    source: PolicySource,
+    results: tuple,
+    metrics: dict,
+    table: str,
+    seconds: float,
+    fmt: str | None,
+) -> list[str]:
+    """Every artefact, written into a hidden staging folder renamed to ``out`` at the end, so that an
+    evaluation is complete or absent."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
+    try:
+        files = _write_artefacts(stage, out.name, cfg, source, results, metrics, table, seconds, fmt)
+        if out.exists():  # an empty folder made in the meantime
+            out.rmdir()
+        os.replace(stage, out)
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
+    return files
 
 
 def _validate(cfg: DictConfig) -> tuple[PolicySource, PolicySource | None, str | None, Path]:
