@@ -95,29 +95,29 @@ def ppo_kwargs(cfg: Any) -> dict[str, Any]:
     """SB3 ``PPO`` keywords for a composed rlgrasp PPO config."""
     from rlgrasp.models.mlp import ACTIVATIONS
 
-    a, m = cfg.algo, cfg.model
-    if a.loss_critic_type != "l2":
-        raise ValueError(f"algo.loss_critic_type={a.loss_critic_type!r}: SB3's value loss is l2 only")
+    loss, o, sched, m = cfg.algo.loss, cfg.algo.optim, cfg.algo.schedule, cfg.model
+    if loss.loss_critic_type != "l2":
+        raise ValueError(f"algo.loss.loss_critic_type={loss.loss_critic_type!r}: SB3's value loss is l2 only")
     return {
         "n_steps": cfg.collector.steps_per_env,
-        "batch_size": a.minibatch_size,
-        "n_epochs": a.epochs,
-        "learning_rate": LinearLR(a.lr, a.min_lr_frac, a.anneal_lr),
-        "gamma": a.gamma,
-        "gae_lambda": a.gae_lambda,
-        "clip_range": a.clip_epsilon,
-        "ent_coef": a.entropy_coeff,
-        "vf_coef": a.critic_coeff,
-        "max_grad_norm": a.max_grad_norm,
-        "normalize_advantage": a.normalize_advantage,
+        "batch_size": o.minibatch_size,
+        "n_epochs": o.epochs,
+        "learning_rate": LinearLR(o.lr, sched.min_lr_frac, sched.anneal_lr),
+        "gamma": loss.gamma,
+        "gae_lambda": loss.gae_lambda,
+        "clip_range": loss.clip_epsilon,
+        "ent_coef": loss.entropy_coeff,
+        "vf_coef": loss.critic_coeff,
+        "max_grad_norm": o.max_grad_norm,
+        "normalize_advantage": loss.normalize_advantage,
         # SB3 stops an update once its KL estimate exceeds 1.5 x target_kl, rlgrasp at target_kl.
-        "target_kl": None if a.target_kl is None else a.target_kl / 1.5,
+        "target_kl": None if sched.target_kl is None else sched.target_kl / 1.5,
         "policy_kwargs": {
             "net_arch": {"pi": list(m.hidden_sizes), "vf": list(m.hidden_sizes)},
             "activation_fn": ACTIVATIONS[m.activation],
             "log_std_init": m.init_log_std,
             "ortho_init": True,  # rlgrasp's init too: gain sqrt(2), 0.01 on the policy head, 1 on the value
-            "optimizer_kwargs": {"eps": a.adam_eps},
+            "optimizer_kwargs": {"eps": o.adam_eps},
         },
     }
 
@@ -126,7 +126,7 @@ def gradient_steps(cfg: Any) -> int:
     """SB3's gradient steps per rollout for rlgrasp's ``utd_ratio``: a rollout is one batch
     (``steps_per_env`` steps of every env), so ``utd_ratio`` x its frames, rounded (SB3 takes a
     whole number; rlgrasp carries the fraction over to the next batch)."""
-    return round(cfg.algo.utd_ratio * n_envs(cfg) * cfg.collector.steps_per_env)
+    return round(cfg.algo.optim.utd_ratio * n_envs(cfg) * cfg.collector.steps_per_env)
 
 
 def sac_kwargs(cfg: Any) -> dict[str, Any]:
@@ -141,25 +141,27 @@ def sac_kwargs(cfg: Any) -> dict[str, Any]:
     if steps < 1:
         frames = n_envs(cfg) * cfg.collector.steps_per_env
         raise ValueError(
-            f"algo.utd_ratio={a.utd_ratio} x {frames} frames a batch rounds to 0 gradient "
+            f"algo.optim.utd_ratio={a.optim.utd_ratio} x {frames} frames a batch rounds to 0 gradient "
             "steps: SB3 would never train"
         )
     return {
         "train_freq": (cfg.collector.steps_per_env, "step"),  # each of the n_envs envs steps this often
         "gradient_steps": steps,
-        "batch_size": a.batch_size,
-        "buffer_size": a.buffer_frames,
-        "learning_starts": a.learning_starts,
-        "learning_rate": a.actor_lr,  # SB3's one rate for actor, critics and temperature
-        "gamma": a.gamma,
-        "tau": a.tau,
+        "batch_size": a.optim.batch_size,
+        "buffer_size": a.replay.buffer_frames,
+        "learning_starts": a.replay.learning_starts,
+        "learning_rate": a.optim.actor_lr,  # SB3's one rate for actor, critics and temperature
+        "gamma": a.loss.gamma,
+        "tau": a.loss.tau,
         "target_update_interval": 1,  # rlgrasp soft-updates the target critics after every step
-        "ent_coef": f"auto_{a.alpha_init}",  # learned, starting at alpha_init
-        "target_entropy": "auto" if a.target_entropy is None else a.target_entropy,  # auto: -(action size)
+        "ent_coef": f"auto_{a.loss.alpha_init}",  # learned, starting at alpha_init
+        "target_entropy": "auto"
+        if a.loss.target_entropy is None
+        else a.loss.target_entropy,  # auto: -(action size)
         "policy_kwargs": {
-            "net_arch": {"pi": list(m.hidden_sizes), "qf": list(a.critic_hidden_sizes)},
+            "net_arch": {"pi": list(m.hidden_sizes), "qf": list(a.critic.hidden_sizes)},
             "activation_fn": ACTIVATIONS[m.activation],
-            "n_critics": a.num_critics,
+            "n_critics": a.loss.num_critics,
         },
     }
 
@@ -197,12 +199,13 @@ def ppo_unmatched(cfg: Any) -> list[str]:
             "policy: SB3 samples a Gaussian and clips actions to the bounds; rlgrasp's TanhNormal "
             "squashes them (SB3 squashes only with gSDE; model.distribution=normal is SB3's)"
         )
-    if cfg.algo.gae_every_epoch:
-        notes.append("algo.gae_every_epoch=true: SB3 computes advantages once per rollout")
-    if cfg.algo.get("desired_kl") is not None:
+    if cfg.algo.loss.gae_every_epoch:
+        notes.append("algo.loss.gae_every_epoch=true: SB3 computes advantages once per rollout")
+    desired_kl = cfg.algo.schedule.desired_kl
+    if desired_kl is not None:
         notes.append(
-            f"algo.desired_kl={cfg.algo.desired_kl}: SB3 has no KL-adaptive learning rate; it gets "
-            "algo.lr on the linear schedule"
+            f"algo.schedule.desired_kl={desired_kl}: SB3 has no KL-adaptive learning rate; it gets "
+            "algo.optim.lr on the linear schedule"
         )
     return notes
 
@@ -217,31 +220,33 @@ def sac_unmatched(cfg: Any) -> list[str]:
         f"{m.init_log_std}, floor model.min_std={m.min_std}); SB3's SAC a state-dependent one (a linear "
         "head, log-std clipped to [-20, 2]; its log_std_init applies only with gSDE)",
         "init: rlgrasp's actor is orthogonal (gain sqrt(2), 0.01 on the head); SB3's SAC PyTorch's default",
-        "warm-up: SB3 acts uniformly at random until algo.learning_starts frames and trains from the first "
-        "batch past them; rlgrasp acts with its initial policy and trains from the batch that reaches them",
+        "warm-up: SB3 acts uniformly at random until algo.replay.learning_starts frames and trains from "
+        "the first batch past them; rlgrasp acts with its initial policy and trains from the batch that "
+        "reaches them",
         "observation statistics: VecNormalize updates them every step, rlgrasp once a batch",
     ]
-    if not a.critic_lr == a.alpha_lr == a.actor_lr:
+    if not a.optim.critic_lr == a.optim.alpha_lr == a.optim.actor_lr:
         notes.append(
-            f"learning rates: SB3 has one for actor, critics and temperature (algo.actor_lr="
-            f"{a.actor_lr}); rlgrasp's critics use algo.critic_lr={a.critic_lr}, its temperature "
-            f"algo.alpha_lr={a.alpha_lr}"
+            f"learning rates: SB3 has one for actor, critics and temperature (algo.optim.actor_lr="
+            f"{a.optim.actor_lr}); rlgrasp's critics use algo.optim.critic_lr={a.optim.critic_lr}, its "
+            f"temperature algo.optim.alpha_lr={a.optim.alpha_lr}"
         )
-    if a.critic_layer_norm:
-        notes.append("algo.critic_layer_norm=true: SB3's SAC critics have no LayerNorm")
-    if a.critic_activation != m.activation:
+    if a.critic.layer_norm:
+        notes.append("algo.critic.layer_norm=true: SB3's SAC critics have no LayerNorm")
+    if a.critic.activation != m.activation:
         notes.append(
             f"activation: SB3's SAC has one for actor and critics (model.activation="
-            f"{m.activation}); rlgrasp's critics use algo.critic_activation={a.critic_activation}"
+            f"{m.activation}); rlgrasp's critics use algo.critic.activation={a.critic.activation}"
         )
-    if a.actor_every != 1:
+    if a.optim.actor_every != 1:
         notes.append(
-            f"algo.actor_every={a.actor_every}: SB3's SAC steps the actor and temperature every gradient step"
+            f"algo.optim.actor_every={a.optim.actor_every}: SB3's SAC steps the actor and temperature "
+            "every gradient step"
         )
-    per_batch = a.utd_ratio * n_envs(cfg) * cfg.collector.steps_per_env
+    per_batch = a.optim.utd_ratio * n_envs(cfg) * cfg.collector.steps_per_env
     if per_batch != gradient_steps(cfg):
         notes.append(
-            f"algo.utd_ratio={a.utd_ratio}: {per_batch:g} gradient steps a batch, SB3 takes "
+            f"algo.optim.utd_ratio={a.optim.utd_ratio}: {per_batch:g} gradient steps a batch, SB3 takes "
             f"{gradient_steps(cfg)} (a whole number; rlgrasp carries the fraction over)"
         )
     if collector_backend(cfg.collector).collects_ahead:

@@ -10,7 +10,7 @@ the teacher's actions is printed on each validation set. A lower loss is not a h
 use it to choose what to run in full.
 
     python benchmarks/bench_student_offline.py [--train-episodes 800] [--seconds 200] \
-        [--variant base= --variant "wide=algo.augment_shift=4 model.channels=[32,64,64]" ...]
+        [--variant base= --variant "wide=algo.augment.shift=4 model.channels=[32,64,64]" ...]
 """
 
 from __future__ import annotations
@@ -119,13 +119,13 @@ def train_variant(overrides: list[str], sets: dict[str, dict], seconds: float) -
     a, train = cfg.algo, sets["train"]
     student = build_vision_actor(vision_spec(env_factory(cfg.env)), cfg.model)
     actor_norm(student).update(train["state"])
-    loss_fn, optimizer = mse_bc_loss(student), torch.optim.Adam(student.parameters(), lr=a.lr)
+    loss_fn, optimizer = mse_bc_loss(student), torch.optim.Adam(student.parameters(), lr=a.optim.lr)
     start, steps, recent = time.monotonic(), 0, []
     while (elapsed := time.monotonic() - start) < seconds:
         for group in optimizer.param_groups:  # annealed over the budget, as a run anneals over its frames
-            group["lr"] = a.lr * max(a.min_lr_frac, 1.0 - elapsed / seconds)
+            group["lr"] = a.optim.lr * max(a.schedule.min_lr_frac, 1.0 - elapsed / seconds)
         sample = augment(
-            _minibatch(train, torch.randint(len(train["label"]), (a.minibatch_size,))),
+            _minibatch(train, torch.randint(len(train["label"]), (a.optim.minibatch_size,))),
             a.augment,
             a.augment_grey,
             a.augment_shift,
@@ -159,10 +159,10 @@ def main() -> None:
         "--variant",
         action="append",
         metavar="NAME=[OVERRIDE ...]",
-        help="default: base= and shift=algo.augment_shift=4",
+        help="default: base= and shift=algo.augment.shift=4",
     )
     args = parser.parse_args()
-    variants = args.variant or ["base=", "shift=algo.augment_shift=4"]
+    variants = args.variant or ["base=", "shift=algo.augment.shift=4"]
     sets = {
         name: record(name, args.train_episodes if name == "train" else args.val_episodes, args.cache)
         for name in SETS

@@ -13,7 +13,7 @@ compiles its update; training here does not): its first update, which compiles, 
 
 SAC (an experiment whose ``algo.name`` is ``sac``): fills the replay buffer with frames collected
 in-process, times one gradient step (``SAC._step``) for each torch thread count, and sets the
-learner's cost per env frame (a step's time x ``algo.utd_ratio``) against the env's (one env stepped
+learner's cost per env frame (a step's time x ``algo.optim.utd_ratio``) against the env's (one env stepped
 in this process with random actions, divided by the workers that step envs in parallel): the larger
 of the two bounds a run in which learner and workers overlap. The env figure leaves out the actor's
 and TorchRL's share of a worker's time, so the ceiling it implies is optimistic.
@@ -58,7 +58,9 @@ def collect(overrides: list[str], frames: int) -> tuple[Any, Any]:
 def ppo_table(cfg: Any, batch: Any, args: argparse.Namespace) -> None:
     """One row per thread count, minibatch size (and with ``--compile``, compiled or not)."""
     frames = batch.numel()
-    print(f"{frames:,} frames per batch, {cfg.algo.epochs} epochs, hidden {list(cfg.model.hidden_sizes)}")
+    print(
+        f"{frames:,} frames per batch, {cfg.algo.optim.epochs} epochs, hidden {list(cfg.model.hidden_sizes)}"
+    )
     print(
         "| torch threads | minibatch | loss | first update, s | ms per update | ms per frame"
         " | learner ceiling, frames/s |"
@@ -69,7 +71,7 @@ def ppo_table(cfg: Any, batch: Any, args: argparse.Namespace) -> None:
         for minibatch in args.minibatch:
             for compiled in (False, True) if args.compile else (False,):
                 algo = copy.deepcopy(cfg.algo)
-                algo.minibatch_size, algo.target_kl = minibatch, None
+                algo.optim.minibatch_size, algo.schedule.target_kl = minibatch, None
                 parts = build_parts(cfg)
                 learner = PPOLearner(parts.actor, parts.critic, parts.norm, algo, torch.device("cpu"), True)
                 if compiled:
@@ -136,8 +138,8 @@ def sac_table(cfg: Any, batch: Any, args: argparse.Namespace) -> None:
     a, workers = cfg.algo, max(1, cfg.collector.num_workers)
     env_ms = env_ms_per_frame(cfg, args.env_steps)
     print(
-        f"replay: {batch.numel():,} frames; minibatch {a.batch_size}, {a.num_critics} critics "
-        f"{list(a.critic_hidden_sizes)}, actor {list(cfg.model.hidden_sizes)}, utd_ratio {a.utd_ratio}"
+        f"replay: {batch.numel():,} frames; minibatch {a.optim.batch_size}, {a.loss.num_critics} critics "
+        f"{list(a.critic.hidden_sizes)}, actor {list(cfg.model.hidden_sizes)}, utd_ratio {a.optim.utd_ratio}"
     )
     print(
         f"env: {env_ms:.3f} ms per frame (one env, random actions, {args.env_steps} steps); "
@@ -150,7 +152,7 @@ def sac_table(cfg: Any, batch: Any, args: argparse.Namespace) -> None:
     print("|---|---|---|---|---|---|---|")
     for threads in args.threads:
         step_ms = sac_step_ms(cfg, batch, threads, args.steps)
-        learner, env = step_ms * a.utd_ratio, env_ms / workers
+        learner, env = step_ms * a.optim.utd_ratio, env_ms / workers
         bound = "learner" if learner > env else "env"
         row = [
             threads,
@@ -185,7 +187,7 @@ def main() -> None:
     cfg = compose_train(overrides)
     if cfg.algo.name == "sac":
         # a replay of a few minibatches (training's batch is small: 128 frames for grasp_sac)
-        frames = max(collector_backend(cfg.collector).frames_per_batch, 4 * cfg.algo.batch_size)
+        frames = max(collector_backend(cfg.collector).frames_per_batch, 4 * cfg.algo.optim.batch_size)
         sac_table(*collect(overrides, frames), args)
     else:  # one in-process worker collects the batch training would get from all of them
         ppo_table(*collect(overrides, collector_backend(cfg.collector).frames_per_batch), args)

@@ -152,7 +152,7 @@ def sparse(out: str) -> None:
             "eval.episodes=4",
             "eval.final_episodes=8",
             "eval.num_envs=4",
-            "algo.bc_epochs=100",
+            "algo.pretrain.epochs=100",
         ]
     )
     print("with demonstrations, final evaluation success", train(cfg))

@@ -82,113 +82,272 @@ class EnvConfig:
     collision_model: str = "mesh"
 
 
+# --- algorithms: each one's keys grouped by role, as TorchRL's sota configs do -----------------
+# loss: the objective's keywords (TorchRL's loss and value-estimator names); optim: the optimizer and
+# how many gradient steps it takes on how much data; schedule: how a rate changes over the run;
+# replay: what is kept between batches; pretrain: behaviour cloning before the first frame; terms:
+# auxiliary losses beside the algorithm's own. The flat keys of before (algo.lr, ...) are mapped by
+# ALGO_KEYS below: old checkpoints load (rlgrasp.train.legacy) and an old override names its new key.
 @dataclass
-class PPOConfig:
-    """PPO hyperparameters (names follow TorchRL's ``ClipPPOLoss``/``GAE`` keywords)."""
+class PPOLossConfig:
+    """``ClipPPOLoss`` and ``GAE`` keywords."""
 
-    _target_: str = "rlgrasp.algos.ppo.PPO"  # the Algorithm class (rlgrasp.train.algorithm)
-    name: str = "ppo"
     gamma: float = 0.9
     gae_lambda: float = 0.9
-    epochs: int = 10
-    minibatch_size: int = 512
-    lr: float = 3e-4
-    anneal_lr: bool = True  # linearly to min_lr_frac x lr at total_frames
-    min_lr_frac: float = 0.0
-    # The schedule's length in frames; null: total_frames. A sweep trial sets the experiment's, so that
-    # it stops part-way along the real run's schedule (sweep.trial.lr_schedule=experiment).
-    anneal_lr_frames: int | None = None
+    # Recompute advantages with the current critic each epoch (TorchRL's sota PPO); false: once per
+    # update (CleanRL), cheaper.
+    gae_every_epoch: bool = True
     clip_epsilon: float = 0.2
     entropy_coeff: float = 0.0
     critic_coeff: float = 0.5
     loss_critic_type: str = "l2"
     normalize_advantage: bool = True
+
+
+@dataclass
+class PPOOptimConfig:
+    """Adam, and the epochs of minibatches over each batch."""
+
+    lr: float = 3e-4
+    adam_eps: float = 1e-5
     max_grad_norm: float = 0.5
+    epochs: int = 10
+    minibatch_size: int = 512
+
+
+@dataclass
+class PPOScheduleConfig:
+    """The learning rate over the run, and when an update's epochs stop early."""
+
+    anneal_lr: bool = True  # linearly to min_lr_frac x optim.lr at total_frames
+    min_lr_frac: float = 0.0
+    # The schedule's length in frames; null: total_frames. A sweep trial sets the experiment's, so that
+    # it stops part-way along the real run's schedule (sweep.trial.lr_schedule=experiment).
+    anneal_lr_frames: int | None = None
     # Stop the epochs of one update once the approximate KL exceeds this (null disables).
     target_kl: float | None = 0.05
     # KL-adaptive learning rate (rsl_rl's "adaptive" schedule): after each minibatch the rate is divided
     # by 1.5 when the KL estimate is above 2 x desired_kl and multiplied by 1.5 below desired_kl / 2,
-    # within [1e-5, 1e-2]. It starts at lr and replaces the linear annealing. null: off.
+    # within [1e-5, 1e-2]. It starts at optim.lr and replaces the linear annealing. null: off.
     desired_kl: float | None = None
-    adam_eps: float = 1e-5
-    # Recompute advantages with the current critic each epoch (TorchRL's sota PPO); false: once per
-    # update (CleanRL), cheaper.
-    gae_every_epoch: bool = True
-    # Sparse rewards (docs/sparse.md). A demonstration directory (rlgrasp-demos; referenced, not copied):
-    # each minibatch's loss gains demo_coeff * demo_decay**k x a behaviour-cloning loss on
-    # demo_minibatch_size demonstrated steps at update k (DAPG). null: none.
+    # The first frames train the critic alone, the actor held still: a fresh critic's first advantages
+    # are noise, and would pull a trained actor away from what it does well.
+    critic_warmup_frames: int = 0
+
+
+@dataclass
+class PretrainConfig:
+    """Behaviour cloning on ``algo.demos`` before a fresh run's first frame (PPO also fits its critic
+    to the demonstrations' returns); ``epochs: 0``: none. ``only``: pre-train, evaluate, stop (the
+    BC baseline; PPO)."""
+
+    epochs: int = 0
+    lr: float = 1e-3
+    minibatch_size: int = 64
+    only: bool = False
+
+
+@dataclass
+class ImitationTermConfig:
+    """DAPG (``rlgrasp.demos.bc.Imitation``): each minibatch's loss gains coeff x decay**k x a
+    behaviour-cloning loss on minibatch_size demonstrated steps at update k; on when ``algo.demos``
+    is set and coeff > 0."""
+
+    _target_: str = "rlgrasp.demos.bc.Imitation"
+    coeff: float = 0.1
+    decay: float = 0.95
+    minibatch_size: int = 256
+
+
+@dataclass
+class TeacherTermConfig:
+    """A camera run's state teacher (``rlgrasp.vision.teacher_term``; a checkpoint or run): each
+    minibatch's loss gains coeff x decay**k x the squared error between the actor's action and the
+    teacher's on the same states (their privileged entry) at update k; during the critic's warm-up
+    too, so there the actor goes on imitating while the critic learns. checkpoint null: off."""
+
+    _target_: str = "rlgrasp.vision.teacher_term.TeacherImitation"
+    checkpoint: str | None = None
+    coeff: float = 1.0
+    decay: float = 1.0
+
+
+@dataclass
+class RNDTermConfig:
+    """Random Network Distillation (``rlgrasp.train.rnd``): coeff x the intrinsic advantage joins
+    PPO's (0: off)."""
+
+    _target_: str = "rlgrasp.train.rnd.RND"
+    coeff: float = 0.0
+    gamma: float = 0.99  # intrinsic returns are non-episodic
+    features: int = 64
+    update_fraction: float = 0.25  # of each minibatch trains the predictor
+
+
+@dataclass
+class PPOTermsConfig:
+    """PPO's auxiliary terms: each node's ``_target_`` is the class that builds it (a class of your
+    own with ``from_config(node, algorithm)`` may join them under a new name)."""
+
+    imitation: ImitationTermConfig = field(default_factory=ImitationTermConfig)
+    teacher: TeacherTermConfig = field(default_factory=TeacherTermConfig)
+    rnd: RNDTermConfig = field(default_factory=RNDTermConfig)
+
+
+@dataclass
+class PPOConfig:
+    """Clipped PPO with GAE (``rlgrasp.algos.ppo``)."""
+
+    _target_: str = "rlgrasp.algos.ppo.PPO"  # the Algorithm class (rlgrasp.train.algorithm)
+    name: str = "ppo"
+    loss: PPOLossConfig = field(default_factory=PPOLossConfig)
+    optim: PPOOptimConfig = field(default_factory=PPOOptimConfig)
+    schedule: PPOScheduleConfig = field(default_factory=PPOScheduleConfig)
+    # A demonstration directory (rlgrasp-demos; referenced, not copied) for pretrain and
+    # terms.imitation (docs/sparse.md). null: none.
     demos: str | None = None
-    demo_coeff: float = 0.1
-    demo_decay: float = 0.95
-    demo_minibatch_size: int = 256
-    # Behaviour-cloning pre-training of the actor (and the critic on the demonstrations' returns)
-    # before a fresh run's first update; 0: none. bc_only: pre-train, evaluate, stop (the BC baseline).
-    bc_epochs: int = 0
-    bc_lr: float = 1e-3
-    bc_minibatch_size: int = 64
-    bc_only: bool = False
+    pretrain: PretrainConfig = field(default_factory=PretrainConfig)
+    terms: PPOTermsConfig = field(default_factory=PPOTermsConfig)
     # Fine-tuning (rlgrasp/train/warm_start.py): a fresh run's actor starts from this checkpoint's policy
     # (a distilled camera student, or any policy of this run's model and env), its std from
     # model.init_log_std. null: a fresh actor.
     init_from: str | None = None
-    # The first frames train the critic alone, the actor held still: a fresh critic's first advantages
-    # are noise, and would pull a trained actor away from what it does well.
-    critic_warmup_frames: int = 0
-    # A camera run's state teacher (a checkpoint or run; rlgrasp/vision/teacher_term.py): each minibatch's
-    # loss gains teacher_coeff * teacher_decay**k x the squared error between the actor's action and
-    # the teacher's on the same states (their privileged entry) at update k; during the critic's
-    # warm-up too, so there the actor goes on imitating while the critic learns. null: none.
-    teacher: str | None = None
-    teacher_coeff: float = 1.0
-    teacher_decay: float = 1.0
-    # Random Network Distillation: rnd_coeff x the intrinsic advantage joins PPO's (0: off).
-    rnd_coeff: float = 0.0
-    rnd_gamma: float = 0.99  # intrinsic returns are non-episodic
-    rnd_features: int = 64
-    rnd_update_fraction: float = 0.25  # of each minibatch trains the predictor
+
+
+@dataclass
+class SACLossConfig:
+    """``SACLoss`` keywords, and the target critics' soft update."""
+
+    gamma: float = 0.95
+    num_critics: int = 2  # the target is the minimum over them (RLPD: an ensemble, e.g. 10)
+    alpha_init: float = 0.1  # the entropy temperature's start (rewards here are at most 1 a step)
+    target_entropy: float | None = None  # null: -(action size)
+    tau: float = 0.005  # the target critics' soft-update rate
+
+
+@dataclass
+class SACOptimConfig:
+    """Adam for each part, and how many gradient steps the learner takes on how much data."""
+
+    actor_lr: float = 3e-4
+    critic_lr: float = 3e-4
+    alpha_lr: float = 3e-4
+    batch_size: int = 256
+    # Gradient steps per env frame, kept across batches (0.25: one step per four frames).
+    utd_ratio: float = 0.25
+    actor_every: int = 1  # the actor and temperature step every this many critic steps
+
+
+@dataclass
+class ReplayConfig:
+    """The replay buffer."""
+
+    buffer_frames: int = 300_000  # transitions kept (the oldest go first)
+    learning_starts: int = 5_000  # frames in the buffer before the first gradient step
+    # With algo.demos: this share of each minibatch is drawn from them (RLPD's symmetric sampling).
+    demo_ratio: float = 0.5
+    # The buffer is written beside the checkpoints (replay.pt), so a resumed run continues with it;
+    # false: a resumed run starts with an empty one.
+    save: bool = True
+
+
+@dataclass
+class SACCriticConfig:
+    """The Q-networks (the actor is ``model``'s)."""
+
+    hidden_sizes: list[int] = field(default_factory=lambda: [256, 256])
+    activation: str = "relu"  # tanh | relu | elu
+    layer_norm: bool = True  # LayerNorm after each hidden layer (RLPD)
+    # With a camera: the critics also read the privileged state beside the images' features (never
+    # deployed; an asymmetric actor-critic).
+    privileged: bool = True
+
+
+@dataclass
+class SACPretrainConfig:
+    """With ``algo.demos``: this many epochs of behaviour cloning on them (at ``lr``) before the first
+    frame (0: none)."""
+
+    epochs: int = 0
+    lr: float = 1e-3
+
+
+@dataclass
+class SACImitationConfig:
+    """With ``algo.demos``: the actor's loss also pulls its deterministic action towards the
+    demonstrated one on the demonstrations' rows of each minibatch, weighted coeff (0: RLPD alone)."""
+
+    coeff: float = 0.0
+
+
+@dataclass
+class SACTermsConfig:
+    imitation: SACImitationConfig = field(default_factory=SACImitationConfig)
+
+
+@dataclass
+class ShiftAugmentConfig:
+    """Replayed images moved by up to ``shift`` pixels each way (DrQ-v2; 0: not moved)."""
+
+    shift: int = 4
 
 
 @dataclass
 class SACConfig:
-    """Soft actor-critic (``rlgrasp.algos.sac``; names follow TorchRL's ``SACLoss``), and with
-    ``demos`` RLPD: demonstrations sampled beside online data in every minibatch."""
+    """Soft actor-critic (``rlgrasp.algos.sac``), and with ``demos`` RLPD: demonstrations sampled
+    beside online data in every minibatch."""
 
     _target_: str = "rlgrasp.algos.sac.SAC"  # the Algorithm class (rlgrasp.train.algorithm)
     name: str = "sac"
-    gamma: float = 0.95
-    # Gradient steps per env frame, kept across batches (0.25: one step per four frames).
-    utd_ratio: float = 0.25
-    batch_size: int = 256
-    buffer_frames: int = 300_000  # transitions kept (the oldest go first)
-    learning_starts: int = 5_000  # frames in the buffer before the first gradient step
-    actor_lr: float = 3e-4
-    critic_lr: float = 3e-4
-    alpha_lr: float = 3e-4
-    alpha_init: float = 0.1  # the entropy temperature's start (rewards here are at most 1 a step)
-    target_entropy: float | None = None  # null: -(action size)
-    tau: float = 0.005  # the target critics' soft-update rate
-    actor_every: int = 1  # the actor and temperature step every this many critic steps
-    num_critics: int = 2  # the target is the minimum over them (RLPD: an ensemble, e.g. 10)
-    critic_hidden_sizes: list[int] = field(default_factory=lambda: [256, 256])
-    critic_activation: str = "relu"  # tanh | relu | elu
-    critic_layer_norm: bool = True  # LayerNorm after each hidden layer (RLPD)
-    # A demonstrations directory (rlgrasp-demos): this share of each minibatch is drawn from it.
-    demos: str | None = None
-    demo_ratio: float = 0.5
-    # With demos: the actor's loss also pulls its deterministic action towards the demonstrated one on
-    # the demonstrations' rows of each minibatch, weighted this much (0: RLPD alone).
-    bc_coeff: float = 0.0
-    # With demos: this many epochs of behaviour cloning on them (at bc_lr) before the first frame.
-    bc_epochs: int = 0
-    bc_lr: float = 1e-3
-    # The replay buffer is written beside the checkpoints (replay.pt), so a resumed run continues
-    # with it; false: a resumed run starts with an empty one.
-    save_replay: bool = True
+    loss: SACLossConfig = field(default_factory=SACLossConfig)
+    optim: SACOptimConfig = field(default_factory=SACOptimConfig)
+    replay: ReplayConfig = field(default_factory=ReplayConfig)
+    critic: SACCriticConfig = field(default_factory=SACCriticConfig)
+    demos: str | None = None  # a demonstrations directory (rlgrasp-demos)
+    pretrain: SACPretrainConfig = field(default_factory=SACPretrainConfig)
+    terms: SACTermsConfig = field(default_factory=SACTermsConfig)
+    augment: ShiftAugmentConfig = field(default_factory=ShiftAugmentConfig)
     init_from: str | None = None  # a state checkpoint whose actor starts this run (warm start)
-    # With a camera (DrQ-v2): each replayed image shifted by up to this many pixels each way (0: none),
-    # and the critics given the privileged state beside the images' features (never deployed).
-    image_shift: int = 4
-    critic_privileged: bool = True
+
+
+#: Where each flat ``algo`` key of before lives now (``algo.<key>`` -> ``algo.<path>``), for every
+#: algorithm; ``teacher`` is the PPO term's checkpoint (DAgger's ``algo.teacher`` did not move).
+ALGO_KEYS = {
+    **{k: f"loss.{k}" for k in ("gamma", "gae_lambda", "gae_every_epoch", "clip_epsilon", "entropy_coeff")},
+    **{k: f"loss.{k}" for k in ("critic_coeff", "loss_critic_type", "normalize_advantage")},
+    **{k: f"loss.{k}" for k in ("tau", "num_critics", "alpha_init", "target_entropy")},
+    **{k: f"optim.{k}" for k in ("lr", "adam_eps", "max_grad_norm", "epochs", "minibatch_size", "ema_decay")},
+    **{
+        k: f"optim.{k}"
+        for k in ("actor_lr", "critic_lr", "alpha_lr", "batch_size", "utd_ratio", "actor_every")
+    },
+    **{
+        k: f"schedule.{k}"
+        for k in ("anneal_lr", "min_lr_frac", "anneal_lr_frames", "target_kl", "desired_kl")
+    },
+    **{k: f"schedule.{k}" for k in ("critic_warmup_frames", "beta0", "beta_decay")},
+    **{k: f"replay.{k}" for k in ("buffer_frames", "learning_starts", "demo_ratio")},
+    "save_replay": "replay.save",
+    **{f"critic_{k}": f"critic.{k}" for k in ("hidden_sizes", "activation", "layer_norm", "privileged")},
+    **{f"bc_{k}": f"pretrain.{k}" for k in ("epochs", "lr", "minibatch_size", "only")},
+    **{f"demo_{k}": f"terms.imitation.{k}" for k in ("coeff", "decay", "minibatch_size")},
+    "bc_coeff": "terms.imitation.coeff",
+    "teacher": "terms.teacher.checkpoint",
+    **{f"teacher_{k}": f"terms.teacher.{k}" for k in ("coeff", "decay")},
+    **{f"rnd_{k}": f"terms.rnd.{k}" for k in ("coeff", "gamma", "features", "update_fraction")},
+    **{f"aux_{k}": f"terms.aux.{k}" for k in ("coeff", "parts")},
+    "augment": "augment.kind",
+    **{f"augment_{k}": f"augment.{k}" for k in ("grey", "shift")},
+    "image_shift": "augment.shift",
+}
+
+
+def moved_algo_key(key: str, algo_name: str | None = None) -> str | None:
+    """Today's path of a flat ``algo`` key of before (``lr`` -> ``optim.lr``); None for a key that
+    did not move (``demos``, ``init_from``, DAgger's ``teacher``) or never existed."""
+    if key == "teacher" and algo_name == "distill":
+        return None
+    return ALGO_KEYS.get(key)
 
 
 @dataclass
@@ -232,6 +391,56 @@ class CollectorConfig:
 
 
 @dataclass
+class DistillOptimConfig:
+    """Adam on the student; gradient samples per batch = epochs x the batch's frames, drawn from every
+    labelled frame so far."""
+
+    lr: float = 1e-3
+    epochs: int = 16
+    minibatch_size: int = 512
+    # The deployed student (what acts, is evaluated and exported) is an exponential moving average of
+    # the trained weights with this decay per update; 0: the trained weights themselves.
+    ema_decay: float = 0.0
+
+
+@dataclass
+class DistillScheduleConfig:
+    """Who acts, and the learning rate, over the run."""
+
+    beta0: float = 1.0  # probability that the teacher acts, in the first batch
+    beta_decay: float = 0.8  # ... times this per batch: soon the student acts, the teacher labels
+    min_lr_frac: float = 0.1  # the learning rate anneals linearly to this fraction at total_frames
+
+
+@dataclass
+class DistillReplayConfig:
+    buffer_frames: int = 60_000  # labelled frames kept (the oldest go first); 64x64 depth: 16 kB each
+
+
+@dataclass
+class AuxTermConfig:
+    """The student's image features also predict these parts of the privileged state, weighted coeff
+    (0: off; rlgrasp/vision/auxiliary.py). Training only; nothing is deployed."""
+
+    coeff: float = 0.0
+    parts: list[str] = field(default_factory=lambda: ["object_minus_grasp", "grasped"])
+
+
+@dataclass
+class DistillTermsConfig:
+    aux: AuxTermConfig = field(default_factory=AuxTermConfig)
+
+
+@dataclass
+class ImageAugmentConfig:
+    """Training images changed per sample (rlgrasp/vision/augment.py)."""
+
+    kind: str = "none"  # none | colour (RGB only: channels permuted, brightness and contrast scaled)
+    grey: float = 0.0  # with kind=colour: the share of training images made grey
+    shift: int = 0  # each training image moved by up to this many pixels (0: not moved)
+
+
+@dataclass
 class DistillConfig:
     """DAgger distillation of a state teacher into a camera student (``rlgrasp.vision.distill``)."""
 
@@ -240,26 +449,12 @@ class DistillConfig:
     # A state policy's checkpoint or run directory (its last.pt); relative paths are tried from the
     # working directory, then from the repository root (policies/grasp_ppo.pt).
     teacher: str = MISSING
-    beta0: float = 1.0  # probability that the teacher acts, in the first batch
-    beta_decay: float = 0.8  # ... times this per batch: soon the student acts, the teacher labels
-    # Gradient samples per batch = epochs x the batch's frames, drawn from every labelled frame so far.
-    epochs: int = 16
-    minibatch_size: int = 512
-    lr: float = 1e-3
-    min_lr_frac: float = 0.1  # the learning rate anneals linearly to this fraction at total_frames
-    buffer_frames: int = 60_000  # labelled frames kept (the oldest go first); 64x64 depth: 16 kB each
-    # Auxiliary task (rlgrasp/vision/auxiliary.py): the student's image features also predict these
-    # parts of the privileged state, weighted aux_coeff (0: off). Training only; nothing is deployed.
-    aux_coeff: float = 0.0
-    aux_parts: list[str] = field(default_factory=lambda: ["object_minus_grasp", "grasped"])
-    # Training images recoloured per sample (rlgrasp/vision/augment.py): none | colour (RGB only).
-    augment: str = "none"
-    augment_grey: float = 0.0  # with augment=colour: the share of training images made grey
-    augment_shift: int = 0  # each training image moved by up to this many pixels (0: not moved)
+    optim: DistillOptimConfig = field(default_factory=DistillOptimConfig)
+    schedule: DistillScheduleConfig = field(default_factory=DistillScheduleConfig)
+    replay: DistillReplayConfig = field(default_factory=DistillReplayConfig)
+    terms: DistillTermsConfig = field(default_factory=DistillTermsConfig)
+    augment: ImageAugmentConfig = field(default_factory=ImageAugmentConfig)
     learner_threads: int | None = None  # null: every core (the learner, not the workers, is the bound)
-    # The deployed student (what acts, is evaluated and exported) is an exponential moving average of
-    # the trained weights with this decay per update; 0: the trained weights themselves.
-    ema_decay: float = 0.0
 
 
 POOLINGS = ("flat", "keypoints")  # how a CNN's last feature maps become features (CNNConfig.pooling)
@@ -440,7 +635,8 @@ class EvalConfig:
     workers: int = 1
     deterministic: bool = True  # false: sample from the policy's distribution (seeded per episode)
     # A camera policy's teacher, evaluated on the same seeded episodes (it reads `privileged`):
-    # auto = the checkpoint's algo.teacher if it has one; none; or a checkpoint file / run directory.
+    # auto = the checkpoint's teacher if it has one (algo.teacher, algo.terms.teacher.checkpoint); none;
+    # or a checkpoint file / run directory.
     teacher: str = "auto"
     video: bool = True
     video_episodes: int = 3  # the first K episodes are rendered
@@ -534,7 +730,7 @@ def _sum(*values: int) -> int:
     return sum(values)
 
 
-#: The colour augmentations a camera student can train with (``algo.augment``), named here so that the
+#: The colour augmentations a camera student can train with (``algo.augment.kind``), named here so that the
 #: schema needs no import of ``rlgrasp.vision.augment``, which implements them.
 AUGMENTATIONS = ("none", "colour")
 
@@ -716,163 +912,202 @@ def _cnn_checks(m: Any) -> list[tuple[str, Any, bool, str]]:
 def _algo_checks(a: Any, batch: int, camera: Any) -> list[tuple[str, Any, bool, str]]:
     """The checks of ``algo``'s own keys: each algorithm has its own (an unknown one is refused)."""
     if a.name == "ppo":
-        return [*_learning_checks(a), *_ppo_checks(a, batch), *_extra_term_checks(a, camera)]
+        return [*_ppo_checks(a, batch), *_ppo_term_checks(a, camera)]
     if a.name == "distill":
-        return [*_learning_checks(a), *_distill_checks(a)]
+        return _distill_checks(a)
     if a.name == "sac":
-        return _sac_checks(a)
+        return [*_sac_checks(a), *_sac_demo_checks(a)]
     return [
         ("algo.name", a.name, False, "must be ppo, sac or distill (the algo group: algo=ppo|sac|distill)")
     ]
 
 
-def _learning_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
-    return [
-        ("algo.epochs", a.epochs, a.epochs >= 1, "must be >= 1"),
-        ("algo.lr", a.lr, a.lr > 0, "must be > 0"),
-        ("algo.lr", a.lr, math.isfinite(a.lr), "must be finite"),
-        ("algo.min_lr_frac", a.min_lr_frac, 0 <= a.min_lr_frac <= 1, "must be in [0, 1]"),
-    ]
+def _rate_checks(key: str, value: Any) -> list[tuple[str, Any, bool, str]]:
+    return [(key, value, _positive(value) and math.isfinite(value), "must be finite and > 0")]
 
 
 def _sac_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
     """SAC's keys: a ratio > 0, a buffer that holds a minibatch, rates > 0."""
-    rates = [
-        (f"algo.{k}", a[k], _positive(a[k]) and math.isfinite(a[k]), "must be finite and > 0")
-        for k in ("actor_lr", "critic_lr", "alpha_lr", "alpha_init", "bc_lr")
-    ]
+    o, r, c = a.optim, a.replay, a.critic
+    rates = [("optim", "actor_lr"), ("optim", "critic_lr"), ("optim", "alpha_lr"), ("loss", "alpha_init")]
     return [
-        ("algo.utd_ratio", a.utd_ratio, _positive(a.utd_ratio), "must be > 0 (gradient steps per env frame)"),
-        ("algo.batch_size", a.batch_size, a.batch_size >= 1, "must be >= 1"),
         (
-            "algo.buffer_frames",
-            a.buffer_frames,
-            a.buffer_frames >= a.batch_size,
-            f"must be >= algo.batch_size ({a.batch_size}): the buffer must hold a minibatch",
+            "algo.optim.utd_ratio",
+            o.utd_ratio,
+            _positive(o.utd_ratio),
+            "must be > 0 (gradient steps per env frame)",
+        ),
+        ("algo.optim.batch_size", o.batch_size, o.batch_size >= 1, "must be >= 1"),
+        ("algo.optim.actor_every", o.actor_every, o.actor_every >= 1, "must be >= 1"),
+        (
+            "algo.replay.buffer_frames",
+            r.buffer_frames,
+            r.buffer_frames >= o.batch_size,
+            f"must be >= algo.optim.batch_size ({o.batch_size}): the buffer must hold a minibatch",
         ),
         (
-            "algo.learning_starts",
-            a.learning_starts,
-            0 <= a.learning_starts <= a.buffer_frames,
-            "must be between 0 and algo.buffer_frames",
+            "algo.replay.learning_starts",
+            r.learning_starts,
+            0 <= r.learning_starts <= r.buffer_frames,
+            "must be between 0 and algo.replay.buffer_frames",
         ),
-        ("algo.gamma", a.gamma, 0 < a.gamma <= 1, "must be in (0, 1]"),
-        ("algo.tau", a.tau, 0 < a.tau <= 1, "must be in (0, 1]"),
-        ("algo.actor_every", a.actor_every, a.actor_every >= 1, "must be >= 1"),
-        ("algo.num_critics", a.num_critics, a.num_critics >= 1, "must be >= 1"),
+        ("algo.loss.gamma", a.loss.gamma, 0 < a.loss.gamma <= 1, "must be in (0, 1]"),
+        ("algo.loss.tau", a.loss.tau, 0 < a.loss.tau <= 1, "must be in (0, 1]"),
+        ("algo.loss.num_critics", a.loss.num_critics, a.loss.num_critics >= 1, "must be >= 1"),
         (
-            "algo.critic_hidden_sizes",
-            list(a.critic_hidden_sizes),
-            len(a.critic_hidden_sizes) > 0 and all(_positive(h) for h in a.critic_hidden_sizes),
+            "algo.critic.hidden_sizes",
+            list(c.hidden_sizes),
+            len(c.hidden_sizes) > 0 and all(_positive(h) for h in c.hidden_sizes),
             "must be a non-empty list of positive sizes",
         ),
         (
-            "algo.critic_activation",
-            a.critic_activation,
-            a.critic_activation in ("tanh", "relu", "elu"),
+            "algo.critic.activation",
+            c.activation,
+            c.activation in ("tanh", "relu", "elu"),
             "must be tanh, relu or elu",
         ),
-        ("algo.demo_ratio", a.demo_ratio, 0 < a.demo_ratio < 1, "must be in (0, 1)"),
-        (
-            "algo.bc_coeff",
-            a.bc_coeff,
-            a.bc_coeff >= 0 and math.isfinite(a.bc_coeff),
-            "must be finite and >= 0",
-        ),
-        ("algo.bc_epochs", a.bc_epochs, a.bc_epochs >= 0, "must be >= 0 (0: no pre-training)"),
-        ("algo.bc_epochs", a.bc_epochs, not a.bc_epochs or a.demos, "needs algo.demos=<demonstrations>"),
-        ("algo.bc_coeff", a.bc_coeff, not a.bc_coeff or a.demos, "needs algo.demos=<demonstrations>"),
-        ("algo.image_shift", a.image_shift, a.image_shift >= 0, "must be >= 0 (pixels)"),
-        *rates,
+        ("algo.augment.shift", a.augment.shift, a.augment.shift >= 0, "must be >= 0 (pixels)"),
+        *[check for group, key in rates for check in _rate_checks(f"algo.{group}.{key}", a[group][key])],
+    ]
+
+
+def _sac_demo_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
+    """What SAC does with demonstrations: their share of a minibatch, cloning first, the BC term."""
+    p, coeff, needs = a.pretrain, a.terms.imitation.coeff, "needs algo.demos=<demonstrations>"
+    return [
+        ("algo.replay.demo_ratio", a.replay.demo_ratio, 0 < a.replay.demo_ratio < 1, "must be in (0, 1)"),
+        ("algo.terms.imitation.coeff", coeff, coeff >= 0 and math.isfinite(coeff), "must be finite and >= 0"),
+        ("algo.terms.imitation.coeff", coeff, not coeff or a.demos, needs),
+        ("algo.pretrain.epochs", p.epochs, p.epochs >= 0, "must be >= 0 (0: no pre-training)"),
+        ("algo.pretrain.epochs", p.epochs, not p.epochs or a.demos, needs),
+        *_rate_checks("algo.pretrain.lr", p.lr),
     ]
 
 
 def _ppo_checks(a: Any, batch: int) -> list[tuple[str, Any, bool, str]]:
+    """PPO's loss, optimizer and schedule."""
+    loss, o, s = a.loss, a.optim, a.schedule
     return [
+        ("algo.optim.epochs", o.epochs, o.epochs >= 1, "must be >= 1"),
+        *_rate_checks("algo.optim.lr", o.lr),
+        ("algo.optim.max_grad_norm", o.max_grad_norm, o.max_grad_norm > 0, "must be > 0"),
         (
-            "algo.minibatch_size",
-            a.minibatch_size,
-            1 <= a.minibatch_size <= max(batch, 1),
+            "algo.optim.minibatch_size",
+            o.minibatch_size,
+            1 <= o.minibatch_size <= max(batch, 1),
             f"must be between 1 and the batch size ({batch:,} frames = workers x envs_per_worker x "
             "steps_per_env)",
         ),
-        ("algo.gamma", a.gamma, 0 < a.gamma <= 1, "must be in (0, 1]"),
-        ("algo.gae_lambda", a.gae_lambda, 0 <= a.gae_lambda <= 1, "must be in [0, 1]"),
-        ("algo.clip_epsilon", a.clip_epsilon, 0 < a.clip_epsilon < 1, "must be in (0, 1)"),
-        ("algo.target_kl", a.target_kl, a.target_kl is None or a.target_kl > 0, "must be > 0 or null"),
+        ("algo.loss.gamma", loss.gamma, 0 < loss.gamma <= 1, "must be in (0, 1]"),
+        ("algo.loss.gae_lambda", loss.gae_lambda, 0 <= loss.gae_lambda <= 1, "must be in [0, 1]"),
+        ("algo.loss.clip_epsilon", loss.clip_epsilon, 0 < loss.clip_epsilon < 1, "must be in (0, 1)"),
         (
-            "algo.loss_critic_type",
-            a.loss_critic_type,
-            a.loss_critic_type in ("l1", "l2", "smooth_l1"),
+            "algo.loss.loss_critic_type",
+            loss.loss_critic_type,
+            loss.loss_critic_type in ("l1", "l2", "smooth_l1"),
             "must be l1, l2 or smooth_l1",
         ),
-        ("algo.max_grad_norm", a.max_grad_norm, a.max_grad_norm > 0, "must be > 0"),
+        ("algo.schedule.min_lr_frac", s.min_lr_frac, 0 <= s.min_lr_frac <= 1, "must be in [0, 1]"),
         (
-            "algo.desired_kl",
-            a.desired_kl,
-            a.desired_kl is None or a.desired_kl > 0,
+            "algo.schedule.target_kl",
+            s.target_kl,
+            s.target_kl is None or s.target_kl > 0,
+            "must be > 0 or null",
+        ),
+        (
+            "algo.schedule.desired_kl",
+            s.desired_kl,
+            s.desired_kl is None or s.desired_kl > 0,
             "must be > 0 or null (null: the learning rate anneals linearly)",
         ),
         (
-            "algo.anneal_lr_frames",
-            a.anneal_lr_frames,
-            a.anneal_lr_frames is None or a.anneal_lr_frames > 0,
+            "algo.schedule.anneal_lr_frames",
+            s.anneal_lr_frames,
+            s.anneal_lr_frames is None or s.anneal_lr_frames > 0,
             "must be > 0 or null (null: total_frames)",
         ),
         (
-            "algo.critic_warmup_frames",
-            a.critic_warmup_frames,
-            a.critic_warmup_frames >= 0,
+            "algo.schedule.critic_warmup_frames",
+            s.critic_warmup_frames,
+            s.critic_warmup_frames >= 0,
             "must be >= 0 (0: the actor learns from the first update)",
         ),
-        ("algo.teacher_coeff", a.teacher_coeff, a.teacher_coeff >= 0, "must be >= 0 (0: no imitation term)"),
-        ("algo.teacher_decay", a.teacher_decay, 0 < a.teacher_decay <= 1, "must be in (0, 1]"),
     ]
 
 
-def _extra_term_checks(a: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
-    """The PPO update's auxiliary terms: demonstrations and curiosity (``rlgrasp.demos``,
+def _ppo_term_checks(a: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
+    """PPO's pre-training and auxiliary terms: demonstrations and curiosity (``rlgrasp.demos``,
     ``rlgrasp.train.rnd``) for state policies only, a teacher for camera policies only."""
-    state = not camera
-    return [
-        ("algo.demo_coeff", a.demo_coeff, a.demo_coeff >= 0, "must be >= 0 (0: no imitation term)"),
-        ("algo.demo_decay", a.demo_decay, 0 < a.demo_decay <= 1, "must be in (0, 1]"),
-        ("algo.demo_minibatch_size", a.demo_minibatch_size, a.demo_minibatch_size >= 1, "must be >= 1"),
-        ("algo.bc_epochs", a.bc_epochs, a.bc_epochs >= 0, "must be >= 0 (0: no pre-training)"),
-        ("algo.bc_lr", a.bc_lr, a.bc_lr > 0, "must be > 0"),
-        ("algo.bc_minibatch_size", a.bc_minibatch_size, a.bc_minibatch_size >= 1, "must be >= 1"),
-        ("algo.bc_epochs", a.bc_epochs, not a.bc_epochs or a.demos, "needs algo.demos=<demonstrations>"),
-        ("algo.bc_only", a.bc_only, not a.bc_only or a.bc_epochs > 0, "needs algo.bc_epochs > 0"),
+    state, p, t = not camera, a.pretrain, a.terms
+    imitation, teacher, rnd = t.get("imitation"), t.get("teacher"), t.get("rnd")
+    checks = [
+        ("algo.pretrain.epochs", p.epochs, p.epochs >= 0, "must be >= 0 (0: no pre-training)"),
+        *_rate_checks("algo.pretrain.lr", p.lr),
+        ("algo.pretrain.minibatch_size", p.minibatch_size, p.minibatch_size >= 1, "must be >= 1"),
+        ("algo.pretrain.epochs", p.epochs, not p.epochs or a.demos, "needs algo.demos=<demonstrations>"),
+        ("algo.pretrain.only", p.only, not p.only or p.epochs > 0, "needs algo.pretrain.epochs > 0"),
         ("algo.demos", a.demos, not a.demos or state, "needs a state policy (cameras=none)"),
+    ]
+    if imitation is not None:
+        checks += _decaying_term_checks("imitation", imitation)
+        checks.append(
+            (
+                "algo.terms.imitation.minibatch_size",
+                imitation.minibatch_size,
+                imitation.minibatch_size >= 1,
+                "must be >= 1",
+            )
+        )
+    if teacher is not None:
+        checks += _decaying_term_checks("teacher", teacher)
+        checks.append(
+            (
+                "algo.terms.teacher.checkpoint",
+                teacher.checkpoint,
+                not teacher.checkpoint or not state,
+                "labels a camera run's privileged state: needs a camera (e.g. cameras=wrist_depth)",
+            )
+        )
+    return checks + (_rnd_checks(rnd, state) if rnd is not None else [])
+
+
+def _decaying_term_checks(name: str, term: Any) -> list[tuple[str, Any, bool, str]]:
+    return [
+        (f"algo.terms.{name}.coeff", term.coeff, term.coeff >= 0, "must be >= 0 (0: no such term)"),
+        (f"algo.terms.{name}.decay", term.decay, 0 < term.decay <= 1, "must be in (0, 1]"),
+    ]
+
+
+def _rnd_checks(rnd: Any, state: bool) -> list[tuple[str, Any, bool, str]]:
+    return [
+        ("algo.terms.rnd.coeff", rnd.coeff, rnd.coeff >= 0, "must be >= 0 (0: no curiosity)"),
+        ("algo.terms.rnd.coeff", rnd.coeff, not rnd.coeff or state, "needs a state policy (cameras=none)"),
+        ("algo.terms.rnd.gamma", rnd.gamma, 0 < rnd.gamma <= 1, "must be in (0, 1]"),
+        ("algo.terms.rnd.features", rnd.features, rnd.features >= 1, "must be >= 1"),
         (
-            "algo.teacher",
-            a.teacher,
-            not a.teacher or not state,
-            "labels a camera run's privileged state: needs a camera (e.g. cameras=wrist_depth)",
-        ),
-        ("algo.rnd_coeff", a.rnd_coeff, a.rnd_coeff >= 0, "must be >= 0 (0: no curiosity)"),
-        ("algo.rnd_coeff", a.rnd_coeff, not a.rnd_coeff or state, "needs a state policy (cameras=none)"),
-        ("algo.rnd_gamma", a.rnd_gamma, 0 < a.rnd_gamma <= 1, "must be in (0, 1]"),
-        ("algo.rnd_features", a.rnd_features, a.rnd_features >= 1, "must be >= 1"),
-        (
-            "algo.rnd_update_fraction",
-            a.rnd_update_fraction,
-            0 < a.rnd_update_fraction <= 1,
+            "algo.terms.rnd.update_fraction",
+            rnd.update_fraction,
+            0 < rnd.update_fraction <= 1,
             "must be in (0, 1]",
         ),
     ]
 
 
 def _distill_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
+    o, s, aug = a.optim, a.schedule, a.augment
     return [
-        ("algo.minibatch_size", a.minibatch_size, a.minibatch_size >= 1, "must be >= 1"),
-        ("algo.beta0", a.beta0, 0 <= a.beta0 <= 1, "must be in [0, 1]"),
-        ("algo.beta_decay", a.beta_decay, 0 < a.beta_decay <= 1, "must be in (0, 1]"),
+        ("algo.optim.epochs", o.epochs, o.epochs >= 1, "must be >= 1"),
+        *_rate_checks("algo.optim.lr", o.lr),
+        ("algo.optim.minibatch_size", o.minibatch_size, o.minibatch_size >= 1, "must be >= 1"),
+        ("algo.optim.ema_decay", o.ema_decay, 0 <= o.ema_decay < 1, "must be in [0, 1) (0: no averaging)"),
+        ("algo.schedule.min_lr_frac", s.min_lr_frac, 0 <= s.min_lr_frac <= 1, "must be in [0, 1]"),
+        ("algo.schedule.beta0", s.beta0, 0 <= s.beta0 <= 1, "must be in [0, 1]"),
+        ("algo.schedule.beta_decay", s.beta_decay, 0 < s.beta_decay <= 1, "must be in (0, 1]"),
         (
-            "algo.buffer_frames",
-            a.buffer_frames,
-            a.buffer_frames >= a.minibatch_size,
-            f"must be >= algo.minibatch_size ({a.minibatch_size})",
+            "algo.replay.buffer_frames",
+            a.replay.buffer_frames,
+            a.replay.buffer_frames >= o.minibatch_size,
+            f"must be >= algo.optim.minibatch_size ({o.minibatch_size})",
         ),
         (
             "algo.learner_threads",
@@ -880,16 +1115,25 @@ def _distill_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
             a.learner_threads is None or a.learner_threads >= 1,
             "must be >= 1 or null",
         ),
-        ("algo.aux_coeff", a.aux_coeff, a.aux_coeff >= 0, "must be >= 0 (0: no auxiliary task)"),
-        ("algo.augment", a.augment, a.augment in AUGMENTATIONS, f"must be one of {', '.join(AUGMENTATIONS)}"),
         (
-            "algo.augment_grey",
-            a.augment_grey,
-            0 <= a.augment_grey <= 1 and (a.augment_grey == 0 or a.augment == "colour"),
-            "must be in [0, 1], and 0 unless algo.augment=colour",
+            "algo.terms.aux.coeff",
+            a.terms.aux.coeff,
+            a.terms.aux.coeff >= 0,
+            "must be >= 0 (0: no auxiliary task)",
         ),
-        ("algo.augment_shift", a.augment_shift, 0 <= a.augment_shift <= 16, "must be in [0, 16] pixels"),
-        ("algo.ema_decay", a.ema_decay, 0 <= a.ema_decay < 1, "must be in [0, 1) (0: no averaging)"),
+        (
+            "algo.augment.kind",
+            aug.kind,
+            aug.kind in AUGMENTATIONS,
+            f"must be one of {', '.join(AUGMENTATIONS)}",
+        ),
+        (
+            "algo.augment.grey",
+            aug.grey,
+            0 <= aug.grey <= 1 and (aug.grey == 0 or aug.kind == "colour"),
+            "must be in [0, 1], and 0 unless algo.augment.kind=colour",
+        ),
+        ("algo.augment.shift", aug.shift, 0 <= aug.shift <= 16, "must be in [0, 16] pixels"),
     ]
 
 

@@ -31,7 +31,7 @@ from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from rlgrasp.compose import compose_config
-from rlgrasp.config import CONFIG_DIR
+from rlgrasp.config import CONFIG_DIR, moved_algo_key
 
 #: Groups whose files set one ``env`` key; a dict (or, for objects, a list) value is that key's value.
 ENV_GROUPS = {"objects": ("{", "["), "randomization": ("{",), "robot": ("{",)}
@@ -84,7 +84,7 @@ def _key_of(override: str) -> str:
 
 
 def _shown(full_key: str, overrides: Sequence[str]) -> str:
-    """The override that set ``full_key`` as typed (``algo.lr=abc``; the last one, as Hydra applies
+    """The override that set ``full_key`` as typed (``algo.optim.lr=abc``; the last one, as Hydra applies
     them in order), else the key."""
     return next((o.lstrip("+~") for o in reversed(overrides) if _key_of(o) == full_key), full_key)
 
@@ -110,10 +110,18 @@ def explain(exc: BaseException, overrides: Sequence[str] = (), root: str = "the 
             # reader checks; Hydra wants them marked as new.
             if where and OmegaConf.get_type(parent) is dict:
                 line += f" (a new key of {where}: +{shown})"
-            return line
-        return f"{shown}: {str(cause.msg).splitlines()[0]}"
+            return line + _moved(cause.full_key, parent)
+        return f"{shown}: {str(cause.msg).splitlines()[0]}" + _moved(cause.full_key, parent)
     lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
     return "; ".join(lines[:3]) or type(exc).__name__
+
+
+def _moved(full_key: str, parent: Any) -> str:
+    """Where a flat ``algo`` key of before lives now (``algo.lr`` -> ``algo.optim.lr``), as a clause."""
+    where, _, key = full_key.rpartition(".")
+    name = parent.get("name") if parent is not None and where == "algo" else None
+    moved = moved_algo_key(key, name) if where == "algo" else None
+    return f"; algo.{key} is algo.{moved} now" if moved else ""
 
 
 def check(config_name: str, overrides: Sequence[str], config_dir: str | Path = CONFIG_DIR) -> None:

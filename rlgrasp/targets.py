@@ -5,8 +5,9 @@ then rebuilt with Hydra's ``instantiate`` (the env, and on resume the collector,
 algorithm), which calls whatever ``_target_`` a node names, with whatever ``_args_`` it gives, at any
 depth. Hydra refuses a few targets (``os.system``) and not others (``builtins.open`` truncates a file
 of the sender's choosing). So a config that came from a file is data until this module has checked
-it: a ``_target_`` may stand only at the top of a node that rlgrasp builds, and must name one of the
-classes below; no other instantiation key may appear anywhere. A class of your own is trusted when
+it: a ``_target_`` may stand only at the top of a node that rlgrasp builds (``env``, ``collector``,
+``logger``, ``algo``, and each of ``algo.terms``), and must name one of the classes below; no other
+instantiation key may appear anywhere. A class of your own is trusted when
 your own command line's config names it (``trusted``, on resume) or your shell lists it in
 ``RLGRASP_TRUSTED_TARGETS``, never because a received file does.
 
@@ -41,6 +42,11 @@ REGISTRY: dict[str, frozenset[str]] = {
     ),
     "algo": frozenset({"rlgrasp.algos.ppo.PPO", "rlgrasp.algos.sac.SAC", "rlgrasp.vision.distill.DAgger"}),
 }
+#: The classes an algorithm's auxiliary term (a node of ``algo.terms``) may name.
+TERMS = frozenset(
+    {"rlgrasp.demos.bc.Imitation", "rlgrasp.vision.teacher_term.TeacherImitation", "rlgrasp.train.rnd.RND"}
+)
+TERMS_NODE = "algo.terms"
 #: Hydra's keys that make a node callable or change how it is called.
 INSTANTIATE_KEYS = ("_target_", "_args_", "_partial_", "_recursive_", "_convert_")
 
@@ -55,26 +61,42 @@ def check_received_config(config: Any, source: str, trusted: Iterable[str] = ())
     if not isinstance(config, Mapping):
         return
     trusted = frozenset(trusted) | env_trusted_targets()
-    for node, allowed in REGISTRY.items():
-        value = config.get(node)
-        if isinstance(value, Mapping) and "_target_" in value:
-            target = value["_target_"]
-            if target not in allowed and target not in trusted:
-                raise UntrustedConfigError(
-                    f"{source}: refused: config.{node}._target_={target!r} is not a class rlgrasp builds "
-                    f"(allowed: {', '.join(sorted(allowed))})"
-                )
+    for node, value in _built_nodes(config).items():
+        allowed = _allowed_at(node)
+        if "_target_" in value and value["_target_"] not in allowed | trusted:
+            raise UntrustedConfigError(
+                f"{source}: refused: config.{node}._target_={value['_target_']!r} is not a class rlgrasp "
+                f"builds (allowed: {', '.join(sorted(allowed))})"
+            )
     for path, key, value in _entries(config, ""):
         if isinstance(value, str) and "${" in value:
             raise UntrustedConfigError(
                 f"{source}: refused: {_where(path, key)} holds an interpolation (${{...}}); a saved config "
                 "is stored resolved, so this one was made by hand"
             )
-        if key in INSTANTIATE_KEYS and not (path in REGISTRY and key == "_target_"):
+        if key in INSTANTIATE_KEYS and not (_builds(path) and key == "_target_"):
             raise UntrustedConfigError(
                 f"{source}: refused: {_where(path, key)} would be called when the config is built "
-                "(a file's config may name a class only at env, collector, logger or algo)"
+                "(a file's config may name a class only at env, collector, logger, algo or algo.terms.*)"
             )
+
+
+def _builds(path: str) -> bool:
+    """Whether rlgrasp builds the node at ``path`` from its ``_target_``."""
+    return path in REGISTRY or (path.startswith(TERMS_NODE + ".") and path.count(".") == 2)
+
+
+def _allowed_at(path: str) -> frozenset[str]:
+    return REGISTRY.get(path, TERMS)
+
+
+def _built_nodes(config: Mapping) -> dict[str, Mapping]:
+    """Each node rlgrasp builds from a ``_target_``, by its path: the top ones and ``algo``'s terms."""
+    nodes = {n: config[n] for n in REGISTRY if isinstance(config.get(n), Mapping)}
+    terms = nodes.get("algo", {}).get("terms")
+    if isinstance(terms, Mapping):
+        nodes.update({f"{TERMS_NODE}.{k}": v for k, v in terms.items() if isinstance(v, Mapping)})
+    return nodes
 
 
 #: Classes of your own that files may name, comma-separated (e.g. the env your runs were trained on).
@@ -111,11 +133,7 @@ def _where(path: str, key: str) -> str:
 def trusted_targets(config: Any) -> set[str]:
     """The ``_target_`` of each node of the user's own composed config (what their command line
     chose, e.g. a collector class of their own), to pass as ``trusted`` for a file read beside it."""
-    return {
-        str(config[n]["_target_"])
-        for n in REGISTRY
-        if isinstance(config.get(n), Mapping) and "_target_" in config[n]
-    }
+    return {str(node["_target_"]) for node in _built_nodes(config).values() if "_target_" in node}
 
 
 #: What ``TensorDict.memmap`` writes for a TensorDict of plain tensors.

@@ -6,7 +6,7 @@ means unpickling arbitrary objects, which can run code: do it only for files you
 hence ``--trust``. ``--policy-only`` keeps what evaluation and export read (actor with its
 normalizer, config, spec, counters, versions) and drops the optimizer, critic and RNG states: a
 small file to share or ship, which cannot be resumed. The config comes out in today's shape
-(``rlgrasp.train.legacy``: collector and logger as ``_target_`` nodes).
+(``rlgrasp.train.legacy``: collector and logger as ``_target_`` nodes, ``algo``'s keys by role).
 
     python scripts/upgrade_checkpoint.py outputs/train/x/run/checkpoints/last.pt upgraded.pt --trust
     python scripts/upgrade_checkpoint.py <run>/checkpoints/best.pt policies/grasp_ppo.pt --policy-only

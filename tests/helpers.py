@@ -25,15 +25,23 @@ from tensordict import TensorDict
 
 from rlgrasp import demo
 from rlgrasp.compose import compose_train
-from rlgrasp.config import EnvConfig
+from rlgrasp.config import EnvConfig, PPOConfig
 from rlgrasp.demos.dataset import layout_of, write_demos
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.models.cnn import actor_norm, build_vision_actor
 from rlgrasp.models.spec import vision_spec
 from rlgrasp.train.checkpoint import FORMAT, load_checkpoint, read_checkpoint
+from rlgrasp.train.legacy import nest_algo
 from rlgrasp.train.loop import Trainer, train
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def ppo_algo(**keys: Any) -> Any:
+    """PPO's ``algo`` node with ``keys`` over the schema's defaults, each named by its leaf
+    (``lr=1e-3`` sets ``optim.lr``, ``rnd_coeff`` ``terms.rnd.coeff``: ``rlgrasp.config.ALGO_KEYS``),
+    so that a unit test of the update reads as a list of the settings it varies."""
+    return OmegaConf.merge(OmegaConf.structured(PPOConfig), nest_algo({"name": "ppo", **keys}))
 
 
 # --- runs and checkpoints ------------------------------------------------------------------------
@@ -226,7 +234,7 @@ SMOKE_IN_PROCESS = [
     "collector=single",
     "collector.envs_per_worker=2",
     "collector.steps_per_env=64",
-    "algo.minibatch_size=64",
+    "algo.optim.minibatch_size=64",
     "total_frames=256",
     "eval.interval_frames=0",
     "eval.episodes=1",

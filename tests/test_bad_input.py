@@ -133,14 +133,29 @@ BAD_ARM = (
 )
 # (entry point, what, arguments after BASE (placeholders filled by _fill), a fragment of the one line)
 TRAIN = [
-    ("unknown key", ["algo.lrr=1"], "algo.lrr=1: unknown key 'lrr'; algo has _target_, name, gamma"),
+    ("unknown key", ["algo.lrr=1"], "algo.lrr=1: unknown key 'lrr'; algo has _target_, name, loss, optim"),
+    (
+        "a key of before algo's split by role",
+        ["algo.lr=1e-3"],
+        "algo.lr=1e-3: unknown key 'lr'; algo has _target_, name, loss, optim, schedule, demos, pretrain, "
+        "terms, init_from; algo.lr is algo.optim.lr now",
+    ),
+    (
+        "a string key of before that is a group now",
+        ["algo=distill", "cameras=wrist_depth", "model=cnn", "algo.teacher={teacher}", "algo.augment=colour"],
+        "algo.augment is algo.augment.kind now",
+    ),
     (
         "new key of an open node",
         ["cameras=wrist_depth", "model=cnn", "env.camera.width=48"],
         "env.camera.width=48: unknown key 'width'; env.camera has mount, modality "
         "(a new key of env.camera: +env.camera.width=48)",
     ),
-    ("wrong type", ["algo.lr=abc"], "algo.lr=abc: Value 'abc' of type 'str' could not be converted"),
+    (
+        "wrong type",
+        ["algo.optim.lr=abc"],
+        "algo.optim.lr=abc: Value 'abc' of type 'str' could not be converted",
+    ),
     (
         "unknown group option",
         ["collector=bogus"],
@@ -157,17 +172,17 @@ TRAIN = [
     ("no envs per worker", ["collector.envs_per_worker=0"], "collector.envs_per_worker=0: must be >= 1"),
     (
         "minibatch larger than a batch",
-        ["algo.minibatch_size=4096"],
-        "algo.minibatch_size=4096: must be between 1",
+        ["algo.optim.minibatch_size=4096"],
+        "algo.optim.minibatch_size=4096: must be between 1",
     ),
-    ("minibatch 0", ["algo.minibatch_size=0"], "algo.minibatch_size=0: must be between 1"),
-    ("no epochs", ["algo.epochs=0"], "algo.epochs=0: must be >= 1"),
-    ("zero learning rate", ["algo.lr=0"], "algo.lr=0.0: must be > 0"),
-    ("negative learning rate", ["algo.lr=-0.001"], "algo.lr=-0.001: must be > 0"),
+    ("minibatch 0", ["algo.optim.minibatch_size=0"], "algo.optim.minibatch_size=0: must be between 1"),
+    ("no epochs", ["algo.optim.epochs=0"], "algo.optim.epochs=0: must be >= 1"),
+    ("zero learning rate", ["algo.optim.lr=0"], "algo.optim.lr=0.0: must be finite and > 0"),
+    ("negative learning rate", ["algo.optim.lr=-0.001"], "algo.optim.lr=-0.001: must be finite and > 0"),
     (
         "a zero KL target for the adaptive rate",
-        ["algo.desired_kl=0"],
-        "algo.desired_kl=0.0: must be > 0 or null",
+        ["algo.schedule.desired_kl=0"],
+        "algo.schedule.desired_kl=0.0: must be > 0 or null",
     ),
     ("no substeps", ["env.substeps=0"], "env: substeps must be a positive integer, got 0"),
     ("unknown control mode", ["env.control_mode=fly"], "env: unknown control_mode 'fly'; valid modes"),
@@ -192,16 +207,24 @@ TRAIN = [
     ),
     (
         "a negative critic warm-up",
-        ["algo.critic_warmup_frames=-1"],
-        "algo.critic_warmup_frames=-1: must be >= 0",
+        ["algo.schedule.critic_warmup_frames=-1"],
+        "algo.schedule.critic_warmup_frames=-1: must be >= 0",
     ),
-    ("a teacher for a state policy", ["algo.teacher={teacher}"], "needs a camera (e.g. cameras=wrist_depth)"),
-    ("a negative teacher weight", ["algo.teacher_coeff=-1"], "algo.teacher_coeff=-1.0: must be >= 0"),
+    (
+        "a teacher for a state policy",
+        ["algo.terms.teacher.checkpoint={teacher}"],
+        "needs a camera (e.g. cameras=wrist_depth)",
+    ),
+    (
+        "a negative teacher weight",
+        ["algo.terms.teacher.coeff=-1"],
+        "algo.terms.teacher.coeff=-1.0: must be >= 0",
+    ),
     (
         "a teacher of another control mode",
         [
             "experiment=grasp_vision_finetune",
-            "algo.teacher={teacher}",
+            "algo.terms.teacher.checkpoint={teacher}",
             "env.control_mode=ee_delta",
             "algo.init_from=null",
         ],
@@ -312,8 +335,8 @@ TRAIN = [
     ),
     (
         "resume with another algorithm setting",
-        ["resume={run}", "algo.gamma=0.5"],
-        "cannot change on resume: algo.gamma",
+        ["resume={run}", "algo.loss.gamma=0.5"],
+        "cannot change on resume: algo.loss.gamma",
     ),
     ("a fresh run into a run dir with checkpoints", ["hydra.run.dir={run}"], "already holds checkpoints"),
     ("an unwritable output directory", ["hydra.run.dir={unwritable}"], "cannot create the run directory"),
@@ -328,11 +351,31 @@ TRAIN = [
         ["algo.demos={empty_demos}"],
         "holds no demonstrations (0 episodes kept)",
     ),
-    ("a demonstration decay above 1", ["algo.demo_decay=1.5"], "algo.demo_decay=1.5: must be in (0, 1]"),
-    ("a demonstration decay of 0", ["algo.demo_decay=0"], "algo.demo_decay=0.0: must be in (0, 1]"),
-    ("a negative demonstration weight", ["algo.demo_coeff=-1"], "algo.demo_coeff=-1.0: must be >= 0"),
-    ("a negative curiosity coefficient", ["algo.rnd_coeff=-0.5"], "algo.rnd_coeff=-0.5: must be >= 0"),
-    ("pre-training without demonstrations", ["algo.bc_epochs=5"], "algo.bc_epochs=5: needs algo.demos="),
+    (
+        "a demonstration decay above 1",
+        ["algo.terms.imitation.decay=1.5"],
+        "algo.terms.imitation.decay=1.5: must be in (0, 1]",
+    ),
+    (
+        "a demonstration decay of 0",
+        ["algo.terms.imitation.decay=0"],
+        "algo.terms.imitation.decay=0.0: must be in (0, 1]",
+    ),
+    (
+        "a negative demonstration weight",
+        ["algo.terms.imitation.coeff=-1"],
+        "algo.terms.imitation.coeff=-1.0: must be >= 0",
+    ),
+    (
+        "a negative curiosity coefficient",
+        ["algo.terms.rnd.coeff=-0.5"],
+        "algo.terms.rnd.coeff=-0.5: must be >= 0",
+    ),
+    (
+        "pre-training without demonstrations",
+        ["algo.pretrain.epochs=5"],
+        "algo.pretrain.epochs=5: needs algo.demos=",
+    ),
     ("a negative seed", ["seed=-1"], "seed=-1: must be an integer in [0, 2**32)"),
     (
         "an experiment name that leaves the outputs folder",
@@ -346,16 +389,16 @@ TRAIN = [
     ),
     (
         "an unknown critic loss",
-        ["algo.loss_critic_type=l3"],
-        "algo.loss_critic_type='l3': must be l1, l2 or smooth_l1",
+        ["algo.loss.loss_critic_type=l3"],
+        "algo.loss.loss_critic_type='l3': must be l1, l2 or smooth_l1",
     ),
-    ("a clip range of 2", ["algo.clip_epsilon=2"], "algo.clip_epsilon=2.0: must be in (0, 1)"),
-    ("an infinite learning rate", ["algo.lr=inf"], "algo.lr=inf: must be finite"),
-    ("a KL target of 0", ["algo.target_kl=0"], "algo.target_kl=0.0: must be > 0 or null"),
+    ("a clip range of 2", ["algo.loss.clip_epsilon=2"], "algo.loss.clip_epsilon=2.0: must be in (0, 1)"),
+    ("an infinite learning rate", ["algo.optim.lr=inf"], "algo.optim.lr=inf: must be finite"),
+    ("a KL target of 0", ["algo.schedule.target_kl=0"], "algo.schedule.target_kl=0.0: must be > 0 or null"),
     (
         "a negative final learning-rate fraction",
-        ["algo.min_lr_frac=-1"],
-        "algo.min_lr_frac=-1.0: must be in [0, 1]",
+        ["algo.schedule.min_lr_frac=-1"],
+        "algo.schedule.min_lr_frac=-1.0: must be in [0, 1]",
     ),
     ("no observation clip", ["model.obs_clip=0"], "model.obs_clip=0.0: must be > 0"),
     (
@@ -559,7 +602,11 @@ SWEEP = [
     ("unknown direction", ["sweep.direction=up"], "sweep.direction=up: must be one of maximize, minimize"),
     ("unknown sampler", ["sweep.sampler.name=grid"], "sweep.sampler.name=grid: must be one of tpe"),
     ("unknown training key", ["algo.lrr=1"], "algo.lrr=1: unknown key 'lrr'; algo has"),
-    ("bad training value", ["algo.lr=-1"], "a trial's training config: algo.lr=-1.0: must be > 0"),
+    (
+        "bad training value",
+        ["algo.optim.lr=-1"],
+        "a trial's training config: algo.optim.lr=-1.0: must be finite and > 0",
+    ),
     (
         "a parameter naming no training key",
         ["+sweep.params.algo.lrr={type:float,low:0.1,high:0.2}"],
@@ -567,8 +614,8 @@ SWEEP = [
     ),
     (
         "unknown distribution",
-        ["sweep.params.algo.lr={type:gauss}"],
-        "sweep.params.algo.lr: type must be float, int or categorical",
+        ["sweep.params.algo.optim.lr={type:gauss}"],
+        "sweep.params.algo.optim.lr: type must be float, int or categorical",
     ),
     (
         "own objects: nothing matches",
@@ -631,24 +678,25 @@ DEMOS = [
 TRAIN_SAC = [
     (
         "no gradient steps",
-        ["algo.utd_ratio=0"],
-        "algo.utd_ratio=0.0: must be > 0 (gradient steps per env frame)",
+        ["algo.optim.utd_ratio=0"],
+        "algo.optim.utd_ratio=0.0: must be > 0 (gradient steps per env frame)",
     ),
     (
         "a buffer smaller than a minibatch",
-        ["algo.buffer_frames=100"],
-        "algo.buffer_frames=100: must be >= algo.batch_size (256): the buffer must hold a minibatch",
+        ["algo.replay.buffer_frames=100"],
+        "algo.replay.buffer_frames=100: must be >= algo.optim.batch_size (256): the buffer must hold a "
+        "minibatch",
     ),
     (
         "demonstrations as the whole minibatch",
-        ["algo.demo_ratio=1"],
-        "algo.demo_ratio=1.0: must be in (0, 1)",
+        ["algo.replay.demo_ratio=1"],
+        "algo.replay.demo_ratio=1.0: must be in (0, 1)",
     ),
-    ("a negative image shift", ["algo.image_shift=-1"], "algo.image_shift=-1: must be >= 0 (pixels)"),
+    ("a negative image shift", ["algo.augment.shift=-1"], "algo.augment.shift=-1: must be >= 0 (pixels)"),
     (
         "an image replay buffer larger than the memory",
-        ["cameras=wrist_depth", "model=cnn", "algo.buffer_frames=1000000000"],
-        "algo.buffer_frames=1,000,000,000: the image replay buffer would take 15",
+        ["cameras=wrist_depth", "model=cnn", "algo.replay.buffer_frames=1000000000"],
+        "algo.replay.buffer_frames=1,000,000,000: the image replay buffer would take 15",
     ),
     (
         "no time for a batch",

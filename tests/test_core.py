@@ -10,10 +10,15 @@ from pathlib import Path
 
 import pytest
 import torch
+from omegaconf import OmegaConf
 
 from rlgrasp.compose import compose_train
+from rlgrasp.config import PPOConfig
 from rlgrasp.train.algorithm import algorithm_class
+from rlgrasp.train.checkpoint import read_checkpoint
+from rlgrasp.train.legacy import nest_algo
 from rlgrasp.train.loop import Trainer, TrainingError
+from tests.helpers import ROOT
 
 #: One in-process worker, tiny networks, a few batches: PPO's and SAC's.
 SMALL = {
@@ -22,16 +27,16 @@ SMALL = {
         "collector=single",
         "collector.envs_per_worker=2",
         "collector.steps_per_env=32",
-        "algo.minibatch_size=32",
+        "algo.optim.minibatch_size=32",
     ],
     "sac": [
         "experiment=grasp_sac",
         "collector=single",
         "collector.envs_per_worker=2",
         "collector.steps_per_env=32",
-        "algo.learning_starts=64",
-        "algo.batch_size=32",
-        "algo.critic_hidden_sizes=[16,16]",
+        "algo.replay.learning_starts=64",
+        "algo.optim.batch_size=32",
+        "algo.critic.hidden_sizes=[16,16]",
     ],
 }
 COMMON = [
@@ -110,6 +115,83 @@ def test_every_algorithm_is_named_by_its_target_and_an_unknown_one_is_refused() 
     assert algorithm_class({"name": "distill"}).name == "distill"
     with pytest.raises(TypeError, match="is not an rlgrasp Algorithm"):
         algorithm_class({"_target_": "collections.OrderedDict"})
+
+
+class ShrinkTheStd:
+    """A user's own auxiliary term (``+algo.terms.<name>``): pulls the actor's std down."""
+
+    def __init__(self, actor: torch.nn.Module, coeff: float) -> None:
+        self.scale = next(p for n, p in actor.named_parameters() if n.endswith("state_independent_scale"))
+        self.coeff, self.calls = coeff, 0
+
+    @classmethod
+    def from_config(cls, node, algorithm) -> ShrinkTheStd | None:
+        return cls(algorithm.actor, node.coeff) if node.coeff else None
+
+    def trainable(self) -> list:
+        return []
+
+    def start(self, batch, updates: int) -> dict[str, float]:
+        return {"charts/shrink_the_std": self.coeff}
+
+    def after_gae(self, batch) -> None:
+        pass
+
+    def loss(self, minibatch):
+        self.calls += 1
+        return self.coeff * self.scale.sum(), {}
+
+
+def test_ppos_terms_are_the_parts_its_config_names(tmp_path: Path) -> None:
+    """Each ``algo.terms`` node is built by the class its ``_target_`` names; one that is off
+    (coefficient 0, no demonstrations, no teacher) is left out, and one of the user's own joins
+    the update."""
+    assert list(_trainer("ppo", tmp_path / "a").algo.terms) == []
+    mine = f"+algo.terms.mine={{_target_:{__name__}.ShrinkTheStd,coeff:1.0}}"
+    overrides = [
+        *SMALL["ppo"],
+        *COMMON,
+        mine,
+        "algo.terms.rnd.coeff=0.5",
+        f"paths.output_dir={tmp_path / 'b'}",
+    ]
+    trainer = Trainer(compose_train(overrides))
+    assert list(trainer.algo.terms) == ["rnd", "mine"]  # the config's order
+    before = trainer.actor.state_dict()["module.0.module.scale.state_independent_scale"].clone()
+    trainer.run()
+    assert trainer.algo.terms["mine"].calls > 0
+    assert (trainer.actor.state_dict()["module.0.module.scale.state_independent_scale"] < before).all()
+    saved = torch.load(tmp_path / "b" / "checkpoints" / "last.pt", weights_only=True)
+    assert "rnd" in saved and "mine" not in saved  # a term with weights is saved under its name
+
+
+def test_a_flat_algo_config_of_before_loads_in_todays_shape() -> None:
+    """A checkpoint written before ``algo`` was split by role (``policies/*.pt``) maps key by key."""
+    flat = {
+        "name": "ppo",
+        "lr": 7e-4,
+        "target_kl": None,
+        "demo_coeff": 0.5,
+        "teacher": None,
+        "bc_only": False,
+    }
+    nested = nest_algo(flat)
+    assert nested == {
+        "name": "ppo",
+        "optim": {"lr": 7e-4},
+        "schedule": {"target_kl": None},
+        "terms": {"imitation": {"coeff": 0.5}, "teacher": {"checkpoint": None}},
+        "pretrain": {"only": False},
+    }
+    assert nest_algo(nested) == nested  # today's shape comes back unchanged
+    assert nest_algo({"name": "distill", "teacher": "t.pt", "augment": "colour"}) == {
+        "name": "distill",
+        "teacher": "t.pt",
+        "augment": {"kind": "colour"},
+    }
+    shipped = read_checkpoint(ROOT / "policies" / "grasp_ppo.pt")["config"]["algo"]
+    algo = OmegaConf.merge(OmegaConf.structured(PPOConfig), shipped)  # every key has its place
+    assert algo.optim.lr == 3e-4 and algo.loss.gamma == 0.9 and algo.terms.rnd._target_.endswith("RND")
 
 
 def test_a_second_process_on_a_run_directory_is_refused_in_one_line(tmp_path: Path) -> None:

@@ -13,15 +13,15 @@ from omegaconf import OmegaConf
 from tensordict import TensorDict
 
 from rlgrasp.compose import compose_config, compose_train
-from rlgrasp.config import MLPConfig, PPOConfig
-from rlgrasp.demos.bc import Imitation, demo_weight, pretrain
+from rlgrasp.config import ImitationTermConfig, MLPConfig
+from rlgrasp.demos.bc import Imitation, decayed_weight, pretrain
 from rlgrasp.demos.cli import _objects_line, record_demos
 from rlgrasp.demos.dataset import DemoError, demos_for, layout_of, load_demos, write_demos
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.models.mlp import build_models
 from rlgrasp.train.loop import Trainer
 from rlgrasp.train.resume import prepare_run
-from tests.helpers import SMOKE_IN_PROCESS, demo_env_cfg, demo_files, logged_scalars
+from tests.helpers import SMOKE_IN_PROCESS, demo_env_cfg, demo_files, logged_scalars, ppo_algo
 
 
 @pytest.fixture(scope="module")
@@ -97,23 +97,23 @@ def test_behaviour_cloning_lowers_its_loss_on_a_fixed_set(recorded: Path) -> Non
     demos = load_demos(recorded, _layout())
     model = OmegaConf.structured(MLPConfig(hidden_sizes=[64, 64]))
     actor, critic, norm = build_models(demos.meta["obs_dim"], -torch.ones(4), torch.ones(4), model)
-    algo = OmegaConf.structured(PPOConfig(bc_epochs=8, demos=str(recorded)))
-    out = pretrain(actor, critic, norm, demos, algo)
+    algo = ppo_algo(bc_epochs=8, demos=str(recorded))
+    out = pretrain(actor, critic, norm, demos, algo.pretrain, algo.loss.gamma)
     assert out["pretrain/bc_loss_last"] < 0.5 * out["pretrain/bc_loss_first"]
     assert out["pretrain/value_loss_last"] < out["pretrain/value_loss_first"]
 
 
 def test_the_demo_weight_decays_as_configured(recorded: Path) -> None:
-    algo = OmegaConf.structured(PPOConfig(demo_coeff=0.5, demo_decay=0.9))
-    weights = [demo_weight(algo, k) for k in range(5)]
+    term = OmegaConf.structured(ImitationTermConfig(coeff=0.5, decay=0.9))
+    weights = [decayed_weight(term, k) for k in range(5)]
     assert weights[0] == pytest.approx(0.5) and weights[3] == pytest.approx(0.5 * 0.9**3)
     assert all(a > b for a, b in zip(weights, weights[1:]))
-    flat = OmegaConf.structured(PPOConfig(demo_coeff=0.5, demo_decay=1.0))
-    assert demo_weight(flat, 100) == pytest.approx(0.5)
+    flat = OmegaConf.structured(ImitationTermConfig(coeff=0.5, decay=1.0))
+    assert decayed_weight(flat, 100) == pytest.approx(0.5)
     model = OmegaConf.structured(MLPConfig(hidden_sizes=[16]))
     demos = load_demos(recorded, _layout())
     actor, _, _ = build_models(demos.meta["obs_dim"], -torch.ones(4), torch.ones(4), model)
-    term = Imitation(actor, demos, algo, torch.device("cpu"))
+    term = Imitation(actor, demos, term, torch.device("cpu"))
     assert term.start(TensorDict({}, []), 2)["charts/demo_weight"] == pytest.approx(0.5 * 0.81)
     loss, values = term.loss(TensorDict({}, []))
     assert loss.requires_grad
@@ -125,8 +125,8 @@ def test_ppo_with_demos_logs_checkpoints_and_resumes(recorded: Path, tmp_path: P
     args = [
         *SMOKE_IN_PROCESS,
         f"algo.demos={recorded}",
-        "algo.bc_epochs=1",
-        "algo.demo_decay=0.5",
+        "algo.pretrain.epochs=1",
+        "algo.terms.imitation.decay=0.5",
         f"paths.output_dir={run}",
     ]
     cfg, resumed = prepare_run(compose_train(args))
@@ -151,8 +151,8 @@ def test_behaviour_cloning_alone_starts_no_workers(recorded: Path, tmp_path: Pat
     args = [
         *SMOKE_IN_PROCESS,
         f"algo.demos={recorded}",
-        "algo.bc_epochs=1",
-        "algo.bc_only=true",
+        "algo.pretrain.epochs=1",
+        "algo.pretrain.only=true",
         f"paths.output_dir={tmp_path / 'bc'}",
     ]
     trainer = Trainer(prepare_run(compose_train(args))[0])

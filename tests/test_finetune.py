@@ -1,7 +1,8 @@
 """PPO fine-tuning from a trained policy (``algo.init_from``, ``rlgrasp.train.warm_start``), the
-critic's warm-up (``algo.critic_warmup_frames``) and the teacher's term (``algo.teacher``): the actor
-starts as the checkpoint's, its std as the run's config says, during the warm-up only the critic
-learns, and the teacher's term pulls the actor towards the teacher."""
+critic's warm-up (``algo.schedule.critic_warmup_frames``) and the teacher's term
+(``algo.terms.teacher.checkpoint``): the actor starts as the checkpoint's, its std as the run's
+config says, during the warm-up only the critic learns, and the teacher's term pulls the actor
+towards the teacher."""
 
 from __future__ import annotations
 
@@ -50,7 +51,9 @@ def test_during_the_critic_warm_up_only_the_critic_learns(tmp_path: Path, train_
     Trainer(train_cfg(*SMOKE, run_dir=start)).save()
     before = load_checkpoint(start)
     run = tmp_path / "warm"
-    train(train_cfg(*SMOKE, f"algo.init_from={start}", "algo.critic_warmup_frames=2048", run_dir=run))
+    train(
+        train_cfg(*SMOKE, f"algo.init_from={start}", "algo.schedule.critic_warmup_frames=2048", run_dir=run)
+    )
     after = load_checkpoint(run)
     actor = Trainer(train_cfg(*SMOKE, run_dir=tmp_path / "probe")).actor
     assert _params(after["actor"], actor).keys() == _params(before["actor"], actor).keys() != set()
@@ -65,14 +68,15 @@ TEACHER = Path(__file__).resolve().parents[1] / "policies" / "grasp_ppo.pt"
 
 
 def test_the_teacher_term_pulls_the_student_towards_its_teacher(train_cfg) -> None:
-    """``algo.teacher``: each minibatch's loss gains the squared error to the teacher's action on the
-    minibatch's privileged state, weighted coeff * decay**k; its gradient moves the actor alone."""
+    """``algo.terms.teacher.checkpoint``: each minibatch's loss gains the squared error to the
+    teacher's action on the minibatch's privileged state, weighted coeff * decay**k; its gradient
+    moves the actor alone."""
     cfg = train_cfg(
         "experiment=grasp_vision_finetune",
         "logger=none",
-        f"algo.teacher={TEACHER}",
-        "algo.teacher_coeff=2.0",
-        "algo.teacher_decay=0.5",
+        f"algo.terms.teacher.checkpoint={TEACHER}",
+        "algo.terms.teacher.coeff=2.0",
+        "algo.terms.teacher.decay=0.5",
     )
     trainer = Trainer(cfg)  # starts no worker
     (term,) = [x for x in trainer.algo.learner.extras if isinstance(x, TeacherImitation)]

@@ -9,9 +9,10 @@ import torch
 from omegaconf import OmegaConf
 from tensordict import TensorDict
 
-from rlgrasp.config import MLPConfig, PPOConfig
+from rlgrasp.config import MLPConfig
 from rlgrasp.models.mlp import LOC_BOUND, build_models
 from rlgrasp.train.ppo import LOG_RATIO_BOUND, PPOLearner
+from tests.helpers import ppo_algo
 
 OBS_DIM, ACT_DIM, ENVS, STEPS = 5, 2, 4, 32
 
@@ -44,7 +45,7 @@ def _learner(
 ) -> tuple[PPOLearner, object]:
     torch.manual_seed(0)
     model_cfg = OmegaConf.structured(MLPConfig(hidden_sizes=[16, 16], distribution=distribution))
-    algo_cfg = OmegaConf.structured(PPOConfig(minibatch_size=32, target_kl=None, **algo))
+    algo_cfg = ppo_algo(minibatch_size=32, target_kl=None, **algo)
     actor, critic, norm = build_models(OBS_DIM, -torch.ones(ACT_DIM), torch.ones(ACT_DIM), model_cfg)
     learner = PPOLearner(actor, critic, norm, algo_cfg, torch.device("cpu"), stale_batches)
     return learner, actor
@@ -112,8 +113,8 @@ def test_a_gaussian_policy_keeps_the_unclipped_sample_and_its_own_log_prob() -> 
 
 
 def test_the_adaptive_rate_follows_the_kl(monkeypatch) -> None:
-    """``algo.desired_kl``: the rate grows by 1.5 after a minibatch whose KL is below half the target,
-    shrinks by 1.5 above twice the target, stays in [1e-5, 1e-2], and is what ``lr_at`` reports
+    """``algo.schedule.desired_kl``: the rate grows by 1.5 after a minibatch whose KL is below half
+    the target, shrinks by 1.5 above twice the target, stays in [1e-5, 1e-2], and is what ``lr_at`` reports
     whatever the frames (the linear annealing is off)."""
     learner, actor = _learner(epochs=1, lr=1e-3, desired_kl=0.01)  # 128 frames: 4 minibatches
     kls = iter([0.001, 0.05, 0.01, 0.001])
@@ -154,7 +155,7 @@ def _at_the_std_floor(
     model_cfg = OmegaConf.structured(
         MLPConfig(hidden_sizes=[16, 16], init_log_std=-10.0, distribution=distribution)
     )
-    algo_cfg = OmegaConf.structured(PPOConfig(minibatch_size=32, target_kl=None))
+    algo_cfg = ppo_algo(minibatch_size=32, target_kl=None)
     actor, critic, norm = build_models(OBS_DIM, -torch.ones(ACT_DIM), torch.ones(ACT_DIM), model_cfg)
     return PPOLearner(actor, critic, norm, algo_cfg, torch.device("cpu"), stale_batches), actor
 

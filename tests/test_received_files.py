@@ -18,7 +18,7 @@ from rlgrasp.compose import compose_config, compose_train
 from rlgrasp.config import ConfigError
 from rlgrasp.demos.dataset import DemoError, load_demos
 from rlgrasp.evaluation import EvaluationError
-from rlgrasp.targets import UntrustedConfigError, check_plain_memmap, check_received_config
+from rlgrasp.targets import UntrustedConfigError, check_plain_memmap, check_received_config, trusted_targets
 from rlgrasp.train.checkpoint import CheckpointError
 from rlgrasp.train.loop import Trainer
 
@@ -204,6 +204,18 @@ def _layout() -> dict:
             "config.algo.demos._partial_ would be called",
         ),
         (
+            {"algo": {"_target_": "rlgrasp.algos.ppo.PPO", "terms": {"x": {"_target_": "builtins.open"}}}},
+            "config.algo.terms.x._target_='builtins.open' is not a class rlgrasp builds",
+        ),
+        (
+            {
+                "algo": {
+                    "terms": {"rnd": {"_target_": "rlgrasp.train.rnd.RND", "net": {"_target_": "os.getcwd"}}}
+                }
+            },
+            "config.algo.terms.rnd.net._target_ would be called",
+        ),
+        (
             {"env": {"_target_": "rlgrasp.envs.PandaGraspEnv", "objects": "${oc.env:HOME}"}},
             "config.env.objects holds an interpolation",
         ),
@@ -222,6 +234,13 @@ def test_rlgrasp_targets_and_a_users_own_class_from_their_command_line_pass() ->
     with pytest.raises(UntrustedConfigError):
         check_received_config(mine, "f.pt")
     check_received_config(mine, "f.pt", trusted={"mypkg.MyCollector"})
+    # an algorithm's terms: rlgrasp's own classes pass, a user's own when their command line names it
+    terms = {"imitation": {"_target_": "rlgrasp.demos.bc.Imitation"}, "mine": {"_target_": "mypkg.Term"}}
+    with pytest.raises(UntrustedConfigError, match="config.algo.terms.mine._target_='mypkg.Term'"):
+        check_received_config({"algo": {"terms": terms}}, "f.pt")
+    check_received_config(
+        {"algo": {"terms": terms}}, "f.pt", trusted=trusted_targets({"algo": {"terms": terms}})
+    )
 
 
 def test_a_checkpoint_of_a_newer_format_is_refused_by_every_loader(tmp_path: Path) -> None:

@@ -293,7 +293,7 @@ def test_a_resume_keeps_the_launch_config_in_dot_hydra(tmp_path: Path) -> None:
         "collector=single",
         "collector.envs_per_worker=1",
         "collector.steps_per_env=16",
-        "algo.minibatch_size=16",
+        "algo.optim.minibatch_size=16",
         "eval.episodes=1",
         "eval.final_episodes=1",
         "eval.num_envs=1",
@@ -301,7 +301,7 @@ def test_a_resume_keeps_the_launch_config_in_dot_hydra(tmp_path: Path) -> None:
     for args, code in (
         ([*SMOKE, *tiny, f"hydra.run.dir={run}", "total_frames=16"], 0),
         ([f"resume={run}", "total_frames=32"], 0),
-        ([f"resume={run}", "algo.gamma=0.5"], 2),
+        ([f"resume={run}", "algo.loss.gamma=0.5"], 2),
     ):
         proc = _train(args, tmp_path)
         out, _ = proc.communicate(timeout=300)

@@ -9,20 +9,21 @@ from omegaconf import OmegaConf
 from tensordict import TensorDict
 
 from rlgrasp.compose import compose_train
-from rlgrasp.config import MLPConfig, PPOConfig
+from rlgrasp.config import MLPConfig
 from rlgrasp.models.mlp import RunningNorm, build_models
 from rlgrasp.train.loop import Trainer
 from rlgrasp.train.ppo import PPOLearner
 from rlgrasp.train.resume import prepare_run
 from rlgrasp.train.rnd import INTRINSIC_REWARD, RND
-from tests.helpers import SMOKE_IN_PROCESS, logged_scalars
+from tests.helpers import SMOKE_IN_PROCESS, logged_scalars, ppo_algo
 
 OBS_DIM, ENVS, STEPS = 6, 4, 32
 
 
 def _rnd(**algo) -> RND:
     torch.manual_seed(0)
-    return RND(OBS_DIM, RunningNorm(OBS_DIM), OmegaConf.structured(PPOConfig(rnd_coeff=1.0, **algo)))
+    a = ppo_algo(rnd_coeff=1.0, **algo)
+    return RND(OBS_DIM, RunningNorm(OBS_DIM), a.terms.rnd, a.loss)
 
 
 def _batch(obs: torch.Tensor, next_obs: torch.Tensor) -> TensorDict:
@@ -71,7 +72,7 @@ def test_intrinsic_advantages_join_ppos_across_episode_ends() -> None:
         torch.nn.init.zeros_(rnd.value[-1].bias)  # values 0: the advantage is the discounted reward sum
     rnd.after_gae(batch)
     reward, adv = batch[INTRINSIC_REWARD][0, :, 0], batch["advantage"][0, :, 0]
-    lam = rnd.algo.gae_lambda * rnd.algo.rnd_gamma
+    lam = rnd.ppo_loss.gae_lambda * rnd.term.gamma
     expected = sum(reward[t] * lam**t for t in range(STEPS))
     # the env's done at the last step does not cut it; no episode end anywhere in between
     assert float(adv[0]) == pytest.approx(float(expected), rel=1e-4)
@@ -94,9 +95,9 @@ def test_rewards_are_scaled_by_the_spread_of_returns_carried_across_batches() ->
 def test_the_learner_trains_rnd_and_checkpoints_round_trip() -> None:
     torch.manual_seed(0)
     model = OmegaConf.structured(MLPConfig(hidden_sizes=[16, 16]))
-    algo = OmegaConf.structured(PPOConfig(minibatch_size=32, target_kl=None, rnd_coeff=0.5, epochs=2))
+    algo = ppo_algo(minibatch_size=32, target_kl=None, rnd_coeff=0.5, epochs=2)
     actor, critic, norm = build_models(OBS_DIM, -torch.ones(2), torch.ones(2), model)
-    rnd = RND(OBS_DIM, norm, algo)
+    rnd = RND(OBS_DIM, norm, algo.terms.rnd, algo.loss)
     learner = PPOLearner(actor, critic, norm, algo, torch.device("cpu"), extras=[rnd])
     obs = torch.randn(ENVS, STEPS, OBS_DIM)
     batch = _batch(obs, obs + 0.1)
@@ -106,7 +107,7 @@ def test_the_learner_trains_rnd_and_checkpoints_round_trip() -> None:
     metrics = learner.update(batch)
     assert {"charts/intrinsic_reward", "rnd_loss", "intrinsic_value_loss"} <= set(metrics)
     assert any(not torch.equal(a, b) for a, b in zip(before, rnd.predictor.parameters()))
-    restored = RND(OBS_DIM, norm, algo)
+    restored = RND(OBS_DIM, norm, algo.terms.rnd, algo.loss)
     restored.load_state_dict(rnd.state_dict())
     assert torch.equal(restored.novelty(obs), rnd.novelty(obs))
     assert torch.equal(restored.obs_rms.mean, rnd.obs_rms.mean) and restored.reward_rms.count > 1
@@ -116,19 +117,19 @@ def test_the_learner_trains_rnd_and_checkpoints_round_trip() -> None:
 
 def test_a_run_with_rnd_logs_it_checkpoints_its_networks_and_resumes(tmp_path) -> None:
     run = tmp_path / "run"
-    args = [*SMOKE_IN_PROCESS, "algo.rnd_coeff=0.5", f"paths.output_dir={run}"]
+    args = [*SMOKE_IN_PROCESS, "algo.terms.rnd.coeff=0.5", f"paths.output_dir={run}"]
     trainer = Trainer(prepare_run(compose_train(args))[0])
     seen = logged_scalars(trainer)
     trainer.run()
     assert len(seen["charts/intrinsic_reward"]) == 2 and len(seen["losses/rnd_loss"]) == 2
     state = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
-    assert torch.equal(state["rnd"]["obs_rms.mean"], trainer.algo.rnd.obs_rms.mean)
+    assert torch.equal(state["rnd"]["obs_rms.mean"], trainer.algo.terms["rnd"].obs_rms.mean)
     cfg, resumed = prepare_run(
         compose_train([*args, f"resume={run}", "total_frames=384"]), {"resume", "total_frames"}
     )
     again = Trainer(cfg, resumed=resumed)
     predictor = {k: v for k, v in state["rnd"].items() if k.startswith("predictor.")}
-    assert all(torch.equal(again.algo.rnd.state_dict()[k], v) for k, v in predictor.items())
-    assert float(again.algo.rnd.reward_rms.count) == float(state["rnd"]["reward_rms.count"]) > 1
+    assert all(torch.equal(again.algo.terms["rnd"].state_dict()[k], v) for k, v in predictor.items())
+    assert float(again.algo.terms["rnd"].reward_rms.count) == float(state["rnd"]["reward_rms.count"]) > 1
     again.run()
     assert again.updates == 3

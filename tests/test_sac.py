@@ -28,10 +28,10 @@ SMALL = [
     "collector.envs_per_worker=2",
     "collector.steps_per_env=32",
     "total_frames=256",
-    "algo.learning_starts=64",
-    "algo.batch_size=32",
+    "algo.replay.learning_starts=64",
+    "algo.optim.batch_size=32",
     "model.hidden_sizes=[16,16]",
-    "algo.critic_hidden_sizes=[16,16]",
+    "algo.critic.hidden_sizes=[16,16]",
     "eval.interval_frames=0",
     "eval.episodes=1",
     "eval.final_episodes=2",
@@ -70,7 +70,7 @@ def _batch(sac: SAC, n: int, reward_of=None) -> TensorDict:
 
 
 def test_the_update_to_data_ratio_is_kept_across_batches_of_any_size(tmp_path: Path) -> None:
-    sac = _sac(tmp_path, "algo.utd_ratio=0.3", "algo.learning_starts=10")
+    sac = _sac(tmp_path, "algo.optim.utd_ratio=0.3", "algo.replay.learning_starts=10")
     steps = [sac.update(_batch(sac, n), 0).get("charts/gradient_steps", 0.0) for n in (8, 7, 7, 9, 5)]
     assert steps[0] == 0  # the buffer holds fewer than learning_starts frames
     # 28 frames after the start, at 0.3 steps a frame: 8 steps, none lost to rounding
@@ -82,12 +82,12 @@ def test_the_actor_learns_the_action_the_reward_pays_for(tmp_path: Path) -> None
     action has moved towards 0.5 from the initial policy's 0."""
     sac = _sac(
         tmp_path,
-        "algo.utd_ratio=1",
-        "algo.learning_starts=0",
-        "algo.gamma=0.5",
-        "algo.actor_lr=3e-3",
-        "algo.critic_lr=3e-3",
-        "algo.alpha_init=0.01",
+        "algo.optim.utd_ratio=1",
+        "algo.replay.learning_starts=0",
+        "algo.loss.gamma=0.5",
+        "algo.optim.actor_lr=3e-3",
+        "algo.optim.critic_lr=3e-3",
+        "algo.loss.alpha_init=0.01",
     )
     paid = lambda a: -(a - 0.5).abs().mean(-1, keepdim=True)  # noqa: E731
     before = sac.actor.module[0](TensorDict({"observation": torch.zeros(1, sac.parts.spec["obs_dim"])}, [1]))
@@ -99,7 +99,7 @@ def test_the_actor_learns_the_action_the_reward_pays_for(tmp_path: Path) -> None
 
 
 def test_demonstrations_fill_their_share_of_each_minibatch(tmp_path: Path, recorded_demos: Path) -> None:
-    sac = _sac(tmp_path, f"algo.demos={recorded_demos}", "algo.demo_ratio=0.25", "env.ee_yaw=false")
+    sac = _sac(tmp_path, f"algo.demos={recorded_demos}", "algo.replay.demo_ratio=0.25", "env.ee_yaw=false")
     demos = demo_transitions(load_demos(recorded_demos, _layout_of(sac)), sac.cfg.env)
     sac.update(_batch(sac, 64), 0)
     sample = sac._sample()
@@ -112,18 +112,18 @@ def test_demonstrations_fill_their_share_of_each_minibatch(tmp_path: Path, recor
 def test_the_bc_term_pulls_the_actor_to_the_demonstrated_actions(
     tmp_path: Path, recorded_demos: Path
 ) -> None:
-    """``algo.bc_coeff`` > 0: after the same updates on the same data, the actor's deterministic
+    """``algo.terms.imitation.coeff`` > 0: after the same updates on the same data, the actor's deterministic
     action on the demonstrations' observations is nearer the demonstrated actions than without it."""
 
     def distance_after(bc_coeff: float) -> tuple[float, dict[str, float]]:
         sac = _sac(
             tmp_path,
             f"algo.demos={recorded_demos}",
-            f"algo.bc_coeff={bc_coeff}",
+            f"algo.terms.imitation.coeff={bc_coeff}",
             "env.ee_yaw=false",
-            "algo.utd_ratio=1",
-            "algo.learning_starts=0",
-            "algo.actor_lr=3e-3",
+            "algo.optim.utd_ratio=1",
+            "algo.replay.learning_starts=0",
+            "algo.optim.actor_lr=3e-3",
         )
         demos = demo_transitions(load_demos(recorded_demos, _layout_of(sac)), sac.cfg.env)
         torch.manual_seed(1)
@@ -141,7 +141,7 @@ def test_the_bc_term_pulls_the_actor_to_the_demonstrated_actions(
 def test_pretraining_clones_the_demonstrations_before_the_first_frame(
     tmp_path: Path, recorded_demos: Path
 ) -> None:
-    sac = _sac(tmp_path, f"algo.demos={recorded_demos}", "algo.bc_epochs=30", "env.ee_yaw=false")
+    sac = _sac(tmp_path, f"algo.demos={recorded_demos}", "algo.pretrain.epochs=30", "env.ee_yaw=false")
     demos = demo_transitions(load_demos(recorded_demos, _layout_of(sac)), sac.cfg.env)
 
     def distance() -> float:
@@ -204,11 +204,14 @@ def test_a_ppo_checkpoint_is_not_resumed_as_sac(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("override", "message"),
     [
-        ("algo.utd_ratio=0", "algo.utd_ratio=0.0: must be > 0"),
-        ("algo.buffer_frames=16", "algo.buffer_frames=16: must be >= algo.batch_size (32)"),
-        ("algo.image_shift=-1", "algo.image_shift=-1: must be >= 0 (pixels)"),
-        ("algo.bc_coeff=-1", "algo.bc_coeff=-1.0: must be finite and >= 0"),
-        ("algo.bc_epochs=3", "algo.bc_epochs=3: needs algo.demos=<demonstrations>"),
+        ("algo.optim.utd_ratio=0", "algo.optim.utd_ratio=0.0: must be > 0"),
+        (
+            "algo.replay.buffer_frames=16",
+            "algo.replay.buffer_frames=16: must be >= algo.optim.batch_size (32)",
+        ),
+        ("algo.augment.shift=-1", "algo.augment.shift=-1: must be >= 0 (pixels)"),
+        ("algo.terms.imitation.coeff=-1", "algo.terms.imitation.coeff=-1.0: must be finite and >= 0"),
+        ("algo.pretrain.epochs=3", "algo.pretrain.epochs=3: needs algo.demos=<demonstrations>"),
     ],
 )
 def test_bad_sac_input_is_one_line(tmp_path: Path, override: str, message: str) -> None:
@@ -254,7 +257,7 @@ CAMERA = [
     "experiment=grasp_vision_sac",
     "model.channels=[4,4,4]",
     "model.image_features=8",
-    "algo.buffer_frames=1024",
+    "algo.replay.buffer_frames=1024",
 ]
 
 
@@ -274,7 +277,7 @@ def test_from_pixels_the_critic_trains_the_encoder_and_the_actor_reads_its_featu
     from rlgrasp.algos.sac import FEATURES_KEY
     from rlgrasp.models.cnn import vision_net
 
-    sac = _sac(tmp_path, *CAMERA, "algo.learning_starts=0", "algo.utd_ratio=1")
+    sac = _sac(tmp_path, *CAMERA, "algo.replay.learning_starts=0", "algo.optim.utd_ratio=1")
     encoder = vision_net(sac.actor).encoders
     before = [p.detach().clone() for p in encoder.parameters()]
     sac.update(_camera_batch(sac, 32), 0)
@@ -289,10 +292,10 @@ def test_from_pixels_the_critic_trains_the_encoder_and_the_actor_reads_its_featu
 
 def test_an_image_replay_buffer_larger_than_the_memory_is_refused_in_one_line(tmp_path: Path) -> None:
     with pytest.raises(ConfigError) as info:
-        _sac(tmp_path, *CAMERA, "algo.buffer_frames=1000000000")
+        _sac(tmp_path, *CAMERA, "algo.replay.buffer_frames=1000000000")
     message = str(info.value)
-    assert message.startswith("algo.buffer_frames=1,000,000,000: the image replay buffer would take ")
-    assert message.endswith("lower algo.buffer_frames") and "\n" not in message
+    assert message.startswith("algo.replay.buffer_frames=1,000,000,000: the image replay buffer would take ")
+    assert message.endswith("lower algo.replay.buffer_frames") and "\n" not in message
 
 
 def test_a_short_camera_sac_run_resumes_evaluates_and_exports(tmp_path: Path) -> None:
@@ -375,7 +378,7 @@ def test_camera_demonstrations_fill_a_camera_learners_minibatch_and_others_are_r
             ["episodes=1", f"out={out}", "workers=1", "keep=all", "cameras=wrist_depth", "env.ee_yaw=true"],
         )
     )
-    sac = _sac(tmp_path, *CAMERA, f"algo.demos={out / 'demos'}", "algo.batch_size=8")
+    sac = _sac(tmp_path, *CAMERA, f"algo.demos={out / 'demos'}", "algo.optim.batch_size=8")
     demos = sac.demos[:]
     assert demos["depth"].shape[1:] == (1, 64, 64) and demos["depth"].dtype == torch.float16
     assert not torch.equal(demos["depth"][1], demos["next", "depth"][1])  # the arm moved between them
@@ -383,7 +386,13 @@ def test_camera_demonstrations_fill_a_camera_learners_minibatch_and_others_are_r
     sac.update(_camera_batch(sac, 16), 0)
     assert sac._sample()["privileged"].shape == (8, sac.parts.spec["privileged_dim"])
     # the bc term's gradient reaches the encoders (the actor's own loss reads them detached)
-    with_bc = _sac(tmp_path, *CAMERA, f"algo.demos={out / 'demos'}", "algo.batch_size=8", "algo.bc_coeff=1")
+    with_bc = _sac(
+        tmp_path,
+        *CAMERA,
+        f"algo.demos={out / 'demos'}",
+        "algo.optim.batch_size=8",
+        "algo.terms.imitation.coeff=1",
+    )
     with_bc.update(_camera_batch(with_bc, 16), 0)
     with_bc._bc_loss(with_bc._inputs(with_bc._sample())[0]).backward()
     assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in with_bc._encoder().parameters())

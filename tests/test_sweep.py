@@ -34,20 +34,24 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_space_parses_nested_params_and_names_bad_keys() -> None:
     space = parse_space(
         {
-            "algo": {"lr": {"type": "float", "low": 1e-4, "high": 1e-3, "log": True}},
+            "algo": {"optim": {"lr": {"type": "float", "low": 1e-4, "high": 1e-3, "log": True}}},
             "model": {"hidden_sizes": {"type": "categorical", "choices": [[64, 64], [128]]}},
             "collector": {"envs_per_worker": {"type": "int", "low": 2, "high": 8, "step": 2}},
         }
     )
-    assert set(space.dists) == {"algo.lr", "model.hidden_sizes", "collector.envs_per_worker"}
+    assert set(space.dists) == {"algo.optim.lr", "model.hidden_sizes", "collector.envs_per_worker"}
     assert space.dists["model.hidden_sizes"].choices == ("[64,64]", "[128]")
-    assert to_overrides({"algo.lr": 0.1, "a.b": None, "c": True}) == ["algo.lr=0.1", "a.b=null", "c=true"]
-    with pytest.raises(ValueError, match="algo.lr: type float needs 'high'"):
-        parse_space({"algo": {"lr": {"type": "float", "low": 1.0}}})
-    with pytest.raises(ValueError, match="algo.lr"):
-        parse_space({"algo": {"lr": {"type": "gauss"}}})
+    assert to_overrides({"algo.optim.lr": 0.1, "a.b": None, "c": True}) == [
+        "algo.optim.lr=0.1",
+        "a.b=null",
+        "c=true",
+    ]
+    with pytest.raises(ValueError, match="algo.optim.lr: type float needs 'high'"):
+        parse_space({"algo": {"optim": {"lr": {"type": "float", "low": 1.0}}}})
+    with pytest.raises(ValueError, match="algo.optim.lr"):
+        parse_space({"algo": {"optim": {"lr": {"type": "gauss"}}}})
     assert is_sweep_override("sweep.n_trials=3") and is_sweep_override("+sweep.x=1")
-    assert not is_sweep_override("sweeper=1") and not is_sweep_override("algo.lr=1")
+    assert not is_sweep_override("sweeper=1") and not is_sweep_override("algo.optim.lr=1")
 
 
 def _wait_for(path: Path, text: str, proc: subprocess.Popen, timeout: float = 240) -> None:
@@ -68,7 +72,7 @@ def test_sweep_fails_prunes_resumes_and_summarizes(tmp_path: Path) -> None:
         "sweep.n_trials=3",
         "sweep.plots=false",
         # trial 0 crashes (unknown control mode), trial 1 runs as sampled
-        "sweep.enqueue=[{env:{control_mode:bogus}},{algo:{epochs:1}}]",
+        "sweep.enqueue=[{env:{control_mode:bogus}},{algo:{optim:{epochs:1}}}]",
     ]
     train = ["experiment=smoke"]
     study_dir = root / "smoke"
@@ -132,7 +136,7 @@ def test_sweep_fails_prunes_resumes_and_summarizes(tmp_path: Path) -> None:
         cwd=tmp_path,
     ).stdout
     assert "experiment_name: smoke_best" in job and "collectors.SingleCollector" in job
-    assert f"lr: {trials[1].params['algo.lr']!r}" in job and "epochs: 1\n" in job
+    assert f"lr: {trials[1].params['algo.optim.lr']!r}" in job and "epochs: 1\n" in job
 
     # 4) on demand: --summary, with the plots
     assert main(["sweep=smoke", f"sweep.root_dir={root}", "--summary"]) == 0
@@ -266,14 +270,14 @@ def test_named_choice_sets_several_keys_and_the_lr_schedule_can_stay_the_experim
                     "ee_delta_yaw": {"env": {"control_mode": "ee_delta", "ee_yaw": True}},
                 },
             },
-            "algo": {"epochs": {"type": "int", "low": 1, "high": 3}},
+            "algo": {"optim": {"epochs": {"type": "int", "low": 1, "high": 3}}},
         }
     )
     assert space.dists["control"].choices == ("joint_delta", "ee_delta_yaw") and "control" in space
-    assert space.overrides({"control": "ee_delta_yaw", "algo.epochs": 2}) == [
+    assert space.overrides({"control": "ee_delta_yaw", "algo.optim.epochs": 2}) == [
         "env.control_mode=ee_delta",
         "env.ee_yaw=true",
-        "algo.epochs=2",
+        "algo.optim.epochs=2",
     ]
     with pytest.raises(ValueError, match="control='ee': must be one of joint_delta, ee_delta_yaw"):
         space.overrides({"control": "ee"})
@@ -281,11 +285,15 @@ def test_named_choice_sets_several_keys_and_the_lr_schedule_can_stay_the_experim
         parse_space({"control": {"type": "categorical", "choices": {"a": 1}}})
     # a trial on 163,840 frames anneals as grasp_ppo's run does, over its 270,336
     cfg, configs = compose(["sweep=grasp_ppo_speed"], ROOT / "configs"), ROOT / "configs"
-    assert schedule_overrides(cfg, ["experiment=grasp_ppo"], configs) == ["algo.anneal_lr_frames=270336"]
-    algo = OmegaConf.structured(PPOConfig(lr=1.0, anneal_lr_frames=200))
+    assert schedule_overrides(cfg, ["experiment=grasp_ppo"], configs) == [
+        "algo.schedule.anneal_lr_frames=270336"
+    ]
+    algo = OmegaConf.merge(
+        OmegaConf.structured(PPOConfig), {"optim": {"lr": 1.0}, "schedule": {"anneal_lr_frames": 200}}
+    )
     learner = SimpleNamespace(cfg=algo)
     assert PPOLearner.lr_at(learner, 50, 100) == pytest.approx(0.75)  # not 0.5: over 200 frames
-    algo.anneal_lr_frames = None
+    algo.schedule.anneal_lr_frames = None
     assert PPOLearner.lr_at(learner, 50, 100) == pytest.approx(0.5)
 
 
@@ -319,7 +327,7 @@ def test_several_seeds_per_trial_mean_and_first_seed_pruning(tmp_path: Path) -> 
     for r in runs:  # smoke learns nothing in 1,024 frames: never 0.9, scored 1,024 x (2 - final)
         assert r["reached_at"] is None and r["value"] == pytest.approx(1024 * (2 - r["success_rate"]))
     assert {p.name for p in (study_dir / "trials" / "0000").iterdir()} == {"seed_3", "seed_4"}
-    assert "algo.anneal_lr_frames=2048" in trial.user_attrs["overrides"]  # smoke's total_frames
+    assert "algo.schedule.anneal_lr_frames=2048" in trial.user_attrs["overrides"]  # smoke's total_frames
     assert not any(o.startswith("seed=") for o in trial.user_attrs["overrides"])
     with (study_dir / "trials.csv").open() as f:
         (row,) = list(csv.DictReader(f))

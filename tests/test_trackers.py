@@ -65,7 +65,7 @@ def test_mlflow_gets_tags_config_and_resumes_the_same_run(tmp_path: Path, train_
     assert set(TAGS) <= set(data.metrics)
     steps = [m.step for m in client.get_metric_history(run_id, "losses/policy_loss")]
     assert 1024 in steps and 2048 in steps
-    assert data.params["algo.lr"] == "0.0003" and data.params["experiment_name"] == "smoke"
+    assert data.params["algo.optim.lr"] == "0.0003" and data.params["experiment_name"] == "smoke"
     assert {"panda", "smoke"} <= set(data.tags) and data.tags["mlflow.runName"].startswith("smoke/")
     config = Path(client.download_artifacts(run_id, "config.yaml", str(tmp_path)))
     assert "gae_lambda" in config.read_text()
@@ -135,7 +135,7 @@ def test_wandb_offline_gets_tags_config_and_resumes_the_same_run(tmp_path: Path,
         if r.WhichOneof("record_type") == "config"
         for i in r.config.update
     }
-    assert config["algo"]["lr"] == 3e-4 and config["experiment_name"] == "smoke"
+    assert config["algo"]["optim"]["lr"] == 3e-4 and config["experiment_name"] == "smoke"
     history = [
         dict(_item(i) for i in r.history.item) for r in records if r.WhichOneof("record_type") == "history"
     ]

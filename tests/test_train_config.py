@@ -101,9 +101,9 @@ def test_grasp_ppo_defaults(train_cfg) -> None:
     cfg = train_cfg("experiment=grasp_ppo")
     assert cfg.env.randomization == "default"
     assert cfg.env.control_mode == "joint_delta"
-    assert cfg.algo.gamma == pytest.approx(0.9)
+    assert cfg.algo.loss.gamma == pytest.approx(0.9)
     assert list(cfg.model.hidden_sizes) == [256, 256]
-    assert cfg.algo.gae_every_epoch is False
+    assert cfg.algo.loss.gae_every_epoch is False
     assert cfg.eval.final_episodes == 100
 
 
@@ -132,7 +132,7 @@ def test_env_factory_is_one_picklable_partial(train_cfg) -> None:
 @pytest.mark.parametrize(
     ("override", "error", "names"),
     [
-        ("algo.lr=abc", ValidationError, ["algo.lr", "abc"]),
+        ("algo.optim.lr=abc", ValidationError, ["algo.optim.lr", "abc"]),
         ("algo.lrr=0.1", ConfigKeyError, ["lrr"]),
         ("total_frames=many", ValidationError, ["total_frames"]),
         ("collector.num_workers=1.5", ValidationError, ["collector.num_workers"]),

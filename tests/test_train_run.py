@@ -159,16 +159,22 @@ def test_the_seed_check_catches_an_unseeded_worker(tmp_path: Path, train_cfg) ->
 # --- the refactor guard: what the seed decides before any torch kernel runs ----------------------
 #: experiment=smoke composed, except ``env`` (its own guard below) and ``paths.output_dir``.
 SMOKE_CONFIG = """
-algo: {_target_: rlgrasp.algos.ppo.PPO, name: ppo, gamma: 0.9, gae_lambda: 0.9, epochs: 2,
-       minibatch_size: 256, lr: 0.0003, anneal_lr: true,
-       min_lr_frac: 0.0, anneal_lr_frames: null, clip_epsilon: 0.2, entropy_coeff: 0.0, critic_coeff: 0.5,
-       loss_critic_type: l2,
-       normalize_advantage: true, max_grad_norm: 0.5, target_kl: 0.05, desired_kl: null, adam_eps: 1.0e-05,
-       gae_every_epoch: true, demos: null, demo_coeff: 0.1, demo_decay: 0.95, demo_minibatch_size: 256,
-       bc_epochs: 0, bc_lr: 0.001, bc_minibatch_size: 64, bc_only: false, init_from: null,
-       critic_warmup_frames: 0, teacher: null, teacher_coeff: 1.0, teacher_decay: 1.0, rnd_coeff: 0.0,
-       rnd_gamma: 0.99,
-       rnd_features: 64, rnd_update_fraction: 0.25}
+algo:
+  _target_: rlgrasp.algos.ppo.PPO
+  name: ppo
+  loss: {gamma: 0.9, gae_lambda: 0.9, gae_every_epoch: true, clip_epsilon: 0.2, entropy_coeff: 0.0,
+         critic_coeff: 0.5, loss_critic_type: l2, normalize_advantage: true}
+  optim: {lr: 0.0003, adam_eps: 1.0e-05, max_grad_norm: 0.5, epochs: 2, minibatch_size: 256}
+  schedule: {anneal_lr: true, min_lr_frac: 0.0, anneal_lr_frames: null, target_kl: 0.05, desired_kl: null,
+             critic_warmup_frames: 0}
+  demos: null
+  pretrain: {epochs: 0, lr: 0.001, minibatch_size: 64, only: false}
+  terms:
+    imitation: {_target_: rlgrasp.demos.bc.Imitation, coeff: 0.1, decay: 0.95, minibatch_size: 256}
+    teacher: {_target_: rlgrasp.vision.teacher_term.TeacherImitation, checkpoint: null, coeff: 1.0,
+              decay: 1.0}
+    rnd: {_target_: rlgrasp.train.rnd.RND, coeff: 0.0, gamma: 0.99, features: 64, update_fraction: 0.25}
+  init_from: null
 model: {name: mlp, hidden_sizes: [64, 64], activation: tanh, init_log_std: -0.5, min_std: 0.05,
         obs_norm: true, obs_clip: 10.0, distribution: tanh_normal}
 collector: {_target_: rlgrasp.train.collectors.ProcessCollector, num_workers: 2, envs_per_worker: 2,

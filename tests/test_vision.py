@@ -160,7 +160,8 @@ def test_an_unknown_auxiliary_part_is_refused_in_one_line():
     actor = build_vision_actor(SPEC, MODEL)
     with pytest.raises(
         ConfigError,
-        match="algo.aux_parts: unknown part 'object_pose'; parts of the privileged state: object_minus_grasp",
+        match="algo.terms.aux.parts: unknown part 'object_pose'; parts of the privileged state: "
+        "object_minus_grasp",
     ):
         ObjectFromImages(actor.module[0].module.encoders, {"object_minus_grasp": [2, 5]}, ["object_pose"])
 
@@ -293,7 +294,10 @@ def test_distillation_trains_checkpoints_resumes_and_evaluates(tmp_path, train_c
     from rlgrasp.vision.distill import distill
 
     run = tmp_path / "run"
-    with_aux = (*SMALL_DISTILL, "algo.aux_coeff=0.1")  # the auxiliary head is checkpointed and resumed too
+    with_aux = (
+        *SMALL_DISTILL,
+        "algo.terms.aux.coeff=0.1",
+    )  # the auxiliary head is checkpointed and resumed too
     success = distill(train_cfg(*with_aux, run_dir=run))
     assert 0.0 <= success <= 1.0
     ckpt = load_checkpoint(run)
@@ -318,11 +322,11 @@ def test_distillation_trains_checkpoints_resumes_and_evaluates(tmp_path, train_c
     "override, match",
     [
         ("algo.teacher=/nowhere/teacher.pt", "/nowhere/teacher.pt"),
-        ("algo.beta_decay=0", "algo.beta_decay=0.0: must be in (0, 1]"),
-        ("algo.beta0=1.5", "algo.beta0=1.5: must be in [0, 1]"),
-        ("algo.ema_decay=1", "algo.ema_decay=1.0: must be in [0, 1)"),
-        ("algo.augment_grey=0.5", "algo.augment_grey=0.5: must be in [0, 1], and 0 unless algo.augment"),
-        ("algo.augment_shift=-1", "algo.augment_shift=-1: must be in [0, 16] pixels"),
+        ("algo.schedule.beta_decay=0", "algo.schedule.beta_decay=0.0: must be in (0, 1]"),
+        ("algo.schedule.beta0=1.5", "algo.schedule.beta0=1.5: must be in [0, 1]"),
+        ("algo.optim.ema_decay=1", "algo.optim.ema_decay=1.0: must be in [0, 1)"),
+        ("algo.augment.grey=0.5", "algo.augment.grey=0.5: must be in [0, 1], and 0 unless algo.augment.kind"),
+        ("algo.augment.shift=-1", "algo.augment.shift=-1: must be in [0, 16] pixels"),
         ("cameras=none", "env.camera=null: a camera policy needs a camera"),
         ("env.control_mode=ee_delta", "it reads 49 state values, this env's privileged state has 45"),
     ],

@@ -89,14 +89,9 @@ class QNet(nn.Module):
         return self.mlp(torch.cat([self.norm(observation), *rest], dim=-1))
 
 
-def build_qvalue(norm: RunningNorm, in_keys: list[Any], in_dim: int, algo_cfg: Any) -> TensorDictModule:
-    net = QNet(
-        norm,
-        in_dim,
-        list(algo_cfg.critic_hidden_sizes),
-        algo_cfg.critic_activation,
-        algo_cfg.critic_layer_norm,
-    )
+def build_qvalue(norm: RunningNorm, in_keys: list[Any], in_dim: int, critic_cfg: Any) -> TensorDictModule:
+    """A Q-network as ``algo.critic`` describes it."""
+    net = QNet(norm, in_dim, list(critic_cfg.hidden_sizes), critic_cfg.activation, critic_cfg.layer_norm)
     return TensorDictModule(net, in_keys=in_keys, out_keys=["state_action_value"])
 
 
@@ -110,33 +105,41 @@ class SAC(Algorithm):
         a = cfg.algo
         self.norm = parts.norm
         self.images = image_specs(parts.spec)  # key -> shape; empty: a state policy
-        self.transition_keys = _transition_keys(self.images, a.get("critic_privileged", False))
+        self.transition_keys = _transition_keys(self.images, a.critic.privileged)
         act_dim = len(parts.spec["action_low"])
         self.loss = SACLoss(
             self._loss_actor(),
             self._qvalue(act_dim).to(device),
-            num_qvalue_nets=a.num_critics,
+            num_qvalue_nets=a.loss.num_critics,
             loss_function="l2",
-            alpha_init=a.alpha_init,
-            target_entropy=a.target_entropy if a.target_entropy is not None else -float(act_dim),
+            alpha_init=a.loss.alpha_init,
+            target_entropy=a.loss.target_entropy if a.loss.target_entropy is not None else -float(act_dim),
             delay_qvalue=True,
         )
-        self.loss.make_value_estimator(gamma=a.gamma)
-        self.target_update = SoftUpdate(self.loss, tau=a.tau)
-        self.optimizers = {
-            "actor": torch.optim.Adam(_trainable(self.loss.actor_network_params), lr=a.actor_lr),
-            "critic": torch.optim.Adam(_trainable(self.loss.qvalue_network_params), lr=a.critic_lr),
-            "alpha": torch.optim.Adam([self.loss.log_alpha], lr=a.alpha_lr),
-        }
-        if self.images:  # the encoders learn from the critics' loss (their own optimizer, its rate)
-            self.optimizers["encoder"] = torch.optim.Adam(self._encoder().parameters(), lr=a.critic_lr)
-            _check_replay_memory(a, parts.spec, self.transition_keys)
+        self.loss.make_value_estimator(gamma=a.loss.gamma)
+        self.target_update = SoftUpdate(self.loss, tau=a.loss.tau)
+        self.optimizers = self._optimizers(a.optim)
+        if self.images:
+            _check_replay_memory(a.replay, parts.spec, self.transition_keys)
         self.demos = self._demos() if a.get("demos") else None
-        self.bc = mse_bc_loss(self._loss_actor()) if self.demos is not None and a.bc_coeff > 0 else None
-        online = a.batch_size - (self.demos.batch_size if self.demos is not None else 0)
-        self.replay = _buffer(a.buffer_frames, online, device)
+        bc_on = self.demos is not None and a.terms.imitation.coeff > 0
+        self.bc = mse_bc_loss(self._loss_actor()) if bc_on else None
+        online = a.optim.batch_size - (self.demos.batch_size if self.demos is not None else 0)
+        self.replay = _buffer(a.replay.buffer_frames, online, device)
         self.owed = 0.0  # gradient steps due but not yet taken (the ratio is kept across batches)
         self.replay_file: Path | None = None
+
+    def _optimizers(self, optim: Any) -> dict[str, torch.optim.Optimizer]:
+        """Adam for the actor, the critics and the temperature; with a camera, for the encoders too,
+        which learn from the critics' loss (at the critics' rate)."""
+        optimizers = {
+            "actor": torch.optim.Adam(_trainable(self.loss.actor_network_params), lr=optim.actor_lr),
+            "critic": torch.optim.Adam(_trainable(self.loss.qvalue_network_params), lr=optim.critic_lr),
+            "alpha": torch.optim.Adam([self.loss.log_alpha], lr=optim.alpha_lr),
+        }
+        if self.images:
+            optimizers["encoder"] = torch.optim.Adam(self._encoder().parameters(), lr=optim.critic_lr)
+        return optimizers
 
     def _encoder(self) -> nn.Module:
         return vision_net(self.actor).encoders
@@ -148,43 +151,44 @@ class SAC(Algorithm):
 
     def _qvalue(self, act_dim: int) -> TensorDictModule:
         """The critics' template: on the state and the action; with a camera, on the state (the
-        privileged one with ``algo.critic_privileged``), the images' features and the action."""
+        privileged one with ``algo.critic.privileged``), the images' features and the action."""
         a, spec = self.cfg.algo, self.parts.spec
         if not self.images:
-            return build_qvalue(self.norm, [OBS_KEY, "action"], spec["obs_dim"] + act_dim, a)
+            return build_qvalue(self.norm, [OBS_KEY, "action"], spec["obs_dim"] + act_dim, a.critic)
         features = sum(e.project[0].out_features for e in self._encoder().values())
-        if a.critic_privileged:
+        if a.critic.privileged:
             key, norm, dim = PRIVILEGED_KEY, self.parts.norms[PRIVILEGED_KEY], spec["privileged_dim"]
         else:
             key, norm, dim = OBS_KEY, self.norm, spec["obs_dim"]
-        return build_qvalue(norm, [key, FEATURES_KEY, "action"], dim + features + act_dim, a)
+        return build_qvalue(norm, [key, FEATURES_KEY, "action"], dim + features + act_dim, a.critic)
 
     def _demos(self) -> TensorDictReplayBuffer:
         """The demonstrations as transitions in a buffer of their own (read, and refused, before any
         worker starts)."""
         a = self.cfg.algo
         frames = demo_transitions(demos_for(a.demos, self.parts.make_env, self.cfg.env), self.cfg.env)
+        batch = a.optim.batch_size
         demos = _buffer(
-            frames.numel(), min(a.batch_size - 1, max(1, round(a.batch_size * a.demo_ratio))), self.device
+            frames.numel(), min(batch - 1, max(1, round(batch * a.replay.demo_ratio))), self.device
         )
         demos.extend(_compact(frames.select(*self.transition_keys)).to(self.device))
         return demos
 
     def start(self, log_scalars: Any) -> None:
-        """With demonstrations and ``algo.bc_epochs``: behaviour cloning on them before the first
-        frame, so that the workers' first episodes explore around the expert (the ``bc_coeff`` term
+        """With demonstrations and ``algo.pretrain.epochs``: behaviour cloning on them before the first
+        frame, so that the workers' first episodes explore around the expert (the imitation term
         then keeps the actor there while the critics learn). The observation normalizer starts from
         the demonstrations' statistics, which online batches then continue, as PPO's pre-training."""
-        a = self.cfg.algo
-        if self.demos is None or not a.bc_epochs:
+        pretrain = self.cfg.algo.pretrain
+        if self.demos is None or not pretrain.epochs:
             return
         demos = self.demos[:]
         self.norm.update(demos[OBS_KEY].float())
         if PRIVILEGED_KEY in self.transition_keys:
             self.parts.norms[PRIVILEGED_KEY].update(demos[PRIVILEGED_KEY].float())
         bc = self.bc or mse_bc_loss(self._loss_actor())
-        optimizer = torch.optim.Adam(self.actor.parameters(), lr=a.bc_lr)
-        steps = a.bc_epochs * -(-len(demos) // self.demos.batch_size)
+        optimizer = torch.optim.Adam(self.actor.parameters(), lr=pretrain.lr)
+        steps = pretrain.epochs * -(-len(demos) // self.demos.batch_size)
         losses = []
         for _ in range(steps):
             with_features, _ = self._inputs(self.demos.sample())  # a camera's encoders learn too
@@ -206,16 +210,16 @@ class SAC(Algorithm):
     def update(self, batch: TensorDictBase, frames: int) -> dict[str, float]:
         """Store the batch, then take ``utd_ratio`` gradient steps per new frame once the buffer
         holds ``learning_starts`` frames (the steps not taken before are not made up)."""
-        a = self.cfg.algo
+        optim = self.cfg.algo.optim
         t0 = time.perf_counter()
         flat = batch.reshape(-1)
         self.norm.update(flat[OBS_KEY])
         if PRIVILEGED_KEY in self.transition_keys:
             self.parts.norms[PRIVILEGED_KEY].update(flat[PRIVILEGED_KEY])
         self.replay.extend(_compact(flat.select(*self.transition_keys)).to(self.device))
-        if len(self.replay) < a.learning_starts:
+        if len(self.replay) < self.cfg.algo.replay.learning_starts:
             return {"charts/replay_frames": float(len(self.replay))}
-        self.owed += a.utd_ratio * flat.numel()
+        self.owed += optim.utd_ratio * flat.numel()
         steps = int(self.owed)
         self.owed -= steps
         sums: dict[str, float] = {}
@@ -242,10 +246,10 @@ class SAC(Algorithm):
         loss_qvalue, _ = self.loss.qvalue_v2_loss(for_critic)
         loss_actor, actor_info = self.loss.actor_loss(for_actor)
         loss_bc = self._bc_loss(for_critic)
-        loss_actor = loss_actor + a.bc_coeff * loss_bc if loss_bc is not None else loss_actor
+        loss_actor = loss_actor + a.terms.imitation.coeff * loss_bc if loss_bc is not None else loss_actor
         loss_alpha = self.loss.alpha_loss(actor_info["log_prob"]).mean()
         self.updates += 1
-        actor_step = self.updates % a.actor_every == 0
+        actor_step = self.updates % a.optim.actor_every == 0
         total = loss_qvalue + (loss_actor + loss_alpha if actor_step else 0.0)
         finite_or_raise(total.detach(), "SAC loss")
         for opt in self.optimizers.values():
@@ -269,13 +273,13 @@ class SAC(Algorithm):
         return metrics
 
     def _bc_loss(self, for_critic: TensorDictBase) -> torch.Tensor | None:
-        """With ``algo.bc_coeff`` > 0: the squared distance between the actor's deterministic action
-        and the demonstrated one, on the demonstrations' rows of the minibatch (the last ones,
-        ``_sample``). It holds the actor near the expert while the critics are still wrong, which
-        RLPD alone leaves to the critics (Nair et al. 2018 add the same term to DDPG). With a
-        camera it reads the features the critics' loss trains, not detached: the demonstrated
-        actions are a supervised signal for the encoders, as for a DAgger student's (on the cube
-        this did not make the camera learner faster: docs/algorithms.md)."""
+        """With ``algo.terms.imitation.coeff`` > 0: the squared distance between the actor's deterministic
+        action and the demonstrated one, on the demonstrations' rows of the minibatch (the last ones,
+        ``_sample``). It holds the actor near the expert while the critics are still wrong, which RLPD
+        alone leaves to the critics (Nair et al. 2018 add the same term to DDPG). With a camera it reads
+        the features the critics' loss trains, not detached: the demonstrated actions are a supervised
+        signal for the encoders, as for a DAgger student's (on the cube this did not make the camera
+        learner faster: docs/algorithms.md)."""
         if self.bc is None:
             return None
         with set_exploration_type(ExplorationType.DETERMINISTIC):
@@ -288,7 +292,7 @@ class SAC(Algorithm):
         images are encoded without gradient (the target)."""
         if not self.images:
             return sample, sample
-        pad = self.cfg.algo.image_shift
+        pad = self.cfg.algo.augment.shift
         net = vision_net(self.actor)
 
         def encode(td: TensorDictBase) -> torch.Tensor:
@@ -326,7 +330,7 @@ class SAC(Algorithm):
 
     def save_extra(self, run_dir: Any) -> None:
         """The replay buffer, beside the checkpoints: ``replay.pt`` (written atomically)."""
-        if not self.cfg.algo.save_replay or len(self.replay) == 0:
+        if not self.cfg.algo.replay.save or len(self.replay) == 0:
             return
         path = Path(run_dir) / REPLAY_FILE
         tmp = path.with_name(f".{path.name}.tmp")
@@ -384,14 +388,15 @@ def replay_bytes_per_frame(spec: dict[str, Any], keys: tuple[Any, ...]) -> int:
     return size
 
 
-def _check_replay_memory(algo_cfg: Any, spec: dict[str, Any], keys: tuple[Any, ...]) -> None:
+def _check_replay_memory(replay_cfg: Any, spec: dict[str, Any], keys: tuple[Any, ...]) -> None:
     """Refuse, before any worker starts, an image replay buffer larger than the memory available."""
-    need = algo_cfg.buffer_frames * replay_bytes_per_frame(spec, keys)
+    need = replay_cfg.buffer_frames * replay_bytes_per_frame(spec, keys)
     available = _available_memory()
     if available is not None and need > 0.8 * available:
         raise ConfigError(
-            f"algo.buffer_frames={algo_cfg.buffer_frames:,}: the image replay buffer would take "
-            f"{need / 2**30:.1f} GiB and {available / 2**30:.1f} GiB are available; lower algo.buffer_frames"
+            f"algo.replay.buffer_frames={replay_cfg.buffer_frames:,}: the image replay buffer would take "
+            f"{need / 2**30:.1f} GiB and {available / 2**30:.1f} GiB are available; lower "
+            "algo.replay.buffer_frames"
         )
 
 

@@ -4,8 +4,8 @@ Both regress the actor's deterministic action onto the demonstrated one with Tor
 (mean squared error, as the camera student of ``rlgrasp.vision.distill``): the expert's gripper
 command is exactly +-1, where the squashed Gaussian's log-likelihood is unbounded. Pre-training
 also fits the critic to the demonstrations' discounted returns, so the first advantages are not
-computed against a random value. The imitation term is weighted ``demo_coeff * demo_decay ** k`` at
-update ``k`` (Rajeswaran et al. 2018, "Learning Complex Dexterous Manipulation with Deep
+computed against a random value. The imitation term is weighted ``coeff * decay ** k`` at update
+``k`` (``algo.terms.imitation``) (Rajeswaran et al. 2018, "Learning Complex Dexterous Manipulation with Deep
 Reinforcement Learning and Demonstrations"): it holds the policy near the expert while PPO's own
 advantages are still noise, then fades.
 """
@@ -45,28 +45,29 @@ def successful(demos: Demos, gamma: float) -> TensorDict:
     return frames[frames["success"]].select(OBS_KEY, "action", VALUE_TARGET)
 
 
-def demo_weight(algo: Any, updates: int) -> float:
-    """DAPG's ``lambda0 * lambda1 ** k``."""
-    return float(algo.demo_coeff * algo.demo_decay**updates)
+def decayed_weight(term: Any, updates: int) -> float:
+    """A term's weight at update ``k``: ``coeff * decay ** k`` (DAPG's ``lambda0 * lambda1 ** k``)."""
+    return float(term.coeff * term.decay**updates)
 
 
 def pretrain(
-    actor: nn.Module, critic: nn.Module, norm: RunningNorm, demos: Demos, algo: Any
+    actor: nn.Module, critic: nn.Module, norm: RunningNorm, demos: Demos, pretrain_cfg: Any, gamma: float
 ) -> dict[str, float]:
-    """``algo.bc_epochs`` epochs of behaviour cloning (actor) and return regression (critic) on the
-    successful demonstrations; returns the first and last epochs' mean losses."""
-    data = successful(demos, algo.gamma)
+    """``pretrain_cfg.epochs`` epochs of behaviour cloning (actor) and return regression (critic) on
+    the successful demonstrations (returns discounted by ``gamma``); returns the first and last
+    epochs' mean losses."""
+    data = successful(demos, gamma)
     norm.update(data[OBS_KEY])  # PPO's updates continue these statistics
-    mb = min(algo.bc_minibatch_size, data.numel())
+    mb = min(pretrain_cfg.minibatch_size, data.numel())
     buffer = ReplayBuffer(
         storage=LazyTensorStorage(data.numel()), sampler=SamplerWithoutReplacement(), batch_size=mb
     )
     buffer.extend(data)
     bc = mse_bc_loss(actor)
     params = list({id(p): p for p in [*actor.parameters(), *critic.parameters()]}.values())
-    optimizer = torch.optim.Adam(params, lr=algo.bc_lr)
+    optimizer = torch.optim.Adam(params, lr=pretrain_cfg.lr)
     epochs: list[tuple[float, float]] = []
-    for _ in range(algo.bc_epochs):
+    for _ in range(pretrain_cfg.epochs):
         sums = [0.0, 0.0]
         steps = math.ceil(data.numel() / mb)
         for _ in range(steps):
@@ -93,26 +94,34 @@ def pretrain(
 
 
 class Imitation:
-    """DAPG's auxiliary term for ``PPOLearner``: a weighted BC loss on a demonstration minibatch
-    beside each PPO minibatch."""
+    """DAPG's auxiliary term for ``PPOLearner`` (``algo.terms.imitation``): a weighted BC loss on a
+    demonstration minibatch beside each PPO minibatch."""
 
-    def __init__(self, actor: nn.Module, demos: Demos, algo: Any, device: torch.device):
-        data = successful(demos, algo.gamma).select(OBS_KEY, "action")
+    def __init__(self, actor: nn.Module, demos: Demos, term: Any, device: torch.device):
+        data = successful(demos, gamma=1.0).select(OBS_KEY, "action")  # the returns are not used
         self.buffer = ReplayBuffer(
             storage=LazyTensorStorage(data.numel(), device=device),
             sampler=RandomSampler(),
-            batch_size=min(algo.demo_minibatch_size, data.numel()),
+            batch_size=min(term.minibatch_size, data.numel()),
         )
         self.buffer.extend(data)
         self.loss_fn = mse_bc_loss(actor)
-        self.algo = algo
-        self.weight = demo_weight(algo, 0)
+        self.term = term
+        self.weight = decayed_weight(term, 0)
+
+    @classmethod
+    def from_config(cls, term: Any, algorithm: Any) -> Imitation | None:
+        """The term of ``algorithm`` (its actor and ``demos``); None without demonstrations or at
+        coeff 0."""
+        if algorithm.demos is None or term.coeff <= 0:
+            return None
+        return cls(algorithm.actor, algorithm.demos, term, algorithm.device)
 
     def trainable(self) -> list[nn.Parameter]:
         return []  # the actor's, which the PPO optimizer already holds
 
     def start(self, batch: TensorDictBase, updates: int) -> dict[str, float]:
-        self.weight = demo_weight(self.algo, updates)
+        self.weight = decayed_weight(self.term, updates)
         return {"charts/demo_weight": self.weight}
 
     def after_gae(self, batch: TensorDictBase) -> None:

@@ -227,7 +227,7 @@ def _checkpoint_info(full: dict[str, Any], path: Path, kind: str) -> dict[str, A
         "train_randomization": env_cfg.get("randomization", "default"),
         "train_visual": env_cfg.get("visual", "none"),
         "train_camera": env_cfg.get("camera"),
-        "teacher": (full["config"].get("algo") or {}).get("teacher"),
+        "teacher": _teacher_of(full["config"].get("algo") or {}),
     }
 
 
@@ -318,3 +318,10 @@ def _dry_run(source: PolicySource) -> None:
             )
     finally:
         env.close()
+
+
+def _teacher_of(algo: dict[str, Any]) -> str | None:
+    """The state teacher a camera policy learned from: DAgger's ``algo.teacher``, or the checkpoint of
+    PPO's teacher term (``algo.terms.teacher.checkpoint``)."""
+    term = (algo.get("terms") or {}).get("teacher") or {}
+    return algo.get("teacher") or term.get("checkpoint")

@@ -1,6 +1,6 @@
 """``rlgrasp-sweep`` / ``python scripts/sweep.py``: an Optuna search over training configs.
 
-    rlgrasp-sweep experiment=grasp_ppo sweep=grasp_ppo [sweep.n_trials=40] [algo.epochs=5 ...]
+    rlgrasp-sweep experiment=grasp_ppo sweep=grasp_ppo [sweep.n_trials=40] [algo.optim.epochs=5 ...]
     rlgrasp-sweep sweep=grasp_ppo --summary          # tables, best config, plots of the stored study
 
 ``sweep=<name>`` and ``sweep.*`` overrides compose ``configs/sweep/<name>.yaml``; every other

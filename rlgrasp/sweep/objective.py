@@ -51,8 +51,8 @@ def schedule_overrides(cfg: Any, train_overrides: Sequence[str], config_dir: str
     if cfg.trial.lr_schedule != "experiment":
         return []
     experiment = compose_train([*train_overrides, *cfg.overrides], config_dir)
-    frames = experiment.algo.get("anneal_lr_frames") or experiment.total_frames
-    return [f"algo.anneal_lr_frames={frames}"]
+    frames = experiment.algo.schedule.anneal_lr_frames or experiment.total_frames
+    return [f"algo.schedule.anneal_lr_frames={frames}"]
 
 
 class Objective:

@@ -26,7 +26,7 @@ from rlgrasp.utils import markdown_table, pyplot
 log = logging.getLogger("rlgrasp.sweep")
 
 #: Override keys that describe where/how long a trial ran, not what it was: left out of the best config
-#: (``algo.anneal_lr_frames``: ``trial.lr_schedule=experiment`` sets it to the experiment's frames).
+#: (``algo.schedule.anneal_lr_frames``: ``trial.lr_schedule=experiment`` sets it to the experiment's frames).
 RUN_KEYS = (
     "paths.",
     "total_frames",
@@ -34,7 +34,7 @@ RUN_KEYS = (
     "resume",
     "hydra.",
     "experiment_name",
-    "algo.anneal_lr_frames",
+    "algo.schedule.anneal_lr_frames",
 )
 
 

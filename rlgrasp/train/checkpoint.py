@@ -19,7 +19,7 @@ writes it, for every algorithm):
 - ``spec``: ``obs_key``, ``obs_dim``, ``action_dim``, ``action_low``, ``action_high``
 - ``versions``: python, torch, torchrl, tensordict, gymnasium, pybullet, rlgrasp
 - ``run_dir``: the run directory it was written in
-- ``rnd`` (runs with ``algo.rnd_coeff`` > 0): the RND networks, their running statistics and the
+- ``rnd`` (runs with ``algo.terms.rnd.coeff`` > 0): the RND networks, their running statistics and the
   intrinsic value head (``rlgrasp.train.rnd``); a demonstration file is referenced by
   ``config["algo"]["demos"]``, not stored
 

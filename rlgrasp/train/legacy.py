@@ -1,17 +1,20 @@
-"""Checkpoint configs from before the collector and the logger were ``_target_`` nodes.
+"""Checkpoint configs of an older shape: backends named by strings, and ``algo``'s keys in one bag.
 
 A checkpoint stores the resolved training config it was trained with. Older ones name the backends
 with strings (``collector.backend: process|ray|single``, ``logger.backend: tensorboard|none``,
-``logger.tracker: wandb|mlflow``), as ``policies/*.pt`` do. ``upgrade_config`` maps such a config
-to today's shape, here and nowhere else: ``rlgrasp.train.checkpoint.read_checkpoint`` applies it to
-every checkpoint it reads (resume, evaluation, export), and ``scripts/upgrade_checkpoint.py`` writes
-the result back.
+``logger.tracker: wandb|mlflow``), as ``policies/*.pt`` do, and keep ``algo``'s keys flat
+(``algo.lr``, where today's config has ``algo.optim.lr``: ``rlgrasp.config.ALGO_KEYS``).
+``upgrade_config`` maps such a config to today's shape, here and nowhere else:
+``rlgrasp.train.checkpoint.read_checkpoint`` applies it to every checkpoint it reads (resume,
+evaluation, export), and ``scripts/upgrade_checkpoint.py`` writes the result back.
 """
 
 from __future__ import annotations
 
 import copy
 from typing import Any
+
+from rlgrasp.config import moved_algo_key
 
 COLLECTORS = {
     "process": "rlgrasp.train.collectors.ProcessCollector",
@@ -29,6 +32,19 @@ TRACKER_KEYS = {
     "wandb": ("project", "tags", "run_name", "entity", "mode"),
     "mlflow": ("project", "tags", "run_name", "tracking_uri"),
 }
+
+
+def nest_algo(algo: dict[str, Any]) -> dict[str, Any]:
+    """A flat ``algo`` node of before in today's shape (a copy; a nested one comes back unchanged)."""
+    nested: dict[str, Any] = {}
+    for key, value in algo.items():
+        path = moved_algo_key(key, algo.get("name")) if not isinstance(value, dict) else None
+        node = nested
+        *parents, leaf = (path or key).split(".")
+        for part in parents:
+            node = node.setdefault(part, {})
+        node[leaf] = value
+    return nested
 
 
 def upgrade_config(config: dict[str, Any]) -> dict[str, Any]:
@@ -49,4 +65,6 @@ def upgrade_config(config: dict[str, Any]) -> dict[str, Any]:
         keep = ("console_interval_s", *TRACKER_KEYS.get(kind, ()))
         kept = {k: logger[k] for k in keep if k in logger}
         config["logger"] = {"_target_": LOGGERS.get(kind, kind), **kept}
+    if isinstance(config.get("algo"), dict):
+        config["algo"] = nest_algo(config["algo"])
     return config

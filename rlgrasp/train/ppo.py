@@ -32,7 +32,7 @@ from rlgrasp.train.algorithm import NonFiniteError
 
 __all__ = ["NonFiniteError", "PPOLearner", "explained_variance"]
 
-#: Bounds of the KL-adaptive learning rate (``algo.desired_kl``), rsl_rl's.
+#: Bounds of the KL-adaptive learning rate (``algo.schedule.desired_kl``), rsl_rl's.
 ADAPTIVE_LR_RANGE = (1e-5, 1e-2)
 #: The importance ratio pi_new / pi_old is capped at exp(LOG_RATIO_BOUND). A saturated tanh action
 #: with the standard deviation at its floor can have log-probs thousands apart under two nearby
@@ -73,12 +73,12 @@ class PPOLearner:
         self.loss = ClipPPOLoss(
             actor,
             critic,
-            clip_epsilon=algo_cfg.clip_epsilon,
+            clip_epsilon=algo_cfg.loss.clip_epsilon,
             entropy_bonus=True,
-            entropy_coeff=algo_cfg.entropy_coeff,
-            critic_coeff=algo_cfg.critic_coeff,
-            loss_critic_type=algo_cfg.loss_critic_type,
-            normalize_advantage=algo_cfg.normalize_advantage,
+            entropy_coeff=algo_cfg.loss.entropy_coeff,
+            critic_coeff=algo_cfg.loss.critic_coeff,
+            loss_critic_type=algo_cfg.loss.loss_critic_type,
+            normalize_advantage=algo_cfg.loss.normalize_advantage,
             # TorchRL's own cap: it lifts the (gradient-free) old log-prob rather than clamping the
             # ratio, so a capped sample keeps a finite, rescaled gradient instead of none.
             max_importance_ratio=math.exp(LOG_RATIO_BOUND),
@@ -86,25 +86,26 @@ class PPOLearner:
         self.actor = actor
         self.stale_batches = stale_batches
         self.gae = GAE(
-            gamma=algo_cfg.gamma, lmbda=algo_cfg.gae_lambda, value_network=critic, average_gae=False
+            gamma=algo_cfg.loss.gamma, lmbda=algo_cfg.loss.gae_lambda, value_network=critic, average_gae=False
         )
         self.extras = list(extras)
         self.params = [*self.loss.parameters(), *(p for x in self.extras for p in x.trainable())]
-        self.optimizer = torch.optim.Adam(self.params, lr=algo_cfg.lr, eps=algo_cfg.adam_eps)
-        #: The actor's PPO terms are left out of the loss (``algo.critic_warmup_frames``).
+        self.optimizer = torch.optim.Adam(self.params, lr=algo_cfg.optim.lr, eps=algo_cfg.optim.adam_eps)
+        #: The actor's PPO terms are left out of the loss (``algo.schedule.critic_warmup_frames``).
         self.actor_frozen = False
 
     def lr_at(self, frames: int, total_frames: int) -> float:
         """Linear annealing by frames (so a resumed run continues the same schedule), over
-        ``algo.anneal_lr_frames`` when set, else ``total_frames``; with ``algo.desired_kl``, the rate
-        the KL left (kept in Adam's state, so a resumed run continues from it too)."""
-        if self.cfg.get("desired_kl") is not None:
+        ``algo.schedule.anneal_lr_frames`` when set, else ``total_frames``; with
+        ``algo.schedule.desired_kl``, the rate the KL left (kept in Adam's state, so a resumed run
+        continues from it too)."""
+        schedule, lr = self.cfg.schedule, self.cfg.optim.lr
+        if schedule.desired_kl is not None:
             return self.optimizer.param_groups[0]["lr"]
-        horizon = self.cfg.get("anneal_lr_frames") or total_frames
-        if not self.cfg.anneal_lr or horizon <= 0:
-            return self.cfg.lr
-        frac = max(self.cfg.min_lr_frac, 1.0 - frames / horizon)
-        return self.cfg.lr * frac
+        horizon = schedule.anneal_lr_frames or total_frames
+        if not schedule.anneal_lr or horizon <= 0:
+            return lr
+        return lr * max(schedule.min_lr_frac, 1.0 - frames / horizon)
 
     def set_lr(self, lr: float) -> None:
         for group in self.optimizer.param_groups:
@@ -113,7 +114,7 @@ class PPOLearner:
     def adapt_lr(self, kl: float) -> None:
         """rsl_rl's adaptive schedule, one minibatch's KL at a time (torch's and TorchRL's schedulers
         follow steps or a metric's plateau, none a KL target)."""
-        target, lr = self.cfg.desired_kl, self.optimizer.param_groups[0]["lr"]
+        target, lr = self.cfg.schedule.desired_kl, self.optimizer.param_groups[0]["lr"]
         if kl > 2.0 * target:
             self.set_lr(max(ADAPTIVE_LR_RANGE[0], lr / 1.5))
         elif kl < 0.5 * target:
@@ -122,10 +123,10 @@ class PPOLearner:
     def update(self, batch: TensorDictBase, updates: int = 0) -> dict[str, float]:
         """One PPO round on a ``[envs, time]`` batch (``updates``: how many came before); returns
         averaged metrics."""
-        cfg = self.cfg
+        optim, schedule = self.cfg.optim, self.cfg.schedule
         batch = batch.to(self.device)
         n = batch.numel()
-        mb = min(cfg.minibatch_size, n)
+        mb = min(optim.minibatch_size, n)
         buffer = self._buffer(n, mb)
         if self.stale_batches:
             self.refresh_log_probs(batch)
@@ -133,8 +134,8 @@ class PPOLearner:
         sums: dict[str, float] = {}
         count = 0
         stopped_early = False
-        for epoch in range(cfg.epochs):
-            if epoch == 0 or cfg.gae_every_epoch:
+        for epoch in range(optim.epochs):
+            if epoch == 0 or self.cfg.loss.gae_every_epoch:
                 with torch.no_grad():
                     self.gae(batch)
                     for extra in self.extras:
@@ -145,9 +146,9 @@ class PPOLearner:
                 sums["lr"] = sums.get("lr", 0.0) + self.optimizer.param_groups[0]["lr"]
                 kl = self._minibatch_step(buffer.sample(), sums)
                 count += 1
-                if cfg.get("desired_kl") is not None and not self.actor_frozen:  # frozen: no KL to follow
+                if schedule.desired_kl is not None and not self.actor_frozen:  # frozen: no KL to follow
                     self.adapt_lr(kl)
-                if cfg.target_kl is not None and kl > cfg.target_kl:
+                if schedule.target_kl is not None and kl > schedule.target_kl:
                     stopped_early = True
                     break
             if stopped_early:
@@ -184,7 +185,7 @@ class PPOLearner:
             )
         self.optimizer.zero_grad(set_to_none=True)
         total.backward()
-        grad_norm = torch.nn.utils.clip_grad_norm_(self.params, self.cfg.max_grad_norm)
+        grad_norm = torch.nn.utils.clip_grad_norm_(self.params, self.cfg.optim.max_grad_norm)
         if not torch.isfinite(grad_norm):
             raise NonFiniteError(f"non-finite gradient norm {float(grad_norm)}")
         self.optimizer.step()

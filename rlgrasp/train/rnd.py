@@ -8,7 +8,7 @@ kept across batches and episode ends), not of the per-step errors: those vary fa
 returns, and dividing by their spread made the intrinsic value targets tens to hundreds of times
 larger than the extrinsic ones, so the intrinsic value loss ruled the shared gradient clip and the
 actor stopped learning. It has its own value head and its own non-episodic returns (an episode's end
-is no reason for novelty to stop paying), and ``algo.rnd_coeff`` times its advantage is added to
+is no reason for novelty to stop paying), and ``algo.terms.rnd.coeff`` times its advantage is added to
 PPO's. TorchRL provides the predictor's loss (``RNDLoss``) and the running statistics
 (``RunningMeanStd``); its ``RNDTransform`` computes the reward inside the env, which here runs in
 the collector's workers while the predictor trains in the learner, so the reward is computed in the
@@ -42,9 +42,11 @@ class RND(nn.Module):
     """The random target, its predictor, their statistics and the intrinsic value head; the
     ``PPOLearner`` auxiliary-term interface (``start``, ``after_gae``, ``loss``)."""
 
-    def __init__(self, obs_dim: int, norm: RunningNorm, algo: Any):
+    def __init__(self, obs_dim: int, norm: RunningNorm, term: Any, ppo_loss: Any):
+        """``term``: ``algo.terms.rnd``; ``ppo_loss``: ``algo.loss`` (its GAE lambda and critic weight
+        serve the intrinsic value too)."""
         super().__init__()
-        self.target, self.predictor = _net(obs_dim, algo.rnd_features), _net(obs_dim, algo.rnd_features)
+        self.target, self.predictor = _net(obs_dim, term.features), _net(obs_dim, term.features)
         self.target.requires_grad_(False)
         self.obs_rms = RunningMeanStd((obs_dim,))
         self.reward_rms = RunningMeanStd(())  # of the intrinsic returns
@@ -56,9 +58,17 @@ class RND(nn.Module):
             self.target,
             obs_rms=self.obs_rms,
             obs_clip=OBS_CLIP,
-            update_fraction=algo.rnd_update_fraction,
+            update_fraction=term.update_fraction,
         )
-        self.algo = algo
+        self.term, self.ppo_loss = term, ppo_loss
+
+    @classmethod
+    def from_config(cls, term: Any, algorithm: Any) -> RND | None:
+        """The curiosity of ``algorithm`` (on its state observation); None at coeff 0."""
+        if not term.coeff:
+            return None
+        spec, loss = algorithm.parts.spec, algorithm.cfg.algo.loss
+        return cls(spec["obs_dim"], algorithm.parts.norm, term, loss).to(algorithm.device)
 
     def trainable(self) -> list[nn.Parameter]:
         return [*self.predictor.parameters(), *self.value.parameters()]
@@ -87,7 +97,7 @@ class RND(nn.Module):
         returns = torch.empty_like(raw)
         running = self.running_return
         for t in range(raw.shape[-1]):
-            running = running * self.algo.rnd_gamma + raw[..., t]
+            running = running * self.term.gamma + raw[..., t]
             returns[..., t] = running
         self.running_return = running
         return returns
@@ -103,24 +113,24 @@ class RND(nn.Module):
 
     @torch.no_grad()
     def after_gae(self, batch: TensorDictBase) -> None:
-        """Add ``rnd_coeff`` x the intrinsic advantage (no episode ends) to PPO's."""
+        """Add ``coeff`` x the intrinsic advantage (no episode ends) to PPO's."""
         reward = batch[INTRINSIC_REWARD]
         never = torch.zeros_like(reward, dtype=torch.bool)
         adv, target = generalized_advantage_estimate(
-            self.algo.rnd_gamma,
-            self.algo.gae_lambda,
+            self.term.gamma,
+            self.ppo_loss.gae_lambda,
             self._value(batch[OBS_KEY]),
             self._value(batch["next", OBS_KEY]),
             reward,
             never,
             never,
         )
-        batch["advantage"] = batch["advantage"] + self.algo.rnd_coeff * adv
+        batch["advantage"] = batch["advantage"] + self.term.coeff * adv
         batch[INTRINSIC_TARGET] = target
 
     def loss(self, minibatch: TensorDictBase) -> tuple[torch.Tensor, dict[str, float]]:
         value_loss = nn.functional.mse_loss(self._value(minibatch[OBS_KEY]), minibatch[INTRINSIC_TARGET])
         predictor = self.predictor_loss(minibatch)["loss_predictor"]
-        total = self.algo.critic_coeff * value_loss + predictor
+        total = self.ppo_loss.critic_coeff * value_loss + predictor
         values = {"intrinsic_value_loss": float(value_loss.detach()), "rnd_loss": float(predictor.detach())}
         return total, values

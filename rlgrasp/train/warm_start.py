@@ -3,7 +3,7 @@
 A student distilled by DAgger copies its teacher and never sees a reward, so what imitation cannot
 teach (the teacher's own failures, the states where a small error tips the object) stays in it.
 ``algo.init_from`` starts a fresh PPO run's actor from such a checkpoint; the critic starts fresh
-(a shipped policy holds no critic), so ``algo.critic_warmup_frames`` lets it learn the student's
+(a shipped policy holds no critic), so ``algo.schedule.critic_warmup_frames`` lets it learn the student's
 returns before its advantages move the actor. The exploration std is this run's
 ``model.init_log_std``, not the checkpoint's: a student is trained deterministically and its std
 never moved from its initial value.

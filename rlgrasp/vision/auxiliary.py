@@ -45,7 +45,7 @@ class ObjectFromImages(nn.Module):
         unknown = [n for n in names if n not in parts]
         if unknown or not names:
             raise ConfigError(
-                f"algo.aux_parts: unknown part {(unknown or [None])[0]!r}; parts of the privileged "
+                f"algo.terms.aux.parts: unknown part {(unknown or [None])[0]!r}; parts of the privileged "
                 f"state: {', '.join(parts)}"
             )
         self.index = torch.cat([torch.arange(*parts[n]) for n in names])

@@ -4,8 +4,9 @@ The workers step camera envs; the teacher (a state checkpoint) reads each frame'
 and labels it with its action; the student (``rlgrasp.models.cnn``) sees only proprioception and
 the images. Early on the teacher acts (``beta`` near 1) so the data shows what success looks like;
 ``beta`` decays each batch so that the student soon acts and the teacher labels the states the
-student itself visits (Ross et al. 2011). Every labelled frame is kept (up to ``algo.buffer_frames``)
-and the student is regressed onto the labels with TorchRL's ``BCLoss``. With ``algo.ema_decay`` the
+student itself visits (Ross et al. 2011). Every labelled frame is kept (up to
+``algo.replay.buffer_frames``) and the student is regressed onto the labels with TorchRL's
+``BCLoss``. With ``algo.optim.ema_decay`` the
 policy that acts, is evaluated and is saved as ``actor`` is a moving average of the trained weights:
 the last snapshot of a regressed student varies from update to update, the average less
 (docs/benchmarks/cameras.md#cube-wrist-depth-64x64-visualdefault-teacher-policiesgrasp_ppopt).
@@ -51,18 +52,18 @@ class DAgger(Algorithm):
         self.teacher, _ = load_teacher(ckpt_lib.resolve_policy_path(a.teacher), parts.spec, cfg.env)
         self.student = parts.actor
         # What acts, is evaluated and is exported: the student's weights averaged over its recent
-        # updates (algo.ema_decay; 0: the student itself).
-        self.actor = copy.deepcopy(self.student) if a.ema_decay > 0 else self.student
-        self.policy = DAggerPolicy(self.actor, self.teacher, a.beta0)
+        # updates (algo.optim.ema_decay; 0: the student itself).
+        self.actor = copy.deepcopy(self.student) if a.optim.ema_decay > 0 else self.student
+        self.policy = DAggerPolicy(self.actor, self.teacher, a.schedule.beta0)
         self.loss = mse_bc_loss(self.student)
         self.aux = None
-        if a.aux_coeff > 0:
+        if a.terms.aux.coeff > 0:
             encoders = self.student.module[0].module.encoders
-            self.aux = ObjectFromImages(encoders, parts.spec["privileged_parts"], a.aux_parts)
+            self.aux = ObjectFromImages(encoders, parts.spec["privileged_parts"], a.terms.aux.parts)
         params = [*self.student.parameters(), *(self.aux.parameters() if self.aux is not None else [])]
-        self.optimizer = torch.optim.Adam(params, lr=a.lr)
+        self.optimizer = torch.optim.Adam(params, lr=a.optim.lr)
         keys = [*self.student.in_keys, *([PRIVILEGED_KEY] if self.aux is not None else [])]
-        self.data = LabelledFrames(keys, a.buffer_frames, a.minibatch_size)
+        self.data = LabelledFrames(keys, a.replay.buffer_frames, a.optim.minibatch_size)
         self._teacher_evals: dict[int, dict[str, float]] = {}
 
     @property
@@ -80,20 +81,20 @@ class DAgger(Algorithm):
 
     def update(self, batch: Any, frames: int) -> dict[str, float]:
         """Add the batch to the dataset and regress the student on samples of all of it."""
-        a = self.cfg.algo
+        a, optim = self.cfg.algo, self.cfg.algo.optim
         t0 = time.perf_counter()
         batch = batch.reshape(-1)
         actor_norm(self.student).update(batch["observation"])
         if self.aux is not None:
             self.aux.update(batch)
         self.data.extend(batch)
-        steps = max(1, math.ceil(a.epochs * batch.numel() / a.minibatch_size))
-        lr = a.lr * max(a.min_lr_frac, 1.0 - frames / self.cfg.total_frames)
+        steps = max(1, math.ceil(optim.epochs * batch.numel() / optim.minibatch_size))
+        lr = optim.lr * max(a.schedule.min_lr_frac, 1.0 - frames / self.cfg.total_frames)
         for group in self.optimizer.param_groups:
             group["lr"] = lr
         total, aux_total = 0.0, 0.0
         for _ in range(steps):
-            sample = augment(self.data.sample(), a.augment, a.augment_grey, a.augment_shift)
+            sample = augment(self.data.sample(), a.augment.kind, a.augment.grey, a.augment.shift)
             sample["action"] = sample[LABEL_KEY]
             with set_exploration_type(ExplorationType.DETERMINISTIC):
                 loss = self.loss(sample)["loss_bc"]
@@ -101,15 +102,15 @@ class DAgger(Algorithm):
             if self.aux is not None:  # the features of the forward the action loss just ran
                 aux = self.aux.loss(sample)
                 aux_total += aux.item()
-                loss = loss + a.aux_coeff * aux
+                loss = loss + a.terms.aux.coeff * aux
             self.optimizer.zero_grad()
             loss.backward()
             self.optimizer.step()
             if self.actor is not self.student:
-                average_weights(self.actor, self.student, a.ema_decay)
+                average_weights(self.actor, self.student, optim.ema_decay)
         beta = self.policy.beta.item()
         self.updates += 1
-        self.policy.beta.fill_(a.beta0 * a.beta_decay**self.updates)
+        self.policy.beta.fill_(self._beta())
         return {
             "bc_loss": total / steps,
             **({"aux_loss": aux_total / steps} if self.aux is not None else {}),
@@ -140,8 +141,12 @@ class DAgger(Algorithm):
         if self.aux is not None and state.get("aux") is not None:
             self.aux.load_state_dict(state["aux"])
         self.optimizer.load_state_dict(state["optimizer"])
-        a = self.cfg.algo
-        self.policy.beta.fill_(a.beta0 * a.beta_decay**self.updates)
+        self.policy.beta.fill_(self._beta())
+
+    def _beta(self) -> float:
+        """The teacher's share of the actions after ``updates`` batches."""
+        schedule = self.cfg.algo.schedule
+        return schedule.beta0 * schedule.beta_decay**self.updates
 
 
 def distill(cfg: DictConfig, changed: set[str] | None = None) -> float:
