@@ -34,6 +34,12 @@ def recorded(tmp_path_factory) -> Path:
     return out / "demos"
 
 
+def test_demonstrations_are_recorded_with_the_arm_training_names() -> None:
+    """``robot=`` picks the arm as in training, so demonstrations match the run that reads them."""
+    assert compose_config("demos", ["out=x"]).env.robot == "panda"
+    assert compose_config("demos", ["out=x", "robot=xarm6"]).env.robot == "xarm6"
+
+
 def _layout(control_mode: str = "ee_delta") -> dict:
     env_cfg = demo_env_cfg(control_mode)
     env = env_factory(env_cfg)()
