@@ -119,8 +119,9 @@ def explain(exc: BaseException, overrides: Sequence[str] = (), root: str = "the 
 def _moved(full_key: str, parent: Any) -> str:
     """Where a flat ``algo`` key of before lives now (``algo.lr`` -> ``algo.optim.lr``), as a clause."""
     where, _, key = full_key.rpartition(".")
-    name = parent.get("name") if parent is not None and where == "algo" else None
-    moved = moved_algo_key(key, name) if where == "algo" else None
+    if where != "algo":
+        return ""
+    moved = moved_algo_key(key, parent.get("name") if parent is not None else None)
     return f"; algo.{key} is algo.{moved} now" if moved else ""
 
 

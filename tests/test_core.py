@@ -180,7 +180,10 @@ def test_a_flat_algo_config_of_before_loads_in_todays_shape() -> None:
         "name": "ppo",
         "optim": {"lr": 7e-4},
         "schedule": {"target_kl": None},
-        "terms": {"imitation": {"coeff": 0.5}, "teacher": {"checkpoint": None}},
+        "terms": {
+            "imitation": {"coeff": 0.5, "_target_": "rlgrasp.demos.bc.Imitation"},
+            "teacher": {"checkpoint": None, "_target_": "rlgrasp.vision.teacher_term.TeacherImitation"},
+        },
         "pretrain": {"only": False},
     }
     assert nest_algo(nested) == nested  # today's shape comes back unchanged

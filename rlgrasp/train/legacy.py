@@ -14,7 +14,7 @@ from __future__ import annotations
 import copy
 from typing import Any
 
-from rlgrasp.config import moved_algo_key
+from rlgrasp.config import PPOTermsConfig, moved_algo_key
 
 COLLECTORS = {
     "process": "rlgrasp.train.collectors.ProcessCollector",
@@ -35,7 +35,9 @@ TRACKER_KEYS = {
 
 
 def nest_algo(algo: dict[str, Any]) -> dict[str, Any]:
-    """A flat ``algo`` node of before in today's shape (a copy; a nested one comes back unchanged)."""
+    """A flat ``algo`` node of before in today's shape (a copy; a nested one comes back unchanged).
+    PPO's terms get the ``_target_`` a flat config could not name: a resume keeps the checkpoint's
+    config and would otherwise have no class to build them with."""
     nested: dict[str, Any] = {}
     for key, value in algo.items():
         path = moved_algo_key(key, algo.get("name")) if not isinstance(value, dict) else None
@@ -44,6 +46,11 @@ def nest_algo(algo: dict[str, Any]) -> dict[str, Any]:
         for part in parents:
             node = node.setdefault(part, {})
         node[leaf] = value
+    if algo.get("name") == "ppo":
+        for name, term in nested.get("terms", {}).items():
+            default = getattr(PPOTermsConfig(), name, None)
+            if isinstance(term, dict) and default is not None:
+                term.setdefault("_target_", default._target_)
     return nested
 
 
