@@ -281,8 +281,18 @@ class SACImitationConfig:
 
 
 @dataclass
+class AuxTermConfig:
+    """A camera learner's image features also predict these parts of the privileged state, weighted coeff
+    (0: off; rlgrasp/vision/auxiliary.py). Training only; nothing is deployed."""
+
+    coeff: float = 0.0
+    parts: list[str] = field(default_factory=lambda: ["object_minus_grasp", "grasped"])
+
+
+@dataclass
 class SACTermsConfig:
     imitation: SACImitationConfig = field(default_factory=SACImitationConfig)
+    aux: AuxTermConfig = field(default_factory=AuxTermConfig)  # with a camera
 
 
 @dataclass
@@ -415,15 +425,6 @@ class DistillScheduleConfig:
 @dataclass
 class DistillReplayConfig:
     buffer_frames: int = 60_000  # labelled frames kept (the oldest go first); 64x64 depth: 16 kB each
-
-
-@dataclass
-class AuxTermConfig:
-    """The student's image features also predict these parts of the privileged state, weighted coeff
-    (0: off; rlgrasp/vision/auxiliary.py). Training only; nothing is deployed."""
-
-    coeff: float = 0.0
-    parts: list[str] = field(default_factory=lambda: ["object_minus_grasp", "grasped"])
 
 
 @dataclass
@@ -967,6 +968,7 @@ def _sac_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
             "must be tanh, relu or elu",
         ),
         ("algo.augment.shift", a.augment.shift, a.augment.shift >= 0, "must be >= 0 (pixels)"),
+        ("algo.terms.aux.coeff", a.terms.aux.coeff, a.terms.aux.coeff >= 0, "must be >= 0 (0: off)"),
         *[check for group, key in rates for check in _rate_checks(f"algo.{group}.{key}", a[group][key])],
     ]
 

@@ -290,6 +290,31 @@ def test_from_pixels_the_critic_trains_the_encoder_and_the_actor_reads_its_featu
     assert not for_critic["next", FEATURES_KEY].requires_grad  # the target: no gradient
 
 
+def test_the_auxiliary_task_trains_the_encoder_without_a_privileged_critic_and_needs_a_camera(
+    tmp_path: Path,
+) -> None:
+    from rlgrasp.models.cnn import vision_net
+
+    sac = _sac(
+        tmp_path,
+        *CAMERA,
+        "algo.replay.learning_starts=0",
+        "algo.optim.utd_ratio=0.25",
+        "algo.critic.privileged=false",
+        "algo.terms.aux.coeff=1",
+    )
+    assert "privileged" in sac.transition_keys  # the targets are kept although the critics do not read them
+    head = [p.detach().clone() for p in sac.aux.parameters()]
+    sac.update(_camera_batch(sac, 32), 0)
+    metrics = sac.update(_camera_batch(sac, 32), 0)
+    assert metrics["loss_aux"] > 0
+    assert any(not torch.equal(a, b) for a, b in zip(head, sac.aux.parameters()))  # the head learned
+    assert not vision_net(sac.actor).encoders["depth"]._forward_hooks  # SAC encodes itself: no taps
+    assert "aux" in sac.state_dict()["sac"]
+    with pytest.raises(ConfigError, match=r"^algo.terms.aux.coeff=1.0: .* needs a camera"):
+        _sac(tmp_path, "algo.terms.aux.coeff=1")
+
+
 def test_an_image_replay_buffer_larger_than_the_memory_is_refused_in_one_line(tmp_path: Path) -> None:
     with pytest.raises(ConfigError) as info:
         _sac(tmp_path, *CAMERA, "algo.replay.buffer_frames=1000000000")

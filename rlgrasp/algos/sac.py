@@ -40,6 +40,7 @@ from rlgrasp.models.mlp import ACTIVATIONS, OBS_KEY, RunningNorm
 from rlgrasp.models.spec import PRIVILEGED_KEY
 from rlgrasp.train.algorithm import Algorithm, finite_or_raise
 from rlgrasp.vision.augment import random_shift
+from rlgrasp.vision.auxiliary import ObjectFromImages
 
 #: The entries a transition keeps in the replay buffer (the collector's batch has more).
 TRANSITION_KEYS = (
@@ -105,7 +106,8 @@ class SAC(Algorithm):
         a = cfg.algo
         self.norm = parts.norm
         self.images = image_specs(parts.spec)  # key -> shape; empty: a state policy
-        self.transition_keys = _transition_keys(self.images, a.critic.privileged)
+        self.transition_keys = _transition_keys(self.images, a.critic.privileged or a.terms.aux.coeff > 0)
+        self.aux = self._aux()
         act_dim = len(parts.spec["action_low"])
         self.loss = SACLoss(
             self._loss_actor(),
@@ -138,8 +140,24 @@ class SAC(Algorithm):
             "alpha": torch.optim.Adam([self.loss.log_alpha], lr=optim.alpha_lr),
         }
         if self.images:
-            optimizers["encoder"] = torch.optim.Adam(self._encoder().parameters(), lr=optim.critic_lr)
+            params = [*self._encoder().parameters(), *(self.aux.parameters() if self.aux is not None else [])]
+            optimizers["encoder"] = torch.optim.Adam(params, lr=optim.critic_lr)
         return optimizers
+
+    def _aux(self) -> ObjectFromImages | None:
+        """With ``algo.terms.aux.coeff`` > 0: a linear head on the image features regressed onto parts
+        of the privileged state (rlgrasp.vision.auxiliary), so that the encoders learn where the object
+        is even when the critics read it from the privileged state and need little from the images."""
+        aux = self.cfg.algo.terms.aux
+        if aux.coeff <= 0:
+            return None
+        if not self.images:
+            raise ConfigError(
+                f"algo.terms.aux.coeff={aux.coeff}: the auxiliary task reads image features; needs a camera "
+                "(e.g. cameras=wrist_depth)"
+            )
+        head = ObjectFromImages(self._encoder(), self.parts.spec["privileged_parts"], aux.parts, tap=False)
+        return head.to(self.device)
 
     def _encoder(self) -> nn.Module:
         return vision_net(self.actor).encoders
@@ -216,6 +234,8 @@ class SAC(Algorithm):
         self.norm.update(flat[OBS_KEY])
         if PRIVILEGED_KEY in self.transition_keys:
             self.parts.norms[PRIVILEGED_KEY].update(flat[PRIVILEGED_KEY])
+        if self.aux is not None:
+            self.aux.update(flat)
         self.replay.extend(_compact(flat.select(*self.transition_keys)).to(self.device))
         if len(self.replay) < self.cfg.algo.replay.learning_starts:
             return {"charts/replay_frames": float(len(self.replay))}
@@ -248,9 +268,12 @@ class SAC(Algorithm):
         loss_bc = self._bc_loss(for_critic)
         loss_actor = loss_actor + a.terms.imitation.coeff * loss_bc if loss_bc is not None else loss_actor
         loss_alpha = self.loss.alpha_loss(actor_info["log_prob"]).mean()
+        loss_aux = self.aux.loss_of(for_critic[FEATURES_KEY], for_critic) if self.aux is not None else None
         self.updates += 1
         actor_step = self.updates % a.optim.actor_every == 0
         total = loss_qvalue + (loss_actor + loss_alpha if actor_step else 0.0)
+        if loss_aux is not None:  # on the features the critics' loss trains: it trains the encoders too
+            total = total + a.terms.aux.coeff * loss_aux
         finite_or_raise(total.detach(), "SAC loss")
         for opt in self.optimizers.values():
             opt.zero_grad(set_to_none=True)
@@ -270,6 +293,8 @@ class SAC(Algorithm):
         }
         if loss_bc is not None:
             metrics["loss_bc"] = float(loss_bc.detach())
+        if loss_aux is not None:
+            metrics["loss_aux"] = float(loss_aux.detach())
         return metrics
 
     def _bc_loss(self, for_critic: TensorDictBase) -> torch.Tensor | None:
@@ -307,7 +332,8 @@ class SAC(Algorithm):
         return for_critic, for_actor
 
     def trained_parameters(self) -> list[torch.nn.Parameter]:
-        return [*self.actor.parameters(), *_trainable(self.loss.qvalue_network_params)]
+        aux = list(self.aux.parameters()) if self.aux is not None else []
+        return [*self.actor.parameters(), *_trainable(self.loss.qvalue_network_params), *aux]
 
     def state_dict(self) -> dict[str, Any]:
         """The critics, their targets, the temperature and the optimizers (the replay buffer goes
@@ -317,6 +343,7 @@ class SAC(Algorithm):
                 "loss": self.loss.state_dict(),
                 "optimizers": {k: o.state_dict() for k, o in self.optimizers.items()},
                 "owed": self.owed,
+                **({"aux": self.aux.state_dict()} if self.aux is not None else {}),
             }
         }
 
@@ -326,6 +353,8 @@ class SAC(Algorithm):
         for key, opt in self.optimizers.items():
             opt.load_state_dict(saved["optimizers"][key])
         self.owed = saved["owed"]
+        if self.aux is not None and "aux" in saved:
+            self.aux.load_state_dict(saved["aux"])
         self.load_replay(Path(self.cfg.paths.output_dir))
 
     def save_extra(self, run_dir: Any) -> None:

@@ -1,10 +1,11 @@
-"""An auxiliary task for a camera student: from its image features alone, say where the object is.
+"""An auxiliary task for a camera learner: from its image features alone, say where the object is.
 
 Regressing actions onto a teacher's labels trains the image encoder only through the action error,
-a weak and late signal of what in the image matters. The teacher's privileged state holds the
+a weak and late signal of what in the image matters; a critic that reads the privileged state
+(SAC's asymmetric critics) needs little from the images at all. The teacher's privileged state holds the
 answer the encoder must find (the object's offset from the grasp point, whether it is held), so
-during distillation a linear head reads the encoder's features and is regressed onto those parts,
-standardized. The head is the distiller's, not the student's: nothing of it is deployed or
+during training a linear head reads the encoder's features and is regressed onto those parts,
+standardized. The head is the learner's, not the policy's: nothing of it is deployed or
 exported, and the student's observation stays proprioception and images.
 """
 
@@ -39,7 +40,11 @@ class ObjectFromImages(nn.Module):
     the auxiliary loss costs one small matrix product, not a second encoder pass."""
 
     def __init__(
-        self, encoders: Mapping[str, nn.Module], parts: Mapping[str, Sequence[int]], names: Sequence[str]
+        self,
+        encoders: Mapping[str, nn.Module],
+        parts: Mapping[str, Sequence[int]],
+        names: Sequence[str],
+        tap: bool = True,
     ) -> None:
         super().__init__()
         unknown = [n for n in names if n not in parts]
@@ -52,9 +57,9 @@ class ObjectFromImages(nn.Module):
         features = sum(e.project[0].out_features for e in encoders.values())
         self.head = nn.Linear(features, int(self.index.numel()))
         self.norm = RunningNorm(int(self.index.numel()))
-        self.taps = [FeatureTap() for _ in encoders]
-        for encoder, tap in zip(encoders.values(), self.taps):
-            encoder.register_forward_hook(tap)
+        self.taps = [FeatureTap() for _ in encoders] if tap else []  # tap=False: loss_of only
+        for encoder, hook in zip(encoders.values(), self.taps):
+            encoder.register_forward_hook(hook)
 
     def update(self, batch: TensorDictBase) -> None:
         """Fold a batch's targets into the standardization statistics."""
@@ -62,6 +67,10 @@ class ObjectFromImages(nn.Module):
 
     def loss(self, minibatch: TensorDictBase) -> torch.Tensor:
         """Mean squared error of the standardized targets, from the features of the last forward."""
-        features = torch.cat([tap.output for tap in self.taps], -1)
+        return self.loss_of(torch.cat([tap.output for tap in self.taps], -1), minibatch)
+
+    def loss_of(self, features: torch.Tensor, minibatch: TensorDictBase) -> torch.Tensor:
+        """Mean squared error of the standardized targets, from these features (a learner that
+        encodes the minibatch itself, as SAC does, passes them)."""
         target = self.norm(minibatch[PRIVILEGED_KEY][..., self.index])
         return (self.head(features) - target).pow(2).mean()
