@@ -290,7 +290,7 @@ def test_from_pixels_the_critic_trains_the_encoder_and_the_actor_reads_its_featu
     assert not for_critic["next", FEATURES_KEY].requires_grad  # the target: no gradient
 
 
-def test_the_auxiliary_task_trains_the_encoder_without_a_privileged_critic_and_needs_a_camera(
+def test_the_auxiliary_head_keeps_its_targets_learns_without_a_privileged_critic_and_needs_a_camera(
     tmp_path: Path,
 ) -> None:
     from rlgrasp.models.cnn import vision_net

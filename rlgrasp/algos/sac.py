@@ -140,7 +140,7 @@ class SAC(Algorithm):
             "alpha": torch.optim.Adam([self.loss.log_alpha], lr=optim.alpha_lr),
         }
         if self.images:
-            params = [*self._encoder().parameters(), *(self.aux.parameters() if self.aux is not None else [])]
+            params = [*self._encoder().parameters(), *self._aux_parameters()]
             optimizers["encoder"] = torch.optim.Adam(params, lr=optim.critic_lr)
         return optimizers
 
@@ -158,6 +158,9 @@ class SAC(Algorithm):
             )
         head = ObjectFromImages(self._encoder(), self.parts.spec["privileged_parts"], aux.parts, tap=False)
         return head.to(self.device)
+
+    def _aux_parameters(self) -> list[torch.nn.Parameter]:
+        return list(self.aux.parameters()) if self.aux is not None else []
 
     def _encoder(self) -> nn.Module:
         return vision_net(self.actor).encoders
@@ -332,8 +335,8 @@ class SAC(Algorithm):
         return for_critic, for_actor
 
     def trained_parameters(self) -> list[torch.nn.Parameter]:
-        aux = list(self.aux.parameters()) if self.aux is not None else []
-        return [*self.actor.parameters(), *_trainable(self.loss.qvalue_network_params), *aux]
+        critics = _trainable(self.loss.qvalue_network_params)
+        return [*self.actor.parameters(), *critics, *self._aux_parameters()]
 
     def state_dict(self) -> dict[str, Any]:
         """The critics, their targets, the temperature and the optimizers (the replay buffer goes

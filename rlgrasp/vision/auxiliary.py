@@ -2,11 +2,11 @@
 
 Regressing actions onto a teacher's labels trains the image encoder only through the action error,
 a weak and late signal of what in the image matters; a critic that reads the privileged state
-(SAC's asymmetric critics) needs little from the images at all. The teacher's privileged state holds the
+(SAC's asymmetric critics) needs little from the images at all. The privileged state holds the
 answer the encoder must find (the object's offset from the grasp point, whether it is held), so
 during training a linear head reads the encoder's features and is regressed onto those parts,
 standardized. The head is the learner's, not the policy's: nothing of it is deployed or
-exported, and the student's observation stays proprioception and images.
+exported, and the policy's observation stays proprioception and images.
 """
 
 from __future__ import annotations
