@@ -318,6 +318,10 @@ class SACConfig:
     terms: SACTermsConfig = field(default_factory=SACTermsConfig)
     augment: ShiftAugmentConfig = field(default_factory=ShiftAugmentConfig)
     init_from: str | None = None  # a state checkpoint whose actor starts this run (warm start)
+    # Torch threads for the updates (null: every core). A camera learner's run is bound by its
+    # updates while the workers mostly wait, so it takes every core (grasp_vision_sac); 1 keeps a
+    # state learner's runs as they were measured.
+    learner_threads: int | None = 1
 
 
 #: Where each flat ``algo`` key of before lives now (``algo.<key>`` -> ``algo.<path>``), for every
@@ -927,6 +931,16 @@ def _rate_checks(key: str, value: Any) -> list[tuple[str, Any, bool, str]]:
     return [(key, value, _positive(value) and math.isfinite(value), "must be finite and > 0")]
 
 
+def _learner_threads_check(a: Any) -> tuple[str, Any, bool, str]:
+    threads = a.learner_threads
+    return (
+        "algo.learner_threads",
+        threads,
+        threads is None or threads >= 1,
+        "must be >= 1 or null (every core)",
+    )
+
+
 def _sac_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
     """SAC's keys: a ratio > 0, a buffer that holds a minibatch, rates > 0."""
     o, r, c = a.optim, a.replay, a.critic
@@ -969,6 +983,7 @@ def _sac_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
         ),
         ("algo.augment.shift", a.augment.shift, a.augment.shift >= 0, "must be >= 0 (pixels)"),
         ("algo.terms.aux.coeff", a.terms.aux.coeff, a.terms.aux.coeff >= 0, "must be >= 0 (0: off)"),
+        _learner_threads_check(a),
         *[check for group, key in rates for check in _rate_checks(f"algo.{group}.{key}", a[group][key])],
     ]
 
@@ -1111,12 +1126,7 @@ def _distill_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
             a.replay.buffer_frames >= o.minibatch_size,
             f"must be >= algo.optim.minibatch_size ({o.minibatch_size})",
         ),
-        (
-            "algo.learner_threads",
-            a.learner_threads,
-            a.learner_threads is None or a.learner_threads >= 1,
-            "must be >= 1 or null",
-        ),
+        _learner_threads_check(a),
         (
             "algo.terms.aux.coeff",
             a.terms.aux.coeff,

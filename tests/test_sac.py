@@ -4,6 +4,7 @@ checkpoint evaluation and export take as they take PPO's."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -192,6 +193,13 @@ def test_resume_restores_the_learner_and_its_replay_buffer(tmp_path: Path) -> No
     assert "starts with an empty replay buffer" in (run / "train.log").read_text()
 
 
+def test_a_state_learner_keeps_one_thread_and_the_camera_experiments_take_every_core(tmp_path: Path) -> None:
+    assert _sac(tmp_path).learner_threads == 1
+    assert _sac(tmp_path, "algo.learner_threads=null").learner_threads == (os.cpu_count() or 1)
+    for experiment in ("grasp_vision_sac", "grasp_vision_sac_demos"):
+        assert compose_train([f"experiment={experiment}"]).algo.learner_threads is None
+
+
 def test_a_ppo_checkpoint_is_not_resumed_as_sac(tmp_path: Path) -> None:
     run = tmp_path / "run"
     ppo = Trainer(compose_train(["experiment=smoke", "logger=none", f"paths.output_dir={run}"]))
@@ -210,6 +218,7 @@ def test_a_ppo_checkpoint_is_not_resumed_as_sac(tmp_path: Path) -> None:
             "algo.replay.buffer_frames=16: must be >= algo.optim.batch_size (32)",
         ),
         ("algo.augment.shift=-1", "algo.augment.shift=-1: must be >= 0 (pixels)"),
+        ("algo.learner_threads=0", "algo.learner_threads=0: must be >= 1 or null (every core)"),
         ("algo.terms.imitation.coeff=-1", "algo.terms.imitation.coeff=-1.0: must be finite and >= 0"),
         ("algo.pretrain.epochs=3", "algo.pretrain.epochs=3: needs algo.demos=<demonstrations>"),
     ],

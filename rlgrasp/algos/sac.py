@@ -20,6 +20,7 @@ updates on this one (``collector.overlap``): off-policy, one batch of lag costs 
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 from typing import Any
@@ -130,6 +131,11 @@ class SAC(Algorithm):
         self.replay = _buffer(a.replay.buffer_frames, online, device)
         self.owed = 0.0  # gradient steps due but not yet taken (the ratio is kept across batches)
         self.replay_file: Path | None = None
+
+    @property
+    def learner_threads(self) -> int:
+        """``algo.learner_threads``, null meaning every core (a camera learner's updates bound its run)."""
+        return self.cfg.algo.learner_threads or os.cpu_count() or 1
 
     def _optimizers(self, optim: Any) -> dict[str, torch.optim.Optimizer]:
         """Adam for the actor, the critics and the temperature; with a camera, for the encoders too,
