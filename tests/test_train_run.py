@@ -104,6 +104,23 @@ def test_stand_in_env_from_tests_reaches_spawned_workers(tmp_path: Path, train_c
     assert batch.numel() == parts.frames_per_batch == 512
 
 
+def test_process_workers_leave_the_learners_torch_threads_as_set(tmp_path: Path, train_cfg) -> None:
+    """TorchRL's collector would give this process the cores left after one a worker (one, with two
+    workers on two cores), and the learner would update on it whatever ``algo.learner_threads`` says."""
+    cfg = train_cfg("experiment=smoke", "collector.num_workers=2", "collector.envs_per_worker=1")
+    threads = torch.get_num_threads()
+    torch.set_num_threads(3)
+    try:
+        collector = build_parts(cfg).make_collector(0, str(tmp_path / "errors"))
+        try:
+            next(iter(collector))
+            assert torch.get_num_threads() == 3  # (TorchRL's shutdown sets them again, as it likes)
+        finally:
+            collector.shutdown()
+    finally:
+        torch.set_num_threads(threads)
+
+
 # --- one seed, one run (on the machine the test runs on) -----------------------------------------
 @pytest.mark.full  # two smoke runs on process workers
 def test_a_seed_gives_one_run_on_this_machine(tmp_path: Path, train_cfg) -> None:

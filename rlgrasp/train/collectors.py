@@ -115,8 +115,17 @@ class ProcessCollector(CollectorBackend):
         # Inside a joblib (loky) multirun job the start method is not spawn; the workers need it: a
         # forked child would inherit the parent's PyBullet and torch thread state.
         multiprocessing.set_start_method("spawn", force=True)
+        # num_threads: TorchRL would set this process's torch threads to the cores left after one a
+        # worker (with 2 workers on 2 cores: one), and the learner's updates would run on one thread
+        # whatever algo.learner_threads says; the learner's own count is kept instead.
         return Collector(
-            workers, policy, num_collectors=self.num_workers, sync=True, backend="process", **common
+            workers,
+            policy,
+            num_collectors=self.num_workers,
+            sync=True,
+            backend="process",
+            num_threads=torch.get_num_threads(),
+            **common,
         )
 
 
