@@ -98,15 +98,12 @@ def ppo_table(cfg: Any, batch: Any, args: argparse.Namespace) -> None:
 def sac_step_ms(cfg: Any, batch: Any, threads: int, steps: int) -> float:
     """ms per gradient step of a fresh ``SAC`` whose replay holds ``batch`` (and whose normalizer
     has seen it), after a few untimed steps."""
-    from rlgrasp.algos.sac import SAC, _compact
-    from rlgrasp.models.mlp import OBS_KEY
+    from rlgrasp.algos.sac import SAC
 
     torch.set_num_threads(threads)
     torch.manual_seed(0)
     algo = SAC(cfg, build_parts(cfg), torch.device("cpu"))
-    flat = batch.reshape(-1)
-    algo.norm.update(flat[OBS_KEY])
-    algo.replay.extend(_compact(flat.select(*algo.transition_keys)))  # a camera's images too
+    algo.store(batch.reshape(-1))  # a camera's images too
     for _ in range(3):  # warm-up: the optimizers' state, the allocator
         algo._step()
     t0 = time.perf_counter()

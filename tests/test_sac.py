@@ -17,6 +17,7 @@ from rlgrasp.compose import compose_config, compose_train
 from rlgrasp.config import ConfigError, validate_train
 from rlgrasp.demos.cli import record_demos
 from rlgrasp.demos.dataset import DemoError, demo_transitions, load_demos
+from rlgrasp.train.algorithm import algorithm_class
 from rlgrasp.train.loop import Trainer, train
 from rlgrasp.train.parts import build_parts
 from rlgrasp.train.resume import prepare_run
@@ -198,6 +199,9 @@ def test_a_state_learner_keeps_one_thread_and_the_camera_experiments_take_every_
     assert _sac(tmp_path, "algo.learner_threads=null").learner_threads == (os.cpu_count() or 1)
     for experiment in ("grasp_vision_sac", "grasp_vision_sac_demos"):
         assert compose_train([f"experiment={experiment}"]).algo.learner_threads is None
+    ppo_cfg = compose_train([*SMALL, "algo=ppo", "collector.torch_threads=3"])  # PPO has no such key
+    ppo = algorithm_class(ppo_cfg.algo)(ppo_cfg, build_parts(ppo_cfg), torch.device("cpu"))
+    assert "learner_threads" not in ppo_cfg.algo and ppo.learner_threads == 3
 
 
 def test_a_ppo_checkpoint_is_not_resumed_as_sac(tmp_path: Path) -> None:

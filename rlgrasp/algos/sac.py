@@ -20,7 +20,6 @@ updates on this one (``collector.overlap``): off-policy, one batch of lag costs 
 
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 from typing import Any
@@ -132,11 +131,6 @@ class SAC(Algorithm):
         self.owed = 0.0  # gradient steps due but not yet taken (the ratio is kept across batches)
         self.replay_file: Path | None = None
 
-    @property
-    def learner_threads(self) -> int:
-        """``algo.learner_threads``, null meaning every core (a camera learner's updates bound its run)."""
-        return self.cfg.algo.learner_threads or os.cpu_count() or 1
-
     def _optimizers(self, optim: Any) -> dict[str, torch.optim.Optimizer]:
         """Adam for the actor, the critics and the temperature; with a camera, for the encoders too,
         which learn from the critics' loss (at the critics' rate)."""
@@ -240,12 +234,7 @@ class SAC(Algorithm):
         optim = self.cfg.algo.optim
         t0 = time.perf_counter()
         flat = batch.reshape(-1)
-        self.norm.update(flat[OBS_KEY])
-        if PRIVILEGED_KEY in self.transition_keys:
-            self.parts.norms[PRIVILEGED_KEY].update(flat[PRIVILEGED_KEY])
-        if self.aux is not None:
-            self.aux.update(flat)
-        self.replay.extend(_compact(flat.select(*self.transition_keys)).to(self.device))
+        self.store(flat)
         if len(self.replay) < self.cfg.algo.replay.learning_starts:
             return {"charts/replay_frames": float(len(self.replay))}
         self.owed += optim.utd_ratio * flat.numel()
@@ -260,6 +249,16 @@ class SAC(Algorithm):
         metrics["charts/gradient_steps"] = float(steps)
         metrics["time/train_s"] = time.perf_counter() - t0
         return metrics
+
+    def store(self, flat: TensorDictBase) -> None:
+        """Add a flat batch of transitions to the replay buffer (images in their stored dtype) and
+        update the normalizers (and the auxiliary head's target statistics) from it."""
+        self.norm.update(flat[OBS_KEY])
+        if PRIVILEGED_KEY in self.transition_keys:
+            self.parts.norms[PRIVILEGED_KEY].update(flat[PRIVILEGED_KEY])
+        if self.aux is not None:
+            self.aux.update(flat)
+        self.replay.extend(_compact(flat.select(*self.transition_keys)).to(self.device))
 
     def _sample(self) -> TensorDictBase:
         """A minibatch: online transitions, and with demonstrations ``demo_ratio`` of it theirs."""

@@ -15,6 +15,7 @@ student and teacher), refreshed between batches (``rlgrasp.train.batches``).
 from __future__ import annotations
 
 import math
+import os
 from typing import TYPE_CHECKING, Any
 
 import torch
@@ -54,8 +55,12 @@ class Algorithm:
 
     @property
     def learner_threads(self) -> int:
-        """Torch threads for the learner's process: by default the collector's ``torch_threads``."""
-        return int(self.cfg.collector.torch_threads)
+        """Torch threads for the learner's process: ``algo.learner_threads`` where the algorithm has the
+        key (null: every core, for learners whose updates bound the run), else the collector's
+        ``torch_threads``."""
+        if "learner_threads" not in self.cfg.algo:
+            return int(self.cfg.collector.torch_threads)
+        return self.cfg.algo.learner_threads or os.cpu_count() or 1
 
     def start(self, log_scalars: Any) -> None:
         """Called once before the first batch of a fresh run (pre-training, e.g. behaviour cloning);

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import copy
 import math
-import os
 import time
 from typing import Any
 
@@ -69,12 +68,6 @@ class DAgger(Algorithm):
     @property
     def behaviour(self) -> torch.nn.Module:
         return self.policy
-
-    @property
-    def learner_threads(self) -> int:
-        # The student's updates, not the workers, bound a distillation run (the workers wait for
-        # the next weights), so the learner takes every core by default.
-        return self.cfg.algo.learner_threads or os.cpu_count() or 1
 
     def trained_parameters(self) -> list[torch.nn.Parameter]:
         return [*self.student.parameters(), *(self.aux.parameters() if self.aux is not None else [])]
