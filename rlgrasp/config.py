@@ -302,6 +302,20 @@ class ShiftAugmentConfig:
     shift: int = 4
 
 
+#: The losses that may train a camera SAC's image encoders (``algo.encoder.trained_by``).
+ENCODER_TRAINERS = ("critic", "actor", "both")
+
+
+@dataclass
+class SACEncoderConfig:
+    """With a camera: which losses train the image encoders. ``critic``: the critics' (DrQ-v2; the
+    actor reads the features detached). ``actor``: the actor's, through the features it reads (the
+    asymmetric actor-critic's way, Pinto et al. 2018, for critics that read the privileged state and
+    need little from the images; the critics read the features detached). ``both``: the two summed."""
+
+    trained_by: str = "critic"
+
+
 @dataclass
 class SACConfig:
     """Soft actor-critic (``rlgrasp.algos.sac``), and with ``demos`` RLPD: demonstrations sampled
@@ -317,6 +331,7 @@ class SACConfig:
     pretrain: SACPretrainConfig = field(default_factory=SACPretrainConfig)
     terms: SACTermsConfig = field(default_factory=SACTermsConfig)
     augment: ShiftAugmentConfig = field(default_factory=ShiftAugmentConfig)
+    encoder: SACEncoderConfig = field(default_factory=SACEncoderConfig)  # with a camera
     init_from: str | None = None  # a state checkpoint whose actor starts this run (warm start)
     # Torch threads for the updates (null: every core). A camera learner's run is bound by its
     # updates while the workers mostly wait, so it takes every core (grasp_vision_sac); 1 keeps a
@@ -982,6 +997,12 @@ def _sac_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
             "must be tanh, relu or elu",
         ),
         ("algo.augment.shift", a.augment.shift, a.augment.shift >= 0, "must be >= 0 (pixels)"),
+        (
+            "algo.encoder.trained_by",
+            a.encoder.trained_by,
+            a.encoder.trained_by in ENCODER_TRAINERS,
+            "must be " + ", ".join(ENCODER_TRAINERS[:-1]) + " or " + ENCODER_TRAINERS[-1],
+        ),
         ("algo.terms.aux.coeff", a.terms.aux.coeff, a.terms.aux.coeff >= 0, "must be >= 0 (0: off)"),
         _learner_threads_check(a),
         *[check for group, key in rates for check in _rate_checks(f"algo.{group}.{key}", a[group][key])],

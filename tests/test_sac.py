@@ -199,7 +199,7 @@ def test_a_state_learner_keeps_one_thread_and_the_camera_experiments_take_every_
     assert _sac(tmp_path, "algo.learner_threads=null").learner_threads == (os.cpu_count() or 1)
     for experiment in ("grasp_vision_sac", "grasp_vision_sac_demos"):
         assert compose_train([f"experiment={experiment}"]).algo.learner_threads is None
-    ppo_cfg = compose_train([*SMALL, "algo=ppo", "collector.torch_threads=3"])  # PPO has no such key
+    ppo_cfg = compose_train(["algo=ppo", "device=cpu", "collector.torch_threads=3"])  # no such key
     ppo = algorithm_class(ppo_cfg.algo)(ppo_cfg, build_parts(ppo_cfg), torch.device("cpu"))
     assert "learner_threads" not in ppo_cfg.algo and ppo.learner_threads == 3
 
@@ -223,6 +223,7 @@ def test_a_ppo_checkpoint_is_not_resumed_as_sac(tmp_path: Path) -> None:
         ),
         ("algo.augment.shift=-1", "algo.augment.shift=-1: must be >= 0 (pixels)"),
         ("algo.learner_threads=0", "algo.learner_threads=0: must be >= 1 or null (every core)"),
+        ("algo.encoder.trained_by=images", "algo.encoder.trained_by='images': must be critic, actor or both"),
         ("algo.terms.imitation.coeff=-1", "algo.terms.imitation.coeff=-1.0: must be finite and >= 0"),
         ("algo.pretrain.epochs=3", "algo.pretrain.epochs=3: needs algo.demos=<demonstrations>"),
     ],
@@ -287,7 +288,7 @@ def _camera_batch(sac: SAC, n: int) -> TensorDict:
 def test_from_pixels_the_critic_trains_the_encoder_and_the_actor_reads_its_features_detached(
     tmp_path: Path,
 ) -> None:
-    from rlgrasp.algos.sac import FEATURES_KEY
+    from rlgrasp.algos.sac import ACTOR_FEATURES_KEY, FEATURES_KEY
     from rlgrasp.models.cnn import vision_net
 
     sac = _sac(tmp_path, *CAMERA, "algo.replay.learning_starts=0", "algo.optim.utd_ratio=1")
@@ -300,7 +301,28 @@ def test_from_pixels_the_critic_trains_the_encoder_and_the_actor_reads_its_featu
     assert stored["depth"].dtype == torch.float16 and stored["next", "depth"].dtype == torch.float16
     for_critic, for_actor = sac._inputs(sac._sample())
     assert for_critic[FEATURES_KEY].requires_grad and not for_actor[FEATURES_KEY].requires_grad
+    assert not for_actor[ACTOR_FEATURES_KEY].requires_grad
     assert not for_critic["next", FEATURES_KEY].requires_grad  # the target: no gradient
+
+
+def test_the_actor_may_train_the_encoder_and_the_critic_then_reads_its_features_detached(
+    tmp_path: Path,
+) -> None:
+    from rlgrasp.algos.sac import ACTOR_FEATURES_KEY, FEATURES_KEY
+    from rlgrasp.models.cnn import vision_net
+
+    sac = _sac(tmp_path, *CAMERA, "algo.replay.learning_starts=0", "algo.encoder.trained_by=actor")
+    sac.store(_camera_batch(sac, 32).reshape(-1))
+    for_critic, for_actor = sac._inputs(sac._sample())
+    assert not for_critic[FEATURES_KEY].requires_grad and not for_actor[FEATURES_KEY].requires_grad
+    assert for_actor[ACTOR_FEATURES_KEY].requires_grad
+    encoder = vision_net(sac.actor).encoders
+    loss_qvalue, _ = sac.loss.qvalue_v2_loss(for_critic)
+    loss_qvalue.backward()  # the critics' loss leaves the encoder alone
+    assert all(p.grad is None for p in encoder.parameters())
+    loss_actor, _ = sac.loss.actor_loss(for_actor)
+    loss_actor.backward()
+    assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in encoder.parameters())
 
 
 def test_the_auxiliary_head_keeps_its_targets_learns_without_a_privileged_critic_and_needs_a_camera(

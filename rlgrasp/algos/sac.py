@@ -11,7 +11,8 @@ With a camera (``cameras=wrist_depth`` and the like) it learns from pixels the D
 al. 2021): the camera actor's image encoders are trained by the critics' loss alone, the actor gets
 their features detached, each replayed image is shifted by a few pixels (random shift), and the
 critics may also read the privileged state no robot senses (asymmetric actor-critic; they are not
-deployed). Replayed images are kept compact: RGB as uint8, depth as float16.
+deployed). ``algo.encoder.trained_by`` may give the encoders the actor's loss instead, or both.
+Replayed images are kept compact: RGB as uint8, depth as float16.
 
 The actor is the parts' TanhNormal policy, so evaluation, export, enjoy and sweeps take a SAC
 checkpoint as they take a PPO one. The workers keep collecting the next batch while the learner
@@ -53,8 +54,10 @@ TRANSITION_KEYS = (
 )
 #: The replay buffer's file in the run directory (plain tensors, read with ``weights_only=True``).
 REPLAY_FILE = "replay.pt"
-#: Where a camera learner puts the images' features in a minibatch (the actor head and critics read it).
+#: Where a camera learner puts the images' features in a minibatch: the critics read this key, the
+#: actor head the second (the same features, each detached or not as ``algo.encoder.trained_by`` says).
 FEATURES_KEY = "image_features"
+ACTOR_FEATURES_KEY = "actor_image_features"
 #: What a replayed image is stored as: RGB arrives as uint8; depth (metres) loses nothing a 64-pixel
 #: policy reads at half precision.
 STORED_DTYPES = {"rgb": torch.uint8, "depth": torch.float16}
@@ -167,8 +170,8 @@ class SAC(Algorithm):
 
     def _loss_actor(self) -> nn.Module:
         """What the loss trains as the actor: the whole actor on the state; with a camera, the actor
-        after its encoders, reading their features (detached in the actor's loss)."""
-        return head_actor(self.actor, FEATURES_KEY) if self.images else self.actor
+        after its encoders, reading their features (``_inputs``)."""
+        return head_actor(self.actor, ACTOR_FEATURES_KEY) if self.images else self.actor
 
     def _qvalue(self, act_dim: int) -> TensorDictModule:
         """The critics' template: on the state and the action; with a camera, on the state (the
@@ -276,11 +279,12 @@ class SAC(Algorithm):
         loss_bc = self._bc_loss(for_critic)
         loss_actor = loss_actor + a.terms.imitation.coeff * loss_bc if loss_bc is not None else loss_actor
         loss_alpha = self.loss.alpha_loss(actor_info["log_prob"]).mean()
-        loss_aux = self.aux.loss_of(for_critic[FEATURES_KEY], for_critic) if self.aux is not None else None
+        aux_features = for_critic[ACTOR_FEATURES_KEY] if self.aux is not None else None
+        loss_aux = self.aux.loss_of(aux_features, for_critic) if self.aux is not None else None
         self.updates += 1
         actor_step = self.updates % a.optim.actor_every == 0
         total = loss_qvalue + (loss_actor + loss_alpha if actor_step else 0.0)
-        if loss_aux is not None:  # on the features the critics' loss trains: it trains the encoders too
+        if loss_aux is not None:  # on features that carry gradient: it trains the encoders too
             total = total + a.terms.aux.coeff * loss_aux
         finite_or_raise(total.detach(), "SAC loss")
         for opt in self.optimizers.values():
@@ -320,23 +324,32 @@ class SAC(Algorithm):
 
     def _inputs(self, sample: TensorDictBase) -> tuple[TensorDictBase, TensorDictBase]:
         """The minibatch as the critics' loss reads it and as the actor's does. With a camera: each
-        image shifted at random (its own shift, and the next image another), encoded; the
-        critics' loss trains the encoders, the actor's sees the features detached, and the next
-        images are encoded without gradient (the target)."""
+        image shifted at random (its own shift, and the next image another), encoded once; the next
+        images are encoded without gradient (the target). ``algo.encoder.trained_by`` says which loss
+        the features carry gradient in: the critics' (their key in the critics' minibatch), the
+        actor's (the actor's key in the actor's minibatch; its critics always read them detached, so
+        the actor cannot move the features to please the critics), or both. Behaviour cloning reads
+        the critics' minibatch with the features attached: demonstrated actions train the encoders."""
         if not self.images:
             return sample, sample
         pad = self.cfg.algo.augment.shift
+        trained_by = self.cfg.algo.encoder.trained_by
         net = vision_net(self.actor)
 
         def encode(td: TensorDictBase) -> torch.Tensor:
             return net.encode(*(random_shift(td[k], pad) if pad else td[k] for k in self.images))
 
-        for_critic = sample.clone(False)
-        for_critic[FEATURES_KEY] = encode(sample)
+        features = encode(sample)
         with torch.no_grad():
-            for_critic["next", FEATURES_KEY] = encode(sample["next"])
+            next_features = encode(sample["next"])
+        for_critic = sample.clone(False)
+        for_critic[FEATURES_KEY] = features if trained_by != "actor" else features.detach()
+        for_critic[ACTOR_FEATURES_KEY] = features
+        for_critic["next", FEATURES_KEY] = next_features
+        for_critic["next", ACTOR_FEATURES_KEY] = next_features
         for_actor = for_critic.clone(False)
-        for_actor[FEATURES_KEY] = for_critic[FEATURES_KEY].detach()
+        for_actor[FEATURES_KEY] = features.detach()
+        for_actor[ACTOR_FEATURES_KEY] = features if trained_by != "critic" else features.detach()
         return for_critic, for_actor
 
     def trained_parameters(self) -> list[torch.nn.Parameter]:

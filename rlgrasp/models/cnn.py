@@ -118,9 +118,10 @@ class VisionActorNet(nn.Module):
 class VisionActorHead(nn.Module):
     """The part of a ``VisionActorNet`` after its encoders: (state, image features) -> (loc, scale).
 
-    An off-policy learner from pixels trains the encoders through the critic only and gives the
-    actor their features detached (DrQ-v2, Yarats et al. 2021); this head holds the actor's own
-    modules (normalizer, MLP, scale), shared with the whole net, which stays what acts and is exported."""
+    An off-policy learner from pixels computes the features once per minibatch and chooses which
+    loss trains the encoders through them (DrQ-v2, Yarats et al. 2021: the critic's); this head
+    holds the actor's own modules (normalizer, MLP, scale), shared with the whole net, which stays
+    what acts and is exported."""
 
     def __init__(self, net: VisionActorNet) -> None:
         super().__init__()
