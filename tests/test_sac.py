@@ -198,7 +198,8 @@ def test_a_state_learner_keeps_one_thread_and_the_camera_experiments_take_every_
     assert _sac(tmp_path).learner_threads == 1
     assert _sac(tmp_path, "algo.learner_threads=null").learner_threads == (os.cpu_count() or 1)
     for experiment in ("grasp_vision_sac", "grasp_vision_sac_demos"):
-        assert compose_train([f"experiment={experiment}"]).algo.learner_threads is None
+        algo = compose_train([f"experiment={experiment}"]).algo
+        assert algo.learner_threads is None and algo.encoder.trained_by == "actor"
     ppo_cfg = compose_train(["algo=ppo", "device=cpu", "collector.torch_threads=3"])  # no such key
     ppo = algorithm_class(ppo_cfg.algo)(ppo_cfg, build_parts(ppo_cfg), torch.device("cpu"))
     assert "learner_threads" not in ppo_cfg.algo and ppo.learner_threads == 3
