@@ -122,9 +122,18 @@ def test_the_robot_randomization_reaches_each_arm(robot, arm_env):
     ep, r, c = info["randomization"], env.robot, env.client
     assert r.finger_force == pytest.approx(ep["finger_force"])
     assert r.position_gain == pytest.approx(ARMS[robot][0].position_gain * ep["position_gain_scale"])
-    assert c.getDynamicsInfo(r.body, r.finger_links[1])[1] == pytest.approx(ep["finger_friction"])
+    friction = ep["finger_friction"] * ARMS[robot][0].finger_friction_scale
+    assert c.getDynamicsInfo(r.body, r.finger_links[1])[1] == pytest.approx(friction)
     q = r.joint_state()[0]
     assert 0 < np.abs(q - np.asarray(r.neutral_pose)).max() < 0.5  # start-pose noise, within reason
+
+
+def test_an_arms_pad_friction_scales_the_episodes_finger_friction(arm_env):
+    env = arm_env({**PANDA.as_mapping(), "finger_friction_scale": 1.5}, randomization="default")
+    _, info = env.reset(seed=0)
+    for link in env.robot.finger_links:
+        friction = env.client.getDynamicsInfo(env.robot.body, link)[1]
+        assert friction == pytest.approx(1.5 * info["randomization"]["finger_friction"])
 
 
 @pytest.mark.parametrize("robot", ARMS)
@@ -314,6 +323,12 @@ BAD_ARMS = [
         ValueError,
         "robot.fingers: panda_finger_joint1 mimics 'panda_finger_joint2', which must be a finger "
         "joint with a motor of its own",
+    ),
+    (
+        "a pad friction that is not positive",
+        {"finger_friction_scale": 0},
+        ValueError,
+        "robot.finger_friction_scale=0: must be a number > 0",
     ),
     (
         "an unknown expert setting",

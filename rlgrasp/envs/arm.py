@@ -179,7 +179,8 @@ class ArmRobot(Robot):
         for j in self.arm:
             self.client.changeDynamics(self.body, j, jointDamping=joint_damping)
         for link in self.finger_links:
-            self.client.changeDynamics(self.body, link, lateralFriction=finger_friction)
+            friction = finger_friction * self.spec.finger_friction_scale
+            self.client.changeDynamics(self.body, link, lateralFriction=friction)
 
     # --- control -------------------------------------------------------------------------------
     def use_position_control(self, gain_scale: float = 1.0, finger_force: float = 20.0) -> None:

@@ -64,6 +64,9 @@ class RobotSpec:
     position_gain: float = 0.2  # the arm's position-control gain at gain scale 1
     #: Finger motor force (N, or N m for a revolute finger) per N of the episode's ``finger_force``.
     finger_force_scale: float = 1.0
+    #: Friction coefficient of the finger links per unit of the episode's ``finger_friction`` (PyBullet
+    #: multiplies it by the object's): a rubber pad grips more than the default 1.
+    finger_friction_scale: float = 1.0
     ik_iterations: int = 20
     #: null: the model's effort limits; otherwise one value per arm joint.
     max_torque: tuple[float, ...] | None = None
@@ -151,6 +154,9 @@ def spec_from_mapping(mapping: Mapping[str, Any]) -> RobotSpec:
     for key in ("neutral_pose", "grasp_offset", "gripper_down", "base_position", "base_orientation"):
         if key in data and not all(_number(v) for v in data[key]):
             raise ValueError(f"robot.{key}={list(data[key])!r}: must be numbers")
+    for key in ("finger_force_scale", "finger_friction_scale"):
+        if key in data and not (_number(data[key]) and data[key] > 0):
+            raise ValueError(f"robot.{key}={data[key]!r}: must be a number > 0")
     if not (_number(data["max_finger_width"]) and data["max_finger_width"] > 0):
         raise ValueError(f"robot.max_finger_width={data['max_finger_width']!r}: must be a number > 0")
     return RobotSpec(**data)
