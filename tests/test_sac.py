@@ -292,7 +292,13 @@ def test_from_pixels_the_critic_trains_the_encoder_and_the_actor_reads_its_featu
     from rlgrasp.algos.sac import ACTOR_FEATURES_KEY, FEATURES_KEY
     from rlgrasp.models.cnn import vision_net
 
-    sac = _sac(tmp_path, *CAMERA, "algo.replay.learning_starts=0", "algo.optim.utd_ratio=1")
+    sac = _sac(
+        tmp_path,
+        *CAMERA,
+        "algo.replay.learning_starts=0",
+        "algo.optim.utd_ratio=1",
+        "algo.encoder.trained_by=critic",
+    )
     encoder = vision_net(sac.actor).encoders
     before = [p.detach().clone() for p in encoder.parameters()]
     sac.update(_camera_batch(sac, 32), 0)
