@@ -136,7 +136,7 @@ class SAC(Algorithm):
 
     def _optimizers(self, optim: Any) -> dict[str, torch.optim.Optimizer]:
         """Adam for the actor, the critics and the temperature; with a camera, for the encoders too,
-        which learn from the critics' loss (at the critics' rate)."""
+        which learn from the loss ``algo.encoder.trained_by`` names (at the critics' rate)."""
         optimizers = {
             "actor": torch.optim.Adam(_trainable(self.loss.actor_network_params), lr=optim.actor_lr),
             "critic": torch.optim.Adam(_trainable(self.loss.qvalue_network_params), lr=optim.critic_lr),
