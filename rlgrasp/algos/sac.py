@@ -279,12 +279,13 @@ class SAC(Algorithm):
         loss_bc = self._bc_loss(for_critic)
         loss_actor = loss_actor + a.terms.imitation.coeff * loss_bc if loss_bc is not None else loss_actor
         loss_alpha = self.loss.alpha_loss(actor_info["log_prob"]).mean()
-        aux_features = for_critic[ACTOR_FEATURES_KEY] if self.aux is not None else None
-        loss_aux = self.aux.loss_of(aux_features, for_critic) if self.aux is not None else None
+        loss_aux = None
+        if self.aux is not None:  # on features that carry gradient: it trains the encoders too
+            loss_aux = self.aux.loss_of(for_critic[ACTOR_FEATURES_KEY], for_critic)
         self.updates += 1
         actor_step = self.updates % a.optim.actor_every == 0
         total = loss_qvalue + (loss_actor + loss_alpha if actor_step else 0.0)
-        if loss_aux is not None:  # on features that carry gradient: it trains the encoders too
+        if loss_aux is not None:
             total = total + a.terms.aux.coeff * loss_aux
         finite_or_raise(total.detach(), "SAC loss")
         for opt in self.optimizers.values():
