@@ -6,6 +6,7 @@ a checkpoint of one arm is refused by an env of another."""
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 
 import numpy as np
@@ -391,6 +392,27 @@ def test_an_arms_expert_settings_reach_its_expert(tmp_path, arm_env):
     assert expert_module.grasp_plan(upright, extents, 0.05)[1] == pytest.approx(0.1 - 0.035)
     assert expert_module.grasp_plan(upright, extents, 0.05, 0.055, 0.006)[1] == pytest.approx(0.1 - 0.055)
     assert expert_module.grasp_plan(upright, extents, 0.05, 0.2, 0.006)[1] == pytest.approx(0.006)
+
+
+def test_the_expert_keeps_its_yaw_when_two_widths_tie():
+    """A cube's two sides differ by the observation's noise: the hand must not turn back and forth
+    between them (the iiwa's 'never grasped' cubes hovered so until the episode ended)."""
+    turned = np.array([0.0, 0.0, math.sin(0.3), math.cos(0.3)])  # the box turned 0.6 rad about z
+    plan = expert_module.grasp_plan
+    for width_x in (0.0580, 0.0585, 0.0590):  # x the narrower, equal, the wider, all within the tie
+        extents = np.array([width_x, 0.0585, 0.05])
+        near_zero = plan(turned, extents, 0.025)[0]
+        assert plan(turned, extents, 0.025, current_yaw=near_zero)[0] == pytest.approx(near_zero)
+        other = _wrap(near_zero + math.pi / 2)
+        assert plan(turned, extents, 0.025, current_yaw=other)[0] == pytest.approx(other)
+    # beyond the tie the narrower side wins whatever the hand's yaw
+    wide_y = np.array([0.04, 0.06, 0.05])
+    assert plan(turned, wide_y, 0.025, current_yaw=0.0)[2] == pytest.approx(0.04)
+    assert plan(turned, wide_y, 0.025, current_yaw=-1.0)[2] == pytest.approx(0.04)
+
+
+def _wrap(angle: float) -> float:
+    return (angle + math.pi / 2) % math.pi - math.pi / 2
 
 
 def test_a_missing_key_is_named():

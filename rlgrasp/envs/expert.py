@@ -17,6 +17,9 @@ import numpy as np
 
 FINGER_REACH = 0.035  # m below the object's top at which the fingertips close on a tall object
 FLOOR_CLEARANCE = 0.012  # m above the object's bottom: the lowest grasp height
+# Widths closer than this are a tie: the hand keeps the yaw it has. Without the margin, a cube's two
+# near-equal sides swap places with the observation's noise and the hand turns back and forth.
+WIDTH_TIE = 0.005
 
 
 def quat_matrix(quat: np.ndarray) -> np.ndarray:
@@ -42,12 +45,14 @@ def grasp_plan(
     centre_z: float,
     finger_reach: float = FINGER_REACH,
     floor_clearance: float = FLOOR_CLEARANCE,
+    current_yaw: float = 0.0,
 ) -> tuple[float, float, float]:
     """(hand yaw, grasp-point height, width across the fingers) for a top-down grasp: the grasp
     point ``finger_reach`` below the object's top, at least ``floor_clearance`` above its bottom.
 
     The fingers close along the hand's y axis, which at yaw ``t`` points along (-sin t, cos t);
-    they must close along the object's narrower horizontal axis.
+    they must close along the object's narrower horizontal axis, or, where the two widths tie
+    (within ``WIDTH_TIE``), along the one nearer the hand's ``current_yaw``.
     """
     rotation = quat_matrix(quat)
     vertical = int(np.argmax(np.abs(rotation[2])))
@@ -57,8 +62,10 @@ def grasp_plan(
     for i in horizontal:
         axis = rotation[:, i]
         yaw = _wrap_half_turn(math.atan2(axis[1], axis[0]) - math.pi / 2)
-        candidates.append((round(float(extents[i]) / 0.003), abs(yaw), yaw, float(extents[i])))
-    _, _, yaw, width = min(candidates)  # narrowest first; near-equal widths: the smaller turn
+        candidates.append((float(extents[i]), yaw))
+    narrowest = min(width for width, _ in candidates)
+    ties = [(abs(yaw - current_yaw), yaw, w) for w, yaw in candidates if w <= narrowest + WIDTH_TIE]
+    _, yaw, width = min(ties)
     bottom, top = centre_z - half_height, centre_z + half_height
     return yaw, max(bottom + floor_clearance, top - finger_reach), width
 
@@ -123,6 +130,7 @@ class ScriptedExpert:
             centre[2],
             self.finger_reach,
             self.floor_clearance,
+            self._yaw,
         )
         yaw = yaw if self.use_yaw else 0.0
         target = np.array([centre[0], centre[1], grasp_z])
