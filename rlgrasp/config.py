@@ -332,7 +332,7 @@ class SACConfig:
     terms: SACTermsConfig = field(default_factory=SACTermsConfig)
     augment: ShiftAugmentConfig = field(default_factory=ShiftAugmentConfig)
     encoder: SACEncoderConfig = field(default_factory=SACEncoderConfig)  # with a camera
-    init_from: str | None = None  # a state checkpoint whose actor starts this run (warm start)
+    init_from: str | None = None  # a checkpoint of this env and model whose actor starts this run
     # Torch threads for the updates (null: every core). A camera learner's run is bound by its
     # updates while the workers mostly wait, so it takes every core (grasp_vision_sac); 1 keeps a
     # state learner's runs as they were measured.
