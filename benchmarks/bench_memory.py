@@ -25,6 +25,7 @@ import torch
 from bench_update import collect
 
 from rlgrasp.algos.sac import SAC, replay_bytes_per_frame
+from rlgrasp.compose import compose_train
 from rlgrasp.train.parts import build_parts
 
 GIB = 2**30
@@ -44,9 +45,9 @@ def descendants(pid: int) -> list[int]:
     while todo:
         parent = todo.pop()
         for task in Path(f"/proc/{parent}/task").iterdir():
-            children = (task / "children").read_text().split()
-            out += [int(c) for c in children]
-            todo += [int(c) for c in children]
+            children = [int(c) for c in (task / "children").read_text().split()]
+            out += children
+            todo += children
     return out
 
 
@@ -66,8 +67,6 @@ def fill_replay(overrides: list[str], batch_frames: int) -> tuple[SAC, int, int]
 
 def workers_bytes(overrides: list[str], batches: int) -> tuple[int, int]:
     """The resident bytes of the run's collector workers after ``batches`` batches, and how many."""
-    from rlgrasp.compose import compose_train
-
     collector = build_parts(compose_train(overrides)).make_collector()
     try:
         for i, _ in enumerate(collector):

@@ -403,16 +403,12 @@ def test_the_expert_keeps_its_yaw_when_two_widths_tie():
         extents = np.array([width_x, 0.0585, 0.05])
         near_zero = plan(turned, extents, 0.025)[0]
         assert plan(turned, extents, 0.025, current_yaw=near_zero)[0] == pytest.approx(near_zero)
-        other = _wrap(near_zero + math.pi / 2)
+        other = expert_module._wrap_half_turn(near_zero + math.pi / 2)
         assert plan(turned, extents, 0.025, current_yaw=other)[0] == pytest.approx(other)
     # beyond the tie the narrower side wins whatever the hand's yaw
     wide_y = np.array([0.04, 0.06, 0.05])
     assert plan(turned, wide_y, 0.025, current_yaw=0.0)[2] == pytest.approx(0.04)
     assert plan(turned, wide_y, 0.025, current_yaw=-1.0)[2] == pytest.approx(0.04)
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi / 2) % math.pi - math.pi / 2
 
 
 def test_a_missing_key_is_named():
