@@ -296,10 +296,13 @@ class SACTermsConfig:
 
 
 @dataclass
-class ShiftAugmentConfig:
-    """Replayed images moved by up to ``shift`` pixels each way (DrQ-v2; 0: not moved)."""
+class ReplayAugmentConfig:
+    """Replayed images moved by up to ``shift`` pixels each way (DrQ-v2; 0: not moved) and, with
+    ``kind=colour``, RGB images recoloured as a DAgger student's are (rlgrasp/vision/augment.py)."""
 
     shift: int = 4
+    kind: str = "none"  # none | colour (RGB only: channels permuted, brightness and contrast scaled)
+    grey: float = 0.0  # with kind=colour: the share of replayed images made grey
 
 
 #: The losses that may train a camera SAC's image encoders (``algo.encoder.trained_by``).
@@ -330,7 +333,7 @@ class SACConfig:
     demos: str | None = None  # a demonstrations directory (rlgrasp-demos)
     pretrain: SACPretrainConfig = field(default_factory=SACPretrainConfig)
     terms: SACTermsConfig = field(default_factory=SACTermsConfig)
-    augment: ShiftAugmentConfig = field(default_factory=ShiftAugmentConfig)
+    augment: ReplayAugmentConfig = field(default_factory=ReplayAugmentConfig)
     encoder: SACEncoderConfig = field(default_factory=SACEncoderConfig)  # with a camera
     init_from: str | None = None  # a checkpoint of this env and model whose actor starts this run
     # Torch threads for the updates (null: every core). A camera learner's run is bound by its
@@ -997,6 +1000,7 @@ def _sac_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
             "must be tanh, relu or elu",
         ),
         ("algo.augment.shift", a.augment.shift, a.augment.shift >= 0, "must be >= 0 (pixels)"),
+        *_colour_checks(a.augment),
         (
             "algo.encoder.trained_by",
             a.encoder.trained_by,
@@ -1154,6 +1158,14 @@ def _distill_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
             a.terms.aux.coeff >= 0,
             "must be >= 0 (0: no auxiliary task)",
         ),
+        *_colour_checks(aug),
+        ("algo.augment.shift", aug.shift, 0 <= aug.shift <= 16, "must be in [0, 16] pixels"),
+    ]
+
+
+def _colour_checks(aug: Any) -> list[tuple[str, Any, bool, str]]:
+    """``algo.augment.kind`` and ``grey``, the same for a DAgger student and a camera SAC."""
+    return [
         (
             "algo.augment.kind",
             aug.kind,
@@ -1166,7 +1178,6 @@ def _distill_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
             0 <= aug.grey <= 1 and (aug.grey == 0 or aug.kind == "colour"),
             "must be in [0, 1], and 0 unless algo.augment.kind=colour",
         ),
-        ("algo.augment.shift", aug.shift, 0 <= aug.shift <= 16, "must be in [0, 16] pixels"),
     ]
 
 

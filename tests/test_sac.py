@@ -223,6 +223,11 @@ def test_a_ppo_checkpoint_is_not_resumed_as_sac(tmp_path: Path) -> None:
             "algo.replay.buffer_frames=16: must be >= algo.optim.batch_size (32)",
         ),
         ("algo.augment.shift=-1", "algo.augment.shift=-1: must be >= 0 (pixels)"),
+        ("algo.augment.kind=hue", "algo.augment.kind='hue': must be one of none, colour"),
+        (
+            "algo.augment.grey=0.5",
+            "algo.augment.grey=0.5: must be in [0, 1], and 0 unless algo.augment.kind=colour",
+        ),
         ("algo.learner_threads=0", "algo.learner_threads=0: must be >= 1 or null (every core)"),
         ("algo.encoder.trained_by=images", "algo.encoder.trained_by='images': must be critic, actor or both"),
         ("algo.terms.imitation.coeff=-1", "algo.terms.imitation.coeff=-1.0: must be finite and >= 0"),
@@ -330,6 +335,23 @@ def test_the_actor_may_train_the_encoder_and_the_critic_then_reads_its_features_
     loss_actor, _ = sac.loss.actor_loss(for_actor)
     loss_actor.backward()
     assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in encoder.parameters())
+
+
+def test_replayed_rgb_images_are_recoloured_and_a_depth_camera_refuses_colour(tmp_path: Path) -> None:
+    """``algo.augment.kind=colour``: each replayed RGB image its own recolouring (as a DAgger
+    student's, rlgrasp/vision/augment.py) on top of its shift; a camera without RGB says so."""
+    rgb = [*CAMERA, "cameras=wrist_rgb", "algo.augment.shift=0"]
+    images = torch.randint(0, 256, (64, 3, 64, 64), dtype=torch.uint8)
+    plain = _sac(tmp_path, *rgb)._augmented(images, "rgb")
+    assert plain is images  # no shift, no colour: the replayed images as stored
+    recoloured = _sac(tmp_path, *rgb, "algo.augment.kind=colour")._augmented(images, "rgb")
+    assert recoloured.shape == images.shape and recoloured.is_floating_point()
+    changed = (recoloured - images.float()).abs().flatten(1).amax(1) > 1
+    assert changed.float().mean() > 0.5  # most images moved (an identity draw leaves a few near)
+    with pytest.raises(
+        ConfigError, match=r"^algo\.augment\.kind=colour: recolours RGB images; needs a camera"
+    ):
+        _sac(tmp_path, *CAMERA, "algo.augment.kind=colour")
 
 
 def test_the_auxiliary_head_keeps_its_targets_learns_without_a_privileged_critic_and_needs_a_camera(

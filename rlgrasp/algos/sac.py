@@ -40,7 +40,7 @@ from rlgrasp.models.cnn import head_actor, image_specs, vision_net
 from rlgrasp.models.mlp import ACTIVATIONS, OBS_KEY, RunningNorm
 from rlgrasp.models.spec import PRIVILEGED_KEY
 from rlgrasp.train.algorithm import Algorithm, finite_or_raise
-from rlgrasp.vision.augment import random_shift
+from rlgrasp.vision.augment import random_shift, recolour
 from rlgrasp.vision.auxiliary import ObjectFromImages
 
 #: The entries a transition keeps in the replay buffer (the collector's batch has more).
@@ -126,6 +126,11 @@ class SAC(Algorithm):
         self.optimizers = self._optimizers(a.optim)
         if self.images:
             _check_replay_memory(a.replay, parts.spec, self.transition_keys)
+        if a.augment.kind != "none" and "rgb" not in self.images:
+            raise ConfigError(
+                f"algo.augment.kind={a.augment.kind}: recolours RGB images; needs a camera with RGB "
+                "(e.g. cameras=wrist_rgb)"
+            )
         self.demos = self._demos() if a.get("demos") else None
         bc_on = self.demos is not None and a.terms.imitation.coeff > 0
         self.bc = mse_bc_loss(self._loss_actor()) if bc_on else None
@@ -325,7 +330,7 @@ class SAC(Algorithm):
 
     def _inputs(self, sample: TensorDictBase) -> tuple[TensorDictBase, TensorDictBase]:
         """The minibatch as the critics' loss reads it and as the actor's does. With a camera: each
-        image shifted at random (its own shift, and the next image another), encoded once; the next
+        image augmented at random (``_augmented``; the next image its own draw), encoded once; the next
         images are encoded without gradient (the target). ``algo.encoder.trained_by`` says which loss
         the features carry gradient in: the critics' (their key in the critics' minibatch), the
         actor's (the actor's key in the actor's minibatch; its critics always read them detached, so
@@ -333,12 +338,11 @@ class SAC(Algorithm):
         the critics' minibatch with the features attached: demonstrated actions train the encoders."""
         if not self.images:
             return sample, sample
-        pad = self.cfg.algo.augment.shift
         trained_by = self.cfg.algo.encoder.trained_by
         net = vision_net(self.actor)
 
         def encode(td: TensorDictBase) -> torch.Tensor:
-            return net.encode(*(random_shift(td[k], pad) if pad else td[k] for k in self.images))
+            return net.encode(*(self._augmented(td[k], k) for k in self.images))
 
         features = encode(sample)
         with torch.no_grad():
@@ -352,6 +356,16 @@ class SAC(Algorithm):
         for_actor[FEATURES_KEY] = features.detach()
         for_actor[ACTOR_FEATURES_KEY] = features if trained_by != "critic" else features.detach()
         return for_critic, for_actor
+
+    def _augmented(self, images: torch.Tensor, key: str) -> torch.Tensor:
+        """Replayed images as the encoders learn from them: each shifted (``algo.augment.shift``) and,
+        RGB with ``algo.augment.kind=colour``, recoloured; each image its own draw."""
+        aug = self.cfg.algo.augment
+        if aug.shift:
+            images = random_shift(images, aug.shift)
+        if key == "rgb" and aug.kind == "colour":
+            images = recolour(images, grey=aug.grey)
+        return images
 
     def trained_parameters(self) -> list[torch.nn.Parameter]:
         critics = _trainable(self.loss.qvalue_network_params)
