@@ -355,12 +355,6 @@ BAD_ARMS = [
         ValueError,
         "robot.expert=\\[0.05\\]: must be a mapping of finger_reach, floor_clearance, hover",
     ),
-    (
-        "a reward reach that is neither",
-        {"reward_reach": "tips"},
-        ValueError,
-        "robot.reward_reach='tips': must be centre or expert",
-    ),
 ]
 
 
@@ -398,23 +392,6 @@ def test_an_arms_expert_settings_reach_its_expert(tmp_path, arm_env):
     assert expert_module.grasp_plan(upright, extents, 0.05)[1] == pytest.approx(0.1 - 0.035)
     assert expert_module.grasp_plan(upright, extents, 0.05, 0.055, 0.006)[1] == pytest.approx(0.1 - 0.055)
     assert expert_module.grasp_plan(upright, extents, 0.05, 0.2, 0.006)[1] == pytest.approx(0.006)
-
-
-def test_an_arm_may_ask_the_reward_to_reach_where_its_expert_grasps(tmp_path, arm_env):
-    """``reward_reach: expert``: the dense reward's reach term pulls the grasp point to the height
-    the arm's expert closes at, not to the object's centre; the default (the Panda's) keeps the
-    centre."""
-    assert arm_env("panda").task.reach_plan is None
-    env = arm_env(_yaml_arm(tmp_path, XARM6, reward_reach="expert"), randomization="none")
-    reach, clearance = XARM6.expert["finger_reach"], XARM6.expert["floor_clearance"]
-    assert env.task.reach_plan == (reach, clearance)
-    env.reset(seed=0)
-    readings = env.task.readings(np.zeros(3), env.robot.body, env.robot.finger_links)
-    centre, point = readings["object_centre"], env.task._reach_point(readings)
-    bottom = centre[2] - 0.5 * readings["object_extents"][2]  # the cube rests upright
-    np.testing.assert_allclose(point[:2], centre[:2])
-    expected = max(bottom + clearance, bottom + readings["object_extents"][2] - reach)
-    assert point[2] == pytest.approx(expected, abs=1e-3) and point[2] < centre[2] - 0.01
 
 
 def test_the_expert_keeps_its_yaw_when_two_widths_tie():

@@ -14,7 +14,6 @@ import numpy as np
 from rlgrasp.envs.cameras import Camera, CameraSpec, ImageHistory
 from rlgrasp.envs.collision_model import COLLISION_MODELS
 from rlgrasp.envs.control import CONTROL_MODES, make_control
-from rlgrasp.envs.expert import FINGER_REACH, FLOOR_CLEARANCE
 from rlgrasp.envs.observation import PROPRIOCEPTION, ObservationLayout, full_parts
 from rlgrasp.envs.randomization import Randomizer
 from rlgrasp.envs.robot import make_robot
@@ -170,19 +169,10 @@ class GraspEnv(gym.Env):
 
     def _build_task(self, objects: Any, reward: str, weights: RewardWeights, success_height: float) -> None:
         try:
-            self.task = LiftTask(self.scene, objects, reward, weights, success_height, self._reach_plan())
+            self.task = LiftTask(self.scene, objects, reward, weights, success_height)
         except BaseException:
             self.close()
             raise
-
-    def _reach_plan(self) -> tuple[float, float] | None:
-        """(finger_reach, floor_clearance) of the arm's expert where its description asks the reward
-        to reach there (``reward_reach: expert``); None: the object's centre."""
-        spec = getattr(self.robot, "spec", None)
-        if spec is None or spec.reward_reach != "expert":
-            return None
-        plan = {"finger_reach": FINGER_REACH, "floor_clearance": FLOOR_CLEARANCE, **spec.expert}
-        return plan["finger_reach"], plan["floor_clearance"]
 
     def _build_spaces(self) -> None:
         self.action_dim = self.control.action_dim

@@ -83,10 +83,6 @@ class RobotSpec:
     #: grasp point goes on the object, e.g. ``{finger_reach: 0.055, floor_clearance: 0.006}`` for
     #: fingertips that end at the grasp point; empty: the defaults, tuned on the Panda.
     expert: Mapping[str, float] = field(default_factory=dict)
-    #: Where the dense reward's reach term pulls the grasp point: ``centre`` (the object's centre) or
-    #: ``expert`` (where this arm's expert closes, by ``expert``'s settings). For fingers that end at
-    #: the grasp point, the centre is a grip by the tips, which slips (docs/robots.md).
-    reward_reach: str = "centre"
 
     @property
     def label(self) -> str:
@@ -161,8 +157,6 @@ def spec_from_mapping(mapping: Mapping[str, Any]) -> RobotSpec:
     for key in ("finger_force_scale", "finger_friction_scale"):
         if key in data and not (_number(data[key]) and data[key] > 0):
             raise ValueError(f"robot.{key}={data[key]!r}: must be a number > 0")
-    if data.get("reward_reach", "centre") not in REWARD_REACH:
-        raise ValueError(f"robot.reward_reach={data['reward_reach']!r}: must be {' or '.join(REWARD_REACH)}")
     if not (_number(data["max_finger_width"]) and data["max_finger_width"] > 0):
         raise ValueError(f"robot.max_finger_width={data['max_finger_width']!r}: must be a number > 0")
     return RobotSpec(**data)
@@ -171,9 +165,6 @@ def spec_from_mapping(mapping: Mapping[str, Any]) -> RobotSpec:
 def _number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
-
-#: Where the reward's reach term may pull the grasp point (``RobotSpec.reward_reach``).
-REWARD_REACH = ("centre", "expert")
 
 #: The scripted expert's settings an arm may set, with the values each allows (m): how far below
 #: the object's top the grasp point goes, how far above its bottom at least, and how high above

@@ -13,7 +13,6 @@ from typing import Any
 
 import numpy as np
 
-from rlgrasp.envs.expert import grasp_plan
 from rlgrasp.envs.objects import ObjectChoice, ObjectSampler, snap_scale, tilt
 from rlgrasp.envs.scene import Scene
 
@@ -60,7 +59,6 @@ class LiftTask:
         reward: str = "dense",
         weights: RewardWeights | dict | None = None,
         success_height: float = 0.05,
-        reach_plan: tuple[float, float] | None = None,
     ):
         if reward not in REWARD_KINDS:
             raise ValueError(f"unknown reward {reward!r}; valid rewards: {', '.join(REWARD_KINDS)}")
@@ -69,9 +67,6 @@ class LiftTask:
         self.reward_kind = reward
         self.weights = weights if isinstance(weights, RewardWeights) else RewardWeights(**(weights or {}))
         self.success_height = success_height
-        # (finger_reach, floor_clearance): the reach term pulls the grasp point to where the arm's
-        # expert closes (``grasp_plan``'s height) instead of the object's centre; None: the centre.
-        self.reach_plan = reach_plan
         self.object_name = ""
         self.object_extents = np.zeros(3, np.float32)
         self._offset = np.zeros(3)
@@ -166,23 +161,11 @@ class LiftTask:
         if self.reward_kind == "sparse":
             return float(success), success
         w = self.weights
-        offset = self._reach_point(readings) - grasp_pos  # its norm as np.linalg.norm computes it
+        offset = readings["object_centre"] - grasp_pos  # its norm as np.linalg.norm computes it
         reach = 1.0 - math.tanh(5.0 * math.sqrt(offset.dot(offset)))
         progress = min(max(lift / self.success_height, 0.0), 1.0) if grasped else 0.0
         total = w.reach * reach + w.grasp * grasped + w.lift * progress + w.success * success
         return total / (w.reach + w.grasp + w.lift + w.success), success
-
-    def _reach_point(self, readings: dict[str, Any]) -> np.ndarray:
-        """Where the reach term pulls the grasp point: the object's centre, or with ``reach_plan``
-        the same point at the height the arm's expert grasps at."""
-        centre = readings["object_centre"]
-        if self.reach_plan is None:
-            return centre
-        finger_reach, floor_clearance = self.reach_plan
-        _, height, _ = grasp_plan(
-            readings["object_quat"], readings["object_extents"], centre[2], finger_reach, floor_clearance
-        )
-        return np.array([centre[0], centre[1], height])
 
     def info(self, readings: dict[str, Any], success: bool) -> dict[str, Any]:
         """What changes every step."""
