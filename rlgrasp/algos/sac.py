@@ -40,7 +40,7 @@ from rlgrasp.models.cnn import head_actor, image_specs, vision_net
 from rlgrasp.models.mlp import ACTIVATIONS, OBS_KEY, RunningNorm
 from rlgrasp.models.spec import PRIVILEGED_KEY
 from rlgrasp.train.algorithm import Algorithm, finite_or_raise
-from rlgrasp.vision.augment import random_shift, recolour
+from rlgrasp.vision.augment import augment_images
 from rlgrasp.vision.auxiliary import ObjectFromImages
 
 #: The entries a transition keeps in the replay buffer (the collector's batch has more).
@@ -361,11 +361,7 @@ class SAC(Algorithm):
         """Replayed images as the encoders learn from them: each shifted (``algo.augment.shift``) and,
         RGB with ``algo.augment.kind=colour``, recoloured; each image its own draw."""
         aug = self.cfg.algo.augment
-        if aug.shift:
-            images = random_shift(images, aug.shift)
-        if key == "rgb" and aug.kind == "colour":
-            images = recolour(images, grey=aug.grey)
-        return images
+        return augment_images(images, key, aug.kind, aug.grey, aug.shift)
 
     def trained_parameters(self) -> list[torch.nn.Parameter]:
         critics = _trainable(self.loss.qvalue_network_params)

@@ -63,13 +63,22 @@ def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator | No
     return images.reshape(n, channels, -1).gather(2, source).reshape(images.shape)
 
 
+def augment_images(
+    images: torch.Tensor, key: str, kind: str, grey: float = 0.0, shift: int = 0
+) -> torch.Tensor:
+    """One batch of ``key`` images (``depth`` or ``rgb``) shifted (``shift`` pixels) and, RGB with
+    ``kind="colour"``, recoloured; each image its own draw."""
+    if shift > 0:
+        images = random_shift(images, shift)
+    if kind == "colour" and key == "rgb":
+        images = recolour(images, grey=grey)
+    return images
+
+
 def augment(sample: TensorDictBase, kind: str, grey: float = 0.0, shift: int = 0) -> TensorDictBase:
     """A minibatch with its images shifted (``shift`` pixels; depth and RGB) and its RGB images
     recoloured (``kind="colour"``)."""
-    if shift > 0:
-        for key in ("depth", "rgb"):
-            if key in sample.keys():
-                sample[key] = random_shift(sample[key], shift)
-    if kind == "colour" and "rgb" in sample.keys():
-        sample["rgb"] = recolour(sample["rgb"], grey=grey)
+    for key in ("depth", "rgb"):
+        if key in sample.keys():
+            sample[key] = augment_images(sample[key], key, kind, grey, shift)
     return sample
