@@ -354,6 +354,25 @@ def test_replayed_rgb_images_are_recoloured_and_a_depth_camera_refuses_colour(tm
         _sac(tmp_path, *CAMERA, "algo.augment.kind=colour")
 
 
+def test_the_rgb_experiment_is_the_measured_overrides_of_the_camera_one() -> None:
+    """docs/algorithms.md measured the RGB learner as grasp_vision_sac_demos plus these overrides;
+    grasp_vision_sac_rgb_demos must stay that run, so its figures hold for it."""
+    from omegaconf import OmegaConf
+
+    measured = compose_train(
+        [
+            "experiment=grasp_vision_sac_demos",
+            "cameras=wrist_rgb",
+            "algo.demos=demos/cube_yaw_wrist_rgb/demos",
+            "algo.augment.kind=colour",
+        ]
+    )
+    shipped = compose_train(["experiment=grasp_vision_sac_rgb_demos"])
+    measured.experiment_name = shipped.experiment_name
+    assert OmegaConf.to_container(shipped) == OmegaConf.to_container(measured)
+    assert shipped.env.camera is not None and shipped.algo.augment.kind == "colour"
+
+
 def test_the_auxiliary_head_keeps_its_targets_learns_without_a_privileged_critic_and_needs_a_camera(
     tmp_path: Path,
 ) -> None:
