@@ -15,5 +15,5 @@ def test_expert_grasps_are_read_below_the_centre_and_grouped_by_outcome(capsys) 
     # The grasp point closes between the cube's centre and a few cm below it (the cube is 5 cm),
     # within a centimetre of the centre horizontally, and the fingers keep it to the episode's end.
     assert held and all(g is not None and 0.0 < g.depth < 0.025 and g.offset < 0.01 for g in held)
-    assert all(10 < g.steps_held < 50 for g in held)
+    assert all(10 < g.steps_held < 50 and g.let_go is None for g in held)  # still held at the end
     assert "success" in capsys.readouterr().out
