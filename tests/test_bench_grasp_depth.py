@@ -1,5 +1,6 @@
-"""benchmarks/bench_grasp_depth.py: the depth docs/robots.md compares is read at the first grasped
-step and grouped by the evaluation's outcome."""
+"""benchmarks/bench_grasp_depth.py: the depth and offset docs/robots.md compares are read at the
+first grasped step, the hold is counted to its end, and episodes are grouped by the evaluation's
+outcome."""
 
 import runpy
 from pathlib import Path
