@@ -46,15 +46,16 @@ from rlgrasp.stats import wilson_interval
 
 class OffCentreExpert(ScriptedExpert):
     """The scripted expert told the object lies ``offset`` metres further along the pads than it
-    does, until it lifts: it grasps that far off the centre, as learned policies do, so the
-    gripper's tolerance is measured apart from the policy that makes the offset."""
+    does: it grasps that far off the centre, as learned policies do, so the gripper's tolerance is
+    measured apart from the policy that makes the offset. (Once lifting, the expert aims at its own
+    hand, not the object, so the told offset no longer moves it.)"""
 
     def __init__(self, *args, offset: float = 0.0, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.offset = offset
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
-        if self.offset and self.phase != "lift":
+        if self.offset:
             obs = obs.copy()  # the fingers close along (-sin t, cos t) at hand yaw t; the pads run across it
             along_pads = self.offset * np.array([math.cos(self._yaw), math.sin(self._yaw), 0.0])
             obs[self.s["object_minus_grasp"]] += along_pads.astype(obs.dtype)

@@ -1,5 +1,5 @@
 """benchmarks/bench_expert.py's off-centre expert: it aims its grasp point ``offset`` metres along the
-pads from where the plain expert aims, and only until it lifts."""
+pads from where the plain expert aims."""
 
 import runpy
 from pathlib import Path
@@ -19,7 +19,7 @@ def env():
     env.close()
 
 
-def test_the_off_centre_expert_aims_along_the_pads_until_it_lifts(env) -> None:
+def test_the_off_centre_expert_aims_along_the_pads(env) -> None:
     off_centre = runpy.run_path(str(ROOT / "benchmarks" / "bench_expert.py"))["OffCentreExpert"]
     obs, _ = env.reset(seed=0)
     obs = obs.copy()
@@ -30,5 +30,3 @@ def test_the_off_centre_expert_aims_along_the_pads_until_it_lifts(env) -> None:
     # expert's gain of 0.8 per 4 cm step.
     difference = shifted(obs) - plain(obs)
     np.testing.assert_allclose(difference, [0.2, 0.0, 0.0, 0.0], atol=1e-5)
-    plain.phase = shifted.phase = "lift"
-    np.testing.assert_allclose(shifted(obs), plain(obs))
