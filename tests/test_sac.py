@@ -478,7 +478,7 @@ def test_camera_demonstrations_fill_a_camera_learners_minibatch_and_others_are_r
 ) -> None:
     """rlgrasp-demos with a camera records each step's images and privileged state with their
     successors; a camera SAC samples them beside online data; a state run, or a camera run with
-    another image size, refuses them naming the images."""
+    another image size or pose, refuses them naming the images or the view."""
     out = tmp_path / "cam"
     record_demos(
         compose_config(
@@ -510,3 +510,9 @@ def test_camera_demonstrations_fill_a_camera_learners_minibatch_and_others_are_r
         _sac(
             tmp_path, *CAMERA, f"algo.demos={out / 'demos'}", "+env.camera.width=48", "+env.camera.height=48"
         )
+    # same image size, another pose (the camera 5 cm behind the hand): another view, refused too
+    with pytest.raises(
+        DemoError,
+        match=r"camera view .*'eye': \[0\.06, 0\.0, 0\.0\].* camera is .*'eye': \[0\.1, 0\.0, -0\.05\]",
+    ):
+        _sac(tmp_path, *CAMERA, "cameras=wrist_depth_behind", f"algo.demos={out / 'demos'}")

@@ -18,6 +18,7 @@ import torch
 from tensordict import TensorDict
 
 from rlgrasp.config import ConfigError
+from rlgrasp.envs.cameras import MOUNT_DEFAULTS, CameraSpec
 from rlgrasp.models.cnn import IMAGE_KEYS
 from rlgrasp.models.spec import PRIVILEGED_KEY
 from rlgrasp.targets import UntrustedConfigError, check_plain_memmap
@@ -25,6 +26,8 @@ from rlgrasp.targets import UntrustedConfigError, check_plain_memmap
 FORMAT = 1
 META = "demos.json"
 FRAMES = "frames"
+#: What a camera's view is made of beside its image size: where it sits and how wide it sees.
+VIEW_KEYS = ("mount", "eye", "target", "up", "fov", "near", "far")
 #: The env keys that change what an observation or an action means.
 LAYOUT_KEYS = ("control_mode", "ee_yaw", "robot")
 
@@ -66,8 +69,21 @@ def layout_of(env: Any, env_cfg: dict[str, Any]) -> dict[str, Any]:
         "action_dim": int(env.action_space.shape[0]),
         "obs_slices": {k: [s.start, s.stop] for k, s in env.unwrapped.obs_slices.items()},
         "images": {k: list(space[k].shape) for k in IMAGE_KEYS if camera and k in space.spaces},
+        "camera_view": camera_view(env_cfg.get("camera")),
         **{k: env_cfg.get(k) for k in LAYOUT_KEYS},
     }
+
+
+def camera_view(camera_cfg: Any) -> dict[str, Any] | None:
+    """Where a camera looks from and how wide it sees, its mount's defaults filled in (``None``
+    without a camera): images of one size from another pose show the scene otherwise, which the
+    image shapes alone would let through."""
+    if not camera_cfg:
+        return None
+    spec = CameraSpec.from_config(dict(camera_cfg))
+    defaults = MOUNT_DEFAULTS[spec.mount]
+    view = {k: getattr(spec, k) if getattr(spec, k) is not None else defaults[k] for k in VIEW_KEYS}
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in view.items()}  # as JSON reads back
 
 
 def write_demos(out: Path, frames: TensorDict, meta: dict[str, Any]) -> Path:
@@ -102,6 +118,12 @@ def load_demos(path: str | Path, layout: dict[str, Any]) -> Demos:
         raise DemoError(
             f"algo.demos={path}: recorded with the images {meta.get('images', {})}, this run's camera gives "
             f"{layout.get('images', {})} (record them with the run's cameras= and image size)"
+        )
+    # Files recorded before the view was written carry none: the image check above is all they allow.
+    if meta.get("camera_view") is not None and meta["camera_view"] != layout.get("camera_view"):
+        raise DemoError(
+            f"algo.demos={path}: recorded with the camera view {meta['camera_view']}, this run's camera is "
+            f"{layout.get('camera_view')} (record them with the run's cameras=)"
         )
     for key in (*LAYOUT_KEYS, "obs_dim", "action_dim", "obs_slices"):
         if meta.get(key) != layout.get(key):
