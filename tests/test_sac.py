@@ -362,8 +362,8 @@ def test_the_rgb_experiment_is_the_measured_overrides_of_the_camera_one() -> Non
     measured = compose_train(
         [
             "experiment=grasp_vision_sac_demos",
-            "cameras=wrist_rgb",
-            "algo.demos=demos/cube_yaw_wrist_rgb/demos",
+            "cameras=wrist_rgb_behind",
+            "algo.demos=demos/cube_yaw_wrist_rgb_behind/demos",
             "algo.augment.kind=colour",
         ]
     )
