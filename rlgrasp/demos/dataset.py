@@ -18,7 +18,7 @@ import torch
 from tensordict import TensorDict
 
 from rlgrasp.config import ConfigError
-from rlgrasp.envs.cameras import MOUNT_DEFAULTS, CameraSpec
+from rlgrasp.envs.cameras import CameraSpec
 from rlgrasp.models.cnn import IMAGE_KEYS
 from rlgrasp.models.spec import PRIVILEGED_KEY
 from rlgrasp.targets import UntrustedConfigError, check_plain_memmap
@@ -26,8 +26,6 @@ from rlgrasp.targets import UntrustedConfigError, check_plain_memmap
 FORMAT = 1
 META = "demos.json"
 FRAMES = "frames"
-#: What a camera's view is made of beside its image size: where it sits and how wide it sees.
-VIEW_KEYS = ("mount", "eye", "target", "up", "fov", "near", "far")
 #: The env keys that change what an observation or an action means.
 LAYOUT_KEYS = ("control_mode", "ee_yaw", "robot")
 
@@ -81,9 +79,8 @@ def camera_view(camera_cfg: Any) -> dict[str, Any] | None:
     if not camera_cfg:
         return None
     spec = CameraSpec.from_config(dict(camera_cfg))
-    defaults = MOUNT_DEFAULTS[spec.mount]
-    view = {k: getattr(spec, k) if getattr(spec, k) is not None else defaults[k] for k in VIEW_KEYS}
-    return {k: list(v) if isinstance(v, tuple) else v for k, v in view.items()}  # as JSON reads back
+    pose = {k: v.tolist() for k, v in spec.pose().items()}  # lists: as JSON reads them back
+    return {"mount": spec.mount, **pose, "fov": spec.fov, "near": spec.near, "far": spec.far}
 
 
 def write_demos(out: Path, frames: TensorDict, meta: dict[str, Any]) -> Path:
