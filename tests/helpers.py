@@ -132,19 +132,24 @@ def make_student(
 
 
 # --- files an entry point must refuse ------------------------------------------------------------
-def demo_env_cfg(control_mode: str = "ee_delta") -> dict:
-    """The default training config's env section with ``control_mode``, resolved."""
-    cfg = compose_train([f"env.control_mode={control_mode}", "paths.output_dir=."])
+def demo_env_cfg(control_mode: str = "ee_delta", *overrides: str) -> dict:
+    """The default training config's env section with ``control_mode`` (and ``overrides``), resolved."""
+    cfg = compose_train([f"env.control_mode={control_mode}", "paths.output_dir=.", *overrides])
     return OmegaConf.to_container(cfg.env, resolve=True)
 
 
 def demo_files(root: Path) -> dict[str, str]:
-    """Demonstration files without recording: one of another control mode, one with no episode."""
+    """Demonstration files without recording: one of another control mode, one with no episode,
+    one seen by the wrist depth camera from 5 cm behind the hand (another view than ``wrist_depth``'s)."""
     out = {}
-    for name, mode, kept in (("foreign_demos", "joint_delta", 3), ("empty_demos", "ee_delta", 0)):
+    for name, mode, kept, *overrides in (
+        ("foreign_demos", "joint_delta", 3),
+        ("empty_demos", "ee_delta", 0),
+        ("behind_demos", "ee_delta", 3, "cameras=wrist_depth_behind", "model=cnn"),
+    ):
         target = root / name / "demos"
         if not target.exists():
-            env_cfg = demo_env_cfg(mode)
+            env_cfg = demo_env_cfg(mode, *overrides)
             env = env_factory(env_cfg)()
             layout = layout_of(env, env_cfg)
             env.close()

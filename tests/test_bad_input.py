@@ -97,7 +97,7 @@ def _files(root: Path) -> dict[str, str]:
         "notamesh": str(notamesh),
         "notes": str(notes),
         **bad_input_files(root),  # camera checkpoints: student, orphan, mismatched; the teacher
-        **demo_files(root),  # demonstrations of another control mode, and of no episode
+        **demo_files(root),  # demonstrations of another control mode, of no episode, of another view
         **_more_files(root, run, Path(demo_files(root)["empty_demos"])),
     }
 
@@ -693,6 +693,16 @@ TRAIN_SAC = [
         "algo.replay.demo_ratio=1.0: must be in (0, 1)",
     ),
     ("a negative image shift", ["algo.augment.shift=-1"], "algo.augment.shift=-1: must be >= 0 (pixels)"),
+    (
+        "camera demonstrations recorded without a camera",
+        ["cameras=wrist_depth", "model=cnn", "algo.demos={empty_demos}"],
+        "recorded with the images {}, this run's camera gives {'depth': [1, 64, 64]}",
+    ),
+    (
+        "camera demonstrations from another camera view",
+        ["cameras=wrist_depth", "model=cnn", "algo.demos={behind_demos}"],
+        "recorded with the camera view {'mount': 'wrist'",
+    ),
     (
         "an image replay buffer larger than the memory",
         ["cameras=wrist_depth", "model=cnn", "algo.replay.buffer_frames=1000000000"],
