@@ -44,6 +44,7 @@ from rlgrasp.stats import wilson_interval
 from rlgrasp.utils import pyplot
 
 ROOT = Path(__file__).resolve().parents[1]
+SUCCESS = "eval_success_rate"  # the CSV's column of each evaluation's success
 
 
 def run_seed(out: Path, tag: str, seed: int, minutes: float, experiment: str, overrides: list[str]) -> dict:
@@ -170,10 +171,7 @@ def main() -> None:
             )
 
     csv_path = args.out / f"{args.tag}.csv"
-    with open(csv_path, "w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(["tag", "seed", "minutes", "frames", "eval_success_rate"])
-        writer.writerows(rows)
+    rows = write_curves(csv_path, rows, args.seeds)
     plot(rows, args.out / f"{args.tag}.png", args.tag)
 
     print(f"\n{args.tag}: budget {args.minutes} min per seed")
@@ -205,6 +203,25 @@ def main() -> None:
 
 
 Curve = list[tuple[float, int, float]]  # (minutes from launch, frames, eval success)
+
+
+def write_curves(csv_path: Path, rows: list[tuple], seeds: list[int]) -> list[tuple]:
+    """Write ``rows`` to ``csv_path`` after the rows it holds of other seeds, and return them all:
+    a tag run again on another seed adds its curve instead of erasing the earlier seeds'."""
+    kept = []
+    if csv_path.is_file():
+        with open(csv_path, newline="") as f:
+            kept = [
+                (r["tag"], int(r["seed"]), float(r["minutes"]), int(r["frames"]), float(r[SUCCESS]))
+                for r in csv.DictReader(f)
+                if int(r["seed"]) not in seeds
+            ]
+    rows = [*kept, *rows]
+    with open(csv_path, "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["tag", "seed", "minutes", "frames", SUCCESS])
+        writer.writerows(rows)
+    return rows
 
 
 def first_at(curve: Curve, threshold: float) -> tuple[float, int] | None:

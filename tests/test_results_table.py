@@ -206,6 +206,17 @@ def test_bench_learning_composes_its_row():
     assert met(curves, held_out, 0.9, 0.9, target_frames=102400) == "met on 1 of 2"
 
 
+def test_a_tag_run_on_another_seed_keeps_the_earlier_seeds_curves(tmp_path):
+    write = bench("bench_learning")["write_curves"]
+    csv_path = tmp_path / "tag.csv"
+    write(csv_path, [("tag", 2, 1.5, 2048, 0.25), ("tag", 2, 3.0, 4096, 0.5)], [2])
+    rows = write(csv_path, [("tag", 0, 1.4, 2048, 0.0)], [0])
+    assert rows == [("tag", 2, 1.5, 2048, 0.25), ("tag", 2, 3.0, 4096, 0.5), ("tag", 0, 1.4, 2048, 0.0)]
+    rows = write(csv_path, [("tag", 2, 1.6, 2048, 0.75)], [2])  # a seed run again replaces its own
+    assert rows == [("tag", 0, 1.4, 2048, 0.0), ("tag", 2, 1.6, 2048, 0.75)]
+    assert csv_path.read_text().count("\n") == 3  # the header and both rows
+
+
 def test_bench_peer_composes_its_row():
     b = bench("bench_peer")
     ours = b["summary"](
