@@ -16,7 +16,11 @@ in-process, times one gradient step (``SAC._step``) for each torch thread count,
 learner's cost per env frame (a step's time x ``algo.optim.utd_ratio``) against the env's (one env stepped
 in this process with random actions, divided by the workers that step envs in parallel): the larger
 of the two bounds a run in which learner and workers overlap. The env figure leaves out the actor's
-and TorchRL's share of a worker's time, so the ceiling it implies is optimistic.
+and TorchRL's share of a worker's time, so the ceiling it implies is optimistic. ``--profile`` adds,
+on the last thread count, where a step goes: a camera's augment-and-encode (``SAC._inputs``) and
+the ops that take the most time (``torch.profiler``):
+
+    python benchmarks/bench_update.py --threads 2 --steps 20 --profile experiment=grasp_vision_sac_rgb_demos
 """
 
 from __future__ import annotations
@@ -95,9 +99,9 @@ def ppo_table(cfg: Any, batch: Any, args: argparse.Namespace) -> None:
                 print("| " + " | ".join(map(str, row)) + " |", flush=True)
 
 
-def sac_step_ms(cfg: Any, batch: Any, threads: int, steps: int) -> float:
-    """ms per gradient step of a fresh ``SAC`` whose replay holds ``batch`` (and whose normalizer
-    has seen it), after a few untimed steps."""
+def warm_sac(cfg: Any, batch: Any, threads: int) -> Any:
+    """A fresh ``SAC`` on ``threads`` torch threads whose replay holds ``batch`` (and whose
+    normalizer has seen it), after a few untimed steps."""
     from rlgrasp.algos.sac import SAC
 
     torch.set_num_threads(threads)
@@ -106,10 +110,39 @@ def sac_step_ms(cfg: Any, batch: Any, threads: int, steps: int) -> float:
     algo.store(batch.reshape(-1))  # a camera's images too
     for _ in range(3):  # warm-up: the optimizers' state, the allocator
         algo._step()
+    return algo
+
+
+def step_ms(algo: Any, steps: int) -> float:
+    """ms per gradient step of ``algo``, over ``steps`` steps."""
     t0 = time.perf_counter()
     for _ in range(steps):
         algo._step()
     return (time.perf_counter() - t0) / steps * 1000
+
+
+def sac_step_ms(cfg: Any, batch: Any, threads: int, steps: int) -> float:
+    """ms per gradient step of a fresh, warmed-up ``SAC`` (``warm_sac``)."""
+    return step_ms(warm_sac(cfg, batch, threads), steps)
+
+
+def sac_profile(cfg: Any, batch: Any, threads: int, steps: int) -> None:
+    """Print a gradient step's time, the share of it a camera's augmentation and encoding take
+    (``SAC._inputs``, timed on its own), and the ops that take the most time over 5 steps."""
+    from torch.profiler import ProfilerActivity, profile
+
+    algo = warm_sac(cfg, batch, threads)
+    samples = [algo._sample() for _ in range(steps)]
+    t0 = time.perf_counter()
+    for sample in samples:
+        algo._inputs(sample)
+    inputs_ms = (time.perf_counter() - t0) / steps * 1000
+    step = step_ms(algo, steps)
+    print(f"\n{threads} threads: {step:.1f} ms a gradient step, of it augment + encode {inputs_ms:.1f} ms")
+    with profile(activities=[ProfilerActivity.CPU]) as prof:
+        for _ in range(5):
+            algo._step()
+    print(prof.key_averages().table(sort_by="self_cpu_time_total", row_limit=12))
 
 
 def env_ms_per_frame(cfg: Any, steps: int) -> float:
@@ -165,6 +198,8 @@ def sac_table(cfg: Any, batch: Any, args: argparse.Namespace) -> None:
         f"The ceiling gives the learner and each of the {workers} workers a core of its own; on 2 cores "
         "they share them, and a worker also runs the actor and TorchRL's bookkeeping."
     )
+    if args.profile:
+        sac_profile(cfg, batch, args.threads[-1], args.steps)
 
 
 def main() -> None:
@@ -177,6 +212,7 @@ def main() -> None:
     parser.add_argument("--compile", action="store_true", help="PPO: also time the loss under torch.compile")
     parser.add_argument("--steps", type=int, default=50, help="SAC: timed gradient steps per thread count")
     parser.add_argument("--env-steps", type=int, default=500, help="SAC: timed steps of one env")
+    parser.add_argument("--profile", action="store_true", help="SAC: where a step goes (last thread count)")
     parser.add_argument("overrides", nargs="*", help="Hydra overrides (default experiment=grasp_ppo)")
     args = parser.parse_args()
 
