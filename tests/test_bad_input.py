@@ -88,6 +88,7 @@ def _files(root: Path) -> dict[str, str]:
     notamesh.write_text("this is not a mesh\n")
     notes = root / "notes.txt"
     notes.write_text("not a model")
+    demos = demo_files(root)  # demonstrations of another control mode, of no episode, of another view
     return {
         "run": str(run),
         "empty": str(empty),
@@ -97,8 +98,8 @@ def _files(root: Path) -> dict[str, str]:
         "notamesh": str(notamesh),
         "notes": str(notes),
         **bad_input_files(root),  # camera checkpoints: student, orphan, mismatched; the teacher
-        **demo_files(root),  # demonstrations of another control mode, of no episode, of another view
-        **_more_files(root, run, Path(demo_files(root)["empty_demos"])),
+        **demos,
+        **_more_files(root, run, Path(demos["empty_demos"])),
     }
 
 
