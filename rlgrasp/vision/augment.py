@@ -40,15 +40,18 @@ def recolour(
     x = rgb.reshape(-1, 3, shape[-2] * shape[-1]).float()
     n = x.shape[0]
     # Each image's recolouring is affine, x' = s M x + (1 - s) mean(M x), with M a permutation times
-    # the brightness gain and s the contrast: one batched product over the pixels does all of it.
+    # the brightness gain and s the contrast: three multiply-adds over the pixels do all of it (a
+    # batched product of 3x3 matrices, torch.bmm, took twice as long on a CPU: docs/algorithms.md).
     mix = torch.eye(3)[PERMUTATIONS[torch.randint(len(PERMUTATIONS), (n,), generator=generator)]]
     greyed = torch.rand(n, generator=generator) < grey
     mix[greyed] = LUMINANCE.expand(3, 3)
     mix *= torch.empty(n, 1, 1).uniform_(*brightness, generator=generator)
     spread = torch.empty(n, 1, 1).uniform_(*contrast, generator=generator)
     mean = torch.bmm(mix, x.mean(-1, keepdim=True)).mean(1, keepdim=True)
-    x = torch.baddbmm((1 - spread) * mean, spread * mix, x)
-    return x.clamp_(0, 255).reshape(shape)
+    gain = spread * mix  # gain[:, i, j]: how much input channel j adds to output channel i
+    out = gain[:, :, 0:1] * x[:, 0:1]
+    out.addcmul_(gain[:, :, 1:2], x[:, 1:2]).addcmul_(gain[:, :, 2:3], x[:, 2:3])
+    return out.add_((1 - spread) * mean).clamp_(0, 255).reshape(shape)
 
 
 def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator | None = None) -> torch.Tensor:
