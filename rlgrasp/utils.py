@@ -113,6 +113,30 @@ def _exit_without(parent: int) -> None:
     os._exit(1)
 
 
+# glibc's mallopt parameters (<malloc.h>) and the largest mmap threshold it takes on 64-bit.
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+_MMAP_THRESHOLD_MAX = 32 << 20
+
+
+def keep_freed_memory(trim_threshold: int = 256 << 20) -> bool:
+    """Have glibc serve blocks of up to 32 MiB from its heap and keep up to ``trim_threshold`` bytes
+    of freed memory, rather than map each large block afresh and hand it back when freed.
+
+    A camera learner allocates and frees tens of megabytes of image tensors every gradient step
+    (augmented copies, float conversions, activations); left to its defaults, glibc maps many of them
+    anew each time, and each fresh mapping is paid again in page faults (what that costs an RGB
+    step: docs/algorithms.md). Set at run time through ``mallopt`` so that no environment
+    variable is needed before the interpreter starts. False (and nothing changed) where the C library
+    is not glibc."""
+    try:
+        libc = ctypes.CDLL(None)
+        set_option = libc.mallopt
+    except (OSError, AttributeError):
+        return False
+    heap = set_option(_M_MMAP_THRESHOLD, _MMAP_THRESHOLD_MAX)
+    return bool(heap and set_option(_M_TRIM_THRESHOLD, trim_threshold))
+
+
 @contextlib.contextmanager
 def sigterm_as_interrupt() -> Iterator[list[int]]:
     """SIGTERM (``kill``, a scheduler) stops the command as Ctrl-C does, unwinding through a worker

@@ -40,7 +40,7 @@ from rlgrasp.train.parts import build_parts
 from rlgrasp.train.preemption import StopSignals
 from rlgrasp.train.resume import prepare_run
 from rlgrasp.train.warm_start import warm_start
-from rlgrasp.utils import flatten
+from rlgrasp.utils import flatten, keep_freed_memory
 
 #: Called after each evaluation with (frames, metrics); see ``train``.
 EvalCallback = Callable[[int, dict[str, float]], None]
@@ -106,6 +106,7 @@ class Trainer:
         self.algo: Algorithm = algorithm_class(cfg.algo)(cfg, self.parts, self.device)
         self.actor = self.algo.actor
         torch.set_num_threads(self.algo.learner_threads)
+        keep_freed_memory()  # the learner's per-step tensors reuse the heap (rlgrasp.utils)
 
         # --- counters, possibly resumed
         self.frames, self.generation = 0, 0
