@@ -17,8 +17,10 @@ learner's cost per env frame (a step's time x ``algo.optim.utd_ratio``) against 
 in this process with random actions, divided by the workers that step envs in parallel): the larger
 of the two bounds a run in which learner and workers overlap. The env figure leaves out the actor's
 and TorchRL's share of a worker's time, so the ceiling it implies is optimistic. ``--profile`` adds,
-on the last thread count, where a step goes: a camera's augment-and-encode (``SAC._inputs``) and
-the ops that take the most time (``torch.profiler``):
+on the last thread count, where a step goes: its parts timed one by one (sampling, a camera's
+augmenting and encoding, each loss, the optimizers) and the ops that take the most time
+(``torch.profiler``). Like training's learner, it keeps glibc's freed memory
+(``rlgrasp.utils.keep_freed_memory``); ``--malloc-defaults`` times it with the allocator as it starts:
 
     python benchmarks/bench_update.py --threads 2 --steps 20 --profile experiment=grasp_vision_sac_rgb_demos
 """
@@ -39,6 +41,7 @@ from rlgrasp.compose import compose_train
 from rlgrasp.train.collectors import collector_backend
 from rlgrasp.train.parts import build_parts
 from rlgrasp.train.ppo import PPOLearner
+from rlgrasp.utils import keep_freed_memory
 
 
 def collect(overrides: list[str], frames: int) -> tuple[Any, Any]:
@@ -126,19 +129,61 @@ def sac_step_ms(cfg: Any, batch: Any, threads: int, steps: int) -> float:
     return step_ms(warm_sac(cfg, batch, threads), steps)
 
 
+#: The parts of a gradient step that ``--profile`` times, each by the method that does it (on the
+#: learner, its TorchRL loss, its optimizers, its target updater). "augment" runs inside "augment +
+#: encode"; what no part names (the losses' backward, above all) is the step's remainder.
+STEP_PARTS = (
+    ("sample the minibatch", "", "_sample"),
+    ("augment + encode the images", "", "_inputs"),
+    ("  of it: augment", "", "_augmented"),
+    ("critics' loss (forward)", "loss", "qvalue_v2_loss"),
+    ("actor's loss (forward)", "loss", "actor_loss"),
+    ("optimizer steps", "optimizers", "step"),
+    ("target critics' update", "target_update", "step"),
+)
+
+
+def time_parts(algo: Any) -> dict[str, float]:
+    """Wrap each of ``STEP_PARTS`` on this learner instance (the benchmark's patch; training's
+    classes stay as they are) so that every call adds its seconds to the returned dict."""
+    seconds: dict[str, float] = {}
+
+    def wrap(owner: Any, method: str, label: str) -> None:
+        inner = getattr(owner, method)
+
+        def timed(*args: Any, **kwargs: Any) -> Any:
+            t0 = time.perf_counter()
+            try:
+                return inner(*args, **kwargs)
+            finally:
+                seconds[label] = seconds.get(label, 0.0) + time.perf_counter() - t0
+
+        setattr(owner, method, timed)
+
+    for label, attr, method in STEP_PARTS:
+        owners = getattr(algo, attr) if attr else algo
+        for owner in owners.values() if isinstance(owners, dict) else [owners]:
+            wrap(owner, method, label)
+    return seconds
+
+
 def sac_profile(cfg: Any, batch: Any, threads: int, steps: int) -> None:
-    """Print a gradient step's time, the share of it a camera's augmentation and encoding take
-    (``SAC._inputs``, timed on its own), and the ops that take the most time over 5 steps."""
+    """Print a gradient step's time part by part (``STEP_PARTS``), then the ops that take the most
+    time over 5 steps (``torch.profiler``)."""
     from torch.profiler import ProfilerActivity, profile
 
     algo = warm_sac(cfg, batch, threads)
-    samples = [algo._sample() for _ in range(steps)]
-    t0 = time.perf_counter()
-    for sample in samples:
-        algo._inputs(sample)
-    inputs_ms = (time.perf_counter() - t0) / steps * 1000
+    seconds = time_parts(algo)
     step = step_ms(algo, steps)
-    print(f"\n{threads} threads: {step:.1f} ms a gradient step, of it augment + encode {inputs_ms:.1f} ms")
+    print(f"\n{threads} threads: {step:.1f} ms a gradient step, over {steps} steps")
+    print("| part of the step | ms | share |\n|---|---|---|")
+    named = 0.0
+    for label, *_ in STEP_PARTS:
+        ms = seconds.get(label, 0.0) / steps * 1000
+        named += 0.0 if label.startswith(" ") else ms
+        print(f"| {label} | {ms:.1f} | {ms / step:.0%} |")
+    rest = step - named
+    print(f"| the rest: the losses' backward, bookkeeping | {rest:.1f} | {rest / step:.0%} |")
     with profile(activities=[ProfilerActivity.CPU]) as prof:
         for _ in range(5):
             algo._step()
@@ -213,8 +258,15 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=50, help="SAC: timed gradient steps per thread count")
     parser.add_argument("--env-steps", type=int, default=500, help="SAC: timed steps of one env")
     parser.add_argument("--profile", action="store_true", help="SAC: where a step goes (last thread count)")
+    parser.add_argument(
+        "--malloc-defaults",
+        action="store_true",
+        help="glibc's allocator as it starts (training's learner calls rlgrasp.utils.keep_freed_memory)",
+    )
     parser.add_argument("overrides", nargs="*", help="Hydra overrides (default experiment=grasp_ppo)")
     args = parser.parse_args()
+    if not args.malloc_defaults:
+        keep_freed_memory()
 
     overrides = args.overrides or ["experiment=grasp_ppo"]
     cfg = compose_train(overrides)
