@@ -373,6 +373,28 @@ def test_the_rgb_experiment_is_the_measured_overrides_of_the_camera_one() -> Non
     assert shipped.env.camera is not None and shipped.algo.augment.kind == "colour"
 
 
+def test_the_rgb_objects_experiment_is_the_measured_overrides_of_the_rgb_one() -> None:
+    """docs/algorithms.md measured the RGB learner on many objects as grasp_vision_sac_rgb_demos plus
+    these overrides (and bench_learning's time budget); grasp_objects_vision_sac_rgb_demos is that run."""
+    from omegaconf import OmegaConf
+
+    measured = compose_train(
+        [
+            "experiment=grasp_vision_sac_rgb_demos",
+            "objects=train_mix",
+            "algo.demos=demos/train_mix_wrist_rgb_behind/demos",
+            "algo.replay.buffer_frames=61440",
+            "total_frames=200000",
+            "algo.optim.utd_ratio=0.25",
+            "time_budget_min=30",
+        ]
+    )
+    shipped = compose_train(["experiment=grasp_objects_vision_sac_rgb_demos"])
+    measured.experiment_name = shipped.experiment_name
+    assert OmegaConf.to_container(shipped) == OmegaConf.to_container(measured)
+    assert shipped.algo.optim.utd_ratio == 0.25 and shipped.env.objects != compose_train([]).env.objects
+
+
 def test_the_auxiliary_head_keeps_its_targets_learns_without_a_privileged_critic_and_needs_a_camera(
     tmp_path: Path,
 ) -> None:
