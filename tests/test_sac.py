@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Any
 
 import pytest
 import torch
@@ -354,31 +355,37 @@ def test_replayed_rgb_images_are_recoloured_and_a_depth_camera_refuses_colour(tm
         _sac(tmp_path, *CAMERA, "algo.augment.kind=colour")
 
 
+def _shipped_as_measured(experiment: str, measured_overrides: list[str]) -> Any:
+    """``experiment`` composed, after asserting it equals the run the docs measured (its overrides)."""
+    from omegaconf import OmegaConf
+
+    measured = compose_train(measured_overrides)
+    shipped = compose_train([f"experiment={experiment}"])
+    measured.experiment_name = shipped.experiment_name
+    assert OmegaConf.to_container(shipped) == OmegaConf.to_container(measured)
+    return shipped
+
+
 def test_the_rgb_experiment_is_the_measured_overrides_of_the_camera_one() -> None:
     """docs/algorithms.md measured the RGB learner as grasp_vision_sac_demos plus these overrides;
     grasp_vision_sac_rgb_demos must stay that run, so its figures hold for it."""
-    from omegaconf import OmegaConf
-
-    measured = compose_train(
+    shipped = _shipped_as_measured(
+        "grasp_vision_sac_rgb_demos",
         [
             "experiment=grasp_vision_sac_demos",
             "cameras=wrist_rgb_behind",
             "algo.demos=demos/cube_yaw_wrist_rgb_behind/demos",
             "algo.augment.kind=colour",
-        ]
+        ],
     )
-    shipped = compose_train(["experiment=grasp_vision_sac_rgb_demos"])
-    measured.experiment_name = shipped.experiment_name
-    assert OmegaConf.to_container(shipped) == OmegaConf.to_container(measured)
     assert shipped.env.camera is not None and shipped.algo.augment.kind == "colour"
 
 
 def test_the_rgb_objects_experiment_is_the_measured_overrides_of_the_rgb_one() -> None:
     """docs/algorithms.md measured the RGB learner on many objects as grasp_vision_sac_rgb_demos plus
     these overrides (and bench_learning's time budget); grasp_objects_vision_sac_rgb_demos is that run."""
-    from omegaconf import OmegaConf
-
-    measured = compose_train(
+    shipped = _shipped_as_measured(
+        "grasp_objects_vision_sac_rgb_demos",
         [
             "experiment=grasp_vision_sac_rgb_demos",
             "objects=train_mix",
@@ -387,11 +394,8 @@ def test_the_rgb_objects_experiment_is_the_measured_overrides_of_the_rgb_one() -
             "total_frames=200000",
             "algo.optim.utd_ratio=0.25",
             "time_budget_min=30",
-        ]
+        ],
     )
-    shipped = compose_train(["experiment=grasp_objects_vision_sac_rgb_demos"])
-    measured.experiment_name = shipped.experiment_name
-    assert OmegaConf.to_container(shipped) == OmegaConf.to_container(measured)
     assert shipped.algo.optim.utd_ratio == 0.25 and shipped.env.objects != compose_train([]).env.objects
 
 
