@@ -303,6 +303,9 @@ class ReplayAugmentConfig:
     shift: int = 4
     kind: str = "none"  # none | colour (RGB only: channels permuted, brightness and contrast scaled)
     grey: float = 0.0  # with kind=colour: the share of replayed images made grey
+    # RGB: each replayed image blended with a training-texture pattern at a weight drawn in [0, overlay]
+    # (not the next images, the targets'); 0: none
+    overlay: float = 0.0
 
 
 #: The losses that may train a camera SAC's image encoders (``algo.encoder.trained_by``).
@@ -461,6 +464,7 @@ class ImageAugmentConfig:
     kind: str = "none"  # none | colour (RGB only: channels permuted, brightness and contrast scaled)
     grey: float = 0.0  # with kind=colour: the share of training images made grey
     shift: int = 0  # each training image moved by up to this many pixels (0: not moved)
+    overlay: float = 0.0  # RGB: each blended with a training-texture pattern, weight drawn in [0, overlay]
 
 
 @dataclass
@@ -1164,7 +1168,7 @@ def _distill_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
 
 
 def _colour_checks(aug: Any) -> list[tuple[str, Any, bool, str]]:
-    """``algo.augment.kind`` and ``grey``, the same for a DAgger student and a camera SAC."""
+    """``algo.augment.kind``, ``grey`` and ``overlay``, the same for a DAgger student and a camera SAC."""
     return [
         (
             "algo.augment.kind",
@@ -1178,6 +1182,7 @@ def _colour_checks(aug: Any) -> list[tuple[str, Any, bool, str]]:
             0 <= aug.grey <= 1 and (aug.grey == 0 or aug.kind == "colour"),
             "must be in [0, 1], and 0 unless algo.augment.kind=colour",
         ),
+        ("algo.augment.overlay", aug.overlay, 0 <= aug.overlay <= 1, "must be in [0, 1] (0: no overlay)"),
     ]
 
 

@@ -229,6 +229,7 @@ def test_a_ppo_checkpoint_is_not_resumed_as_sac(tmp_path: Path) -> None:
             "algo.augment.grey=0.5",
             "algo.augment.grey=0.5: must be in [0, 1], and 0 unless algo.augment.kind=colour",
         ),
+        ("algo.augment.overlay=1.5", "algo.augment.overlay=1.5: must be in [0, 1] (0: no overlay)"),
         ("algo.learner_threads=0", "algo.learner_threads=0: must be >= 1 or null (every core)"),
         ("algo.encoder.trained_by=images", "algo.encoder.trained_by='images': must be critic, actor or both"),
         ("algo.terms.imitation.coeff=-1", "algo.terms.imitation.coeff=-1.0: must be finite and >= 0"),
@@ -343,9 +344,9 @@ def test_replayed_rgb_images_are_recoloured_and_a_depth_camera_refuses_colour(tm
     student's, rlgrasp/vision/augment.py) on top of its shift; a camera without RGB says so."""
     rgb = [*CAMERA, "cameras=wrist_rgb", "algo.augment.shift=0"]
     images = torch.randint(0, 256, (64, 3, 64, 64), dtype=torch.uint8)
-    plain = _sac(tmp_path, *rgb)._augmented(images, "rgb")
+    plain = _sac(tmp_path, *rgb)._augmented(images, "rgb", target=False)
     assert plain is images  # no shift, no colour: the replayed images as stored
-    recoloured = _sac(tmp_path, *rgb, "algo.augment.kind=colour")._augmented(images, "rgb")
+    recoloured = _sac(tmp_path, *rgb, "algo.augment.kind=colour")._augmented(images, "rgb", target=False)
     assert recoloured.shape == images.shape and recoloured.is_floating_point()
     changed = (recoloured - images.float()).abs().flatten(1).amax(1) > 1
     assert changed.float().mean() > 0.5  # most images moved (an identity draw leaves a few near)
@@ -353,6 +354,22 @@ def test_replayed_rgb_images_are_recoloured_and_a_depth_camera_refuses_colour(tm
         ConfigError, match=r"^algo\.augment\.kind=colour: recolours RGB images; needs a camera"
     ):
         _sac(tmp_path, *CAMERA, "algo.augment.kind=colour")
+
+
+def test_overlay_blends_the_images_the_losses_read_not_the_targets_next_images(tmp_path: Path) -> None:
+    """``algo.augment.overlay``: each replayed RGB image blended with a pattern at its own weight; the
+    next images, which the target values are computed from, stay as stored (SVEA's clean targets)."""
+    rgb = [*CAMERA, "cameras=wrist_rgb", "algo.augment.shift=0"]
+    images = torch.randint(0, 256, (64, 3, 64, 64), dtype=torch.uint8)
+    sac = _sac(tmp_path, *rgb, "algo.augment.overlay=0.5")
+    overlaid = sac._augmented(images, "rgb", target=False)
+    moved = (overlaid - images.float()).abs().flatten(1).mean(1)
+    assert overlaid.shape == images.shape and (moved > 0).float().mean() > 0.9
+    assert moved.std() > 0.1 * moved.mean()  # a weight per image, not one for the batch
+    assert sac._augmented(images, "rgb", target=True) is images
+    refused = r"^algo\.augment\.overlay=0\.5: overlays RGB images; needs a camera"
+    with pytest.raises(ConfigError, match=refused):
+        _sac(tmp_path, *CAMERA, "algo.augment.overlay=0.5")
 
 
 def _shipped_as_measured(experiment: str, measured_overrides: list[str]) -> Any:

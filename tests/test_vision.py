@@ -12,7 +12,7 @@ from torchrl.objectives import BCLoss
 from rlgrasp.config import ConfigError
 from rlgrasp.models.cnn import SpatialSoftmax, actor_norm, average_weights, build_vision_actor
 from rlgrasp.train.checkpoint import CheckpointError
-from rlgrasp.vision.augment import augment, random_shift, recolour
+from rlgrasp.vision.augment import augment, overlay, overlay_bank, random_shift, recolour
 from rlgrasp.vision.auxiliary import ObjectFromImages
 from rlgrasp.vision.dagger import LABEL_KEY, DAggerPolicy, LabelledFrames, PrivilegedTeacher, load_teacher
 
@@ -206,6 +206,29 @@ def test_random_shift_moves_each_image_by_whole_pixels_and_repeats_the_border():
         assert torch.equal(after, before[:, rows][:, :, cols])
         offsets.add(found[0])
     assert len(offsets) > 10  # drawn per image, not once per batch
+
+
+def test_overlay_blends_each_image_toward_a_pattern_of_the_bank_by_its_own_weight():
+    rgb = torch.full((200, 3, 8, 8), 128, dtype=torch.uint8)
+    bank = overlay_bank(8, 8)
+    assert bank.shape == (512, 3, 8, 8) and bank.float().std() > 20  # patterns, not a flat colour
+    out = overlay(rgb, 0.5, torch.Generator().manual_seed(0))
+    assert out.is_floating_point() and out.shape == rgb.shape
+    # Each image is 128 + w (p - 128): one pattern p of the bank, one weight w in [0, 0.5].
+    offsets = (bank.float() - 128.0).flatten(1)
+    offsets = offsets[(offsets * offsets).sum(1) > 0]
+    for image in out[:20]:
+        moved = (image - 128.0).flatten()
+        weights = offsets @ moved / (offsets * offsets).sum(1)
+        errors = (moved - weights[:, None] * offsets).abs().amax(1)
+        best = int(errors.argmin())
+        assert errors[best] < 1e-2 and -1e-4 <= weights[best] <= 0.5 + 1e-4
+    strengths = (out - 128.0).abs().flatten(1).mean(1)
+    assert strengths.std() > 0.1 * strengths.mean()  # drawn per image
+    sample = frames(4)
+    depth = sample["depth"].clone()
+    overlaid = augment(sample, "none", overlay_strength=0.5)
+    assert overlaid["depth"].equal(depth) and overlaid["rgb"].is_floating_point()  # RGB only
 
 
 def test_augment_shifts_depth_and_rgb_images():

@@ -131,6 +131,11 @@ class SAC(Algorithm):
                 f"algo.augment.kind={a.augment.kind}: recolours RGB images; needs a camera with RGB "
                 "(e.g. cameras=wrist_rgb)"
             )
+        if a.augment.get("overlay", 0.0) > 0 and "rgb" not in self.images:
+            raise ConfigError(
+                f"algo.augment.overlay={a.augment.overlay}: overlays RGB images; needs a camera with RGB "
+                "(e.g. cameras=wrist_rgb)"
+            )
         self.demos = self._demos() if a.get("demos") else None
         bc_on = self.demos is not None and a.terms.imitation.coeff > 0
         self.bc = mse_bc_loss(self._loss_actor()) if bc_on else None
@@ -341,12 +346,12 @@ class SAC(Algorithm):
         trained_by = self.cfg.algo.encoder.trained_by
         net = vision_net(self.actor)
 
-        def encode(td: TensorDictBase) -> torch.Tensor:
-            return net.encode(*(self._augmented(td[k], k) for k in self.images))
+        def encode(td: TensorDictBase, target: bool) -> torch.Tensor:
+            return net.encode(*(self._augmented(td[k], k, target) for k in self.images))
 
-        features = encode(sample)
+        features = encode(sample, target=False)
         with torch.no_grad():
-            next_features = encode(sample["next"])
+            next_features = encode(sample["next"], target=True)
         for_critic = sample.clone(False)
         for_critic[FEATURES_KEY] = features if trained_by != "actor" else features.detach()
         for_critic[ACTOR_FEATURES_KEY] = features
@@ -357,11 +362,14 @@ class SAC(Algorithm):
         for_actor[ACTOR_FEATURES_KEY] = features if trained_by != "critic" else features.detach()
         return for_critic, for_actor
 
-    def _augmented(self, images: torch.Tensor, key: str) -> torch.Tensor:
-        """Replayed images as the encoders learn from them: each shifted (``algo.augment.shift``) and,
-        RGB with ``algo.augment.kind=colour``, recoloured; each image its own draw."""
+    def _augmented(self, images: torch.Tensor, key: str, target: bool) -> torch.Tensor:
+        """Replayed images as the encoders learn from them: each shifted (``algo.augment.shift``),
+        RGB ones overlaid with patterns (``algo.augment.overlay``; not the ``target``'s next images,
+        whose values the losses regress onto) and, with ``algo.augment.kind=colour``, recoloured;
+        each image its own draw."""
         aug = self.cfg.algo.augment
-        return augment_images(images, key, aug.kind, aug.grey, aug.shift)
+        overlay_strength = 0.0 if target else aug.get("overlay", 0.0)
+        return augment_images(images, key, aug.kind, aug.grey, aug.shift, overlay_strength)
 
     def trained_parameters(self) -> list[torch.nn.Parameter]:
         critics = _trainable(self.loss.qvalue_network_params)

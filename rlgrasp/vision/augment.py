@@ -15,15 +15,27 @@ border repeated: the random shift of DrQ (Kostrikov et al. 2020), so that an enc
 where in the image an edge lies (measured on the objects students, depth and RGB: no gain in
 success, docs/benchmarks/cameras.md). Hand-written: TorchRL's image transforms crop every image of a
 batch alike, and a shift must be drawn per image.
+
+``overlay`` (RGB) blends each training image with a pattern from a bank of the training texture
+generators' (never the held-out rings), at a weight drawn per image in ``[0, overlay]``: SODA's and
+SVEA's overlay (Hansen et al. 2021), procedural patterns standing in for their natural images, so
+that strong edges and colours anywhere in the image, not only the ground texture cells an episode
+happens to show, stop looking like the object. A camera SAC overlays the images its losses read and
+not the next images the targets are computed from (SVEA's clean targets).
 """
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import torch
 from tensordict import TensorDictBase
 
+from rlgrasp.envs.visuals import VISUAL_PRESETS, repaint_patterns
+
 PERMUTATIONS = torch.tensor([[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]])
 LUMINANCE = torch.tensor([0.299, 0.587, 0.114])  # ITU-R BT.601 weights, as PIL's convert("L")
+OVERLAY_PATTERNS = 256  # in the bank, each also flipped left to right
 
 
 def recolour(
@@ -66,22 +78,53 @@ def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator | No
     return images.reshape(n, channels, -1).gather(2, source).reshape(images.shape)
 
 
+@lru_cache(maxsize=4)
+def overlay_bank(height: int, width: int) -> torch.Tensor:
+    """``[2 * OVERLAY_PATTERNS, 3, height, width]`` patterns in the training visuals' hues, float in
+    0-255 (converted once, not per step), made once per image size (the same bank in every run)."""
+    hues = VISUAL_PRESETS["default"].hues
+    bank = torch.from_numpy(repaint_patterns((height, width), hues, OVERLAY_PATTERNS)).float()
+    return torch.cat([bank, bank.flip(-1)])
+
+
+def overlay(rgb: torch.Tensor, strength: float, generator: torch.Generator | None = None) -> torch.Tensor:
+    """``[..., 3k, H, W]`` images (``k`` stacked frames), each blended with a pattern of the bank:
+    ``(1 - w) x + w p``, ``w`` drawn per image in ``[0, strength]``; float out, in 0-255."""
+    shape = rgb.shape
+    x = rgb.reshape(-1, 3, shape[-2], shape[-1]).float()
+    bank = overlay_bank(shape[-2], shape[-1])
+    n = x.shape[0]
+    pattern = bank[torch.randint(len(bank), (n,), generator=generator)]
+    weight = torch.empty(n, 1, 1, 1).uniform_(0.0, strength, generator=generator)
+    return torch.lerp(x, pattern, weight).reshape(shape)  # a new tensor: float input is not changed
+
+
 def augment_images(
-    images: torch.Tensor, key: str, kind: str, grey: float = 0.0, shift: int = 0
+    images: torch.Tensor,
+    key: str,
+    kind: str,
+    grey: float = 0.0,
+    shift: int = 0,
+    overlay_strength: float = 0.0,
 ) -> torch.Tensor:
-    """One batch of ``key`` images (``depth`` or ``rgb``) shifted (``shift`` pixels) and, RGB with
-    ``kind="colour"``, recoloured; each image its own draw."""
+    """One batch of ``key`` images (``depth`` or ``rgb``) shifted (``shift`` pixels) and, RGB,
+    overlaid with patterns (``overlay_strength`` > 0) and, with ``kind="colour"``, recoloured; each
+    image its own draw."""
     if shift > 0:
         images = random_shift(images, shift)
+    if overlay_strength > 0 and key == "rgb":
+        images = overlay(images, overlay_strength)
     if kind == "colour" and key == "rgb":
         images = recolour(images, grey=grey)
     return images
 
 
-def augment(sample: TensorDictBase, kind: str, grey: float = 0.0, shift: int = 0) -> TensorDictBase:
+def augment(
+    sample: TensorDictBase, kind: str, grey: float = 0.0, shift: int = 0, overlay_strength: float = 0.0
+) -> TensorDictBase:
     """A minibatch with its images shifted (``shift`` pixels; depth and RGB) and its RGB images
-    recoloured (``kind="colour"``)."""
+    overlaid (``overlay_strength``) and recoloured (``kind="colour"``)."""
     for key in ("depth", "rgb"):
         if key in sample.keys():
-            sample[key] = augment_images(sample[key], key, kind, grey, shift)
+            sample[key] = augment_images(sample[key], key, kind, grey, shift, overlay_strength)
     return sample

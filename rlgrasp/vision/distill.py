@@ -87,7 +87,8 @@ class DAgger(Algorithm):
             group["lr"] = lr
         total, aux_total = 0.0, 0.0
         for _ in range(steps):
-            sample = augment(self.data.sample(), a.augment.kind, a.augment.grey, a.augment.shift)
+            aug = a.augment
+            sample = augment(self.data.sample(), aug.kind, aug.grey, aug.shift, aug.get("overlay", 0.0))
             sample["action"] = sample[LABEL_KEY]
             with set_exploration_type(ExplorationType.DETERMINISTIC):
                 loss = self.loss(sample)["loss_bc"]
