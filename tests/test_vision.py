@@ -231,6 +231,15 @@ def test_overlay_blends_each_image_toward_a_pattern_of_the_bank_by_its_own_weigh
     assert overlaid["depth"].equal(depth) and overlaid["rgb"].is_floating_point()  # RGB only
 
 
+def test_augmentations_stay_on_the_images_device():
+    """A camera SAC's replay, and so its images, live on ``device`` (CUDA when present) while the
+    random draws are made on the CPU's generator: the meta device stands in for a GPU here (no
+    machine in CI has one), and refuses a CPU operand the same way."""
+    images = torch.zeros(4, 3, 8, 8, dtype=torch.uint8, device="meta")
+    for augmented in (random_shift(images, 2), recolour(images, grey=0.5), overlay(images, 0.5)):
+        assert augmented.device == images.device and augmented.shape == images.shape
+
+
 def test_augment_shifts_depth_and_rgb_images():
     sample = frames(32)
     depth, rgb = sample["depth"].clone(), sample["rgb"].clone()

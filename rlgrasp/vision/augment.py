@@ -54,11 +54,13 @@ def recolour(
     # Each image's recolouring is affine, x' = s M x + (1 - s) mean(M x), with M a permutation times
     # the brightness gain and s the contrast: three multiply-adds over the pixels do all of it (a
     # batched product of 3x3 matrices, torch.bmm, is slow on a CPU: docs/algorithms.md).
+    # The draws are made on the CPU, where ``generator`` lives, and moved to the images' device.
     mix = torch.eye(3)[PERMUTATIONS[torch.randint(len(PERMUTATIONS), (n,), generator=generator)]]
     greyed = torch.rand(n, generator=generator) < grey
     mix[greyed] = LUMINANCE.expand(3, 3)
     mix *= torch.empty(n, 1, 1).uniform_(*brightness, generator=generator)
     spread = torch.empty(n, 1, 1).uniform_(*contrast, generator=generator)
+    mix, spread = mix.to(x.device), spread.to(x.device)
     mean = torch.bmm(mix, x.mean(-1, keepdim=True)).mean(1, keepdim=True)
     gain = spread * mix  # gain[:, i, j]: how much input channel j adds to output channel i
     out = gain[:, :, 0:1] * x[:, 0:1]
@@ -70,21 +72,23 @@ def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator | No
     """``[N, C, H, W]`` images (any dtype), each moved by whole pixels drawn in [-pad, pad] per axis
     and per image; the pixels shifted in repeat the border."""
     n, channels, height, width = images.shape
-    offsets = torch.randint(2 * pad + 1, (2, n), generator=generator) - pad
-    rows = (torch.arange(height) + offsets[0, :, None]).clamp_(0, height - 1)
-    cols = (torch.arange(width) + offsets[1, :, None]).clamp_(0, width - 1)
+    device = images.device
+    offsets = (torch.randint(2 * pad + 1, (2, n), generator=generator) - pad).to(device)
+    rows = (torch.arange(height, device=device) + offsets[0, :, None]).clamp_(0, height - 1)
+    cols = (torch.arange(width, device=device) + offsets[1, :, None]).clamp_(0, width - 1)
     # One gather over the flattened pixels: several times faster than padding, then cropping each image.
     source = (rows[:, :, None] * width + cols[:, None, :]).reshape(n, 1, -1).expand(n, channels, -1)
     return images.reshape(n, channels, -1).gather(2, source).reshape(images.shape)
 
 
 @lru_cache(maxsize=4)
-def overlay_bank(height: int, width: int) -> torch.Tensor:
+def overlay_bank(height: int, width: int, device: torch.device | str = "cpu") -> torch.Tensor:
     """``[2 * OVERLAY_PATTERNS, 3, height, width]`` patterns in the training visuals' hues, float in
-    0-255 (converted once, not per step), made once per image size (the same bank in every run)."""
+    0-255 (converted once, not per step), made once per image size and device (the same bank in
+    every run)."""
     hues = VISUAL_PRESETS["default"].hues
     bank = torch.from_numpy(repaint_patterns((height, width), hues, OVERLAY_PATTERNS)).float()
-    return torch.cat([bank, bank.flip(-1)])
+    return torch.cat([bank, bank.flip(-1)]).to(device)
 
 
 def overlay(rgb: torch.Tensor, strength: float, generator: torch.Generator | None = None) -> torch.Tensor:
@@ -92,10 +96,10 @@ def overlay(rgb: torch.Tensor, strength: float, generator: torch.Generator | Non
     ``(1 - w) x + w p``, ``w`` drawn per image in ``[0, strength]``; float out, in 0-255."""
     shape = rgb.shape
     x = rgb.reshape(-1, 3, shape[-2], shape[-1]).float()
-    bank = overlay_bank(shape[-2], shape[-1])
+    bank = overlay_bank(shape[-2], shape[-1], x.device)
     n = x.shape[0]
-    pattern = bank[torch.randint(len(bank), (n,), generator=generator)]
-    weight = torch.empty(n, 1, 1, 1).uniform_(0.0, strength, generator=generator)
+    pattern = bank[torch.randint(len(bank), (n,), generator=generator).to(x.device)]
+    weight = torch.empty(n, 1, 1, 1).uniform_(0.0, strength, generator=generator).to(x.device)
     return torch.lerp(x, pattern, weight).reshape(shape)  # a new tensor: float input is not changed
 
 
