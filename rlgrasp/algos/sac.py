@@ -126,16 +126,14 @@ class SAC(Algorithm):
         self.optimizers = self._optimizers(a.optim)
         if self.images:
             _check_replay_memory(a.replay, parts.spec, self.transition_keys)
-        if a.augment.kind != "none" and "rgb" not in self.images:
-            raise ConfigError(
-                f"algo.augment.kind={a.augment.kind}: recolours RGB images; needs a camera with RGB "
-                "(e.g. cameras=wrist_rgb)"
-            )
-        if a.augment.get("overlay", 0.0) > 0 and "rgb" not in self.images:
-            raise ConfigError(
-                f"algo.augment.overlay={a.augment.overlay}: overlays RGB images; needs a camera with RGB "
-                "(e.g. cameras=wrist_rgb)"
-            )
+        aug = a.augment
+        rgb_only = {"kind": (aug.kind != "none", "recolours"), "overlay": (aug.overlay > 0, "overlays")}
+        for key, (asked, what) in rgb_only.items():
+            if asked and "rgb" not in self.images:
+                raise ConfigError(
+                    f"algo.augment.{key}={aug[key]}: {what} RGB images; needs a camera with RGB "
+                    "(e.g. cameras=wrist_rgb)"
+                )
         self.demos = self._demos() if a.get("demos") else None
         bc_on = self.demos is not None and a.terms.imitation.coeff > 0
         self.bc = mse_bc_loss(self._loss_actor()) if bc_on else None
@@ -368,7 +366,7 @@ class SAC(Algorithm):
         whose values the losses regress onto) and, with ``algo.augment.kind=colour``, recoloured;
         each image its own draw."""
         aug = self.cfg.algo.augment
-        overlay_strength = 0.0 if target else aug.get("overlay", 0.0)
+        overlay_strength = 0.0 if target else aug.overlay
         return augment_images(images, key, aug.kind, aug.grey, aug.shift, overlay_strength)
 
     def trained_parameters(self) -> list[torch.nn.Parameter]:

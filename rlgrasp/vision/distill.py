@@ -88,7 +88,7 @@ class DAgger(Algorithm):
         total, aux_total = 0.0, 0.0
         for _ in range(steps):
             aug = a.augment
-            sample = augment(self.data.sample(), aug.kind, aug.grey, aug.shift, aug.get("overlay", 0.0))
+            sample = augment(self.data.sample(), aug.kind, aug.grey, aug.shift, aug.overlay)
             sample["action"] = sample[LABEL_KEY]
             with set_exploration_type(ExplorationType.DETERMINISTIC):
                 loss = self.loss(sample)["loss_bc"]
