@@ -941,9 +941,9 @@ def _algo_checks(a: Any, batch: int, camera: Any) -> list[tuple[str, Any, bool, 
     if a.name == "ppo":
         return [*_ppo_checks(a, batch), *_ppo_term_checks(a, camera)]
     if a.name == "distill":
-        return _distill_checks(a)
+        return _distill_checks(a, camera)
     if a.name == "sac":
-        return [*_sac_checks(a), *_sac_demo_checks(a)]
+        return [*_sac_checks(a, camera), *_sac_demo_checks(a)]
     return [
         ("algo.name", a.name, False, "must be ppo, sac or distill (the algo group: algo=ppo|sac|distill)")
     ]
@@ -963,7 +963,7 @@ def _learner_threads_check(a: Any) -> tuple[str, Any, bool, str]:
     )
 
 
-def _sac_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
+def _sac_checks(a: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
     """SAC's keys: a ratio > 0, a buffer that holds a minibatch, rates > 0."""
     o, r, c = a.optim, a.replay, a.critic
     rates = [("optim", "actor_lr"), ("optim", "critic_lr"), ("optim", "alpha_lr"), ("loss", "alpha_init")]
@@ -1004,7 +1004,7 @@ def _sac_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
             "must be tanh, relu or elu",
         ),
         ("algo.augment.shift", a.augment.shift, a.augment.shift >= 0, "must be >= 0 (pixels)"),
-        *_colour_checks(a.augment),
+        *_colour_checks(a.augment, camera),
         (
             "algo.encoder.trained_by",
             a.encoder.trained_by,
@@ -1139,7 +1139,7 @@ def _rnd_checks(rnd: Any, state: bool) -> list[tuple[str, Any, bool, str]]:
     ]
 
 
-def _distill_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
+def _distill_checks(a: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
     o, s, aug = a.optim, a.schedule, a.augment
     return [
         ("algo.optim.epochs", o.epochs, o.epochs >= 1, "must be >= 1"),
@@ -1162,13 +1162,17 @@ def _distill_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
             a.terms.aux.coeff >= 0,
             "must be >= 0 (0: no auxiliary task)",
         ),
-        *_colour_checks(aug),
+        *_colour_checks(aug, camera),
         ("algo.augment.shift", aug.shift, 0 <= aug.shift <= 16, "must be in [0, 16] pixels"),
     ]
 
 
-def _colour_checks(aug: Any) -> list[tuple[str, Any, bool, str]]:
-    """``algo.augment.kind``, ``grey`` and ``overlay``, the same for a DAgger student and a camera SAC."""
+def _colour_checks(aug: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
+    """``algo.augment.kind``, ``grey`` and ``overlay``, the same for a DAgger student and a camera SAC:
+    the colour augmentations and the overlay change RGB images only, so a camera without RGB refuses
+    them rather than train without them."""
+    rgb = bool(camera) and camera.get("modality", "depth") in ("rgb", "rgbd")
+    needs_rgb = "needs a camera with RGB (e.g. cameras=wrist_rgb)"
     return [
         (
             "algo.augment.kind",
@@ -1176,6 +1180,7 @@ def _colour_checks(aug: Any) -> list[tuple[str, Any, bool, str]]:
             aug.kind in AUGMENTATIONS,
             f"must be one of {', '.join(AUGMENTATIONS)}",
         ),
+        ("algo.augment.kind", aug.kind, aug.kind == "none" or rgb, f"recolours RGB images; {needs_rgb}"),
         (
             "algo.augment.grey",
             aug.grey,
@@ -1183,6 +1188,7 @@ def _colour_checks(aug: Any) -> list[tuple[str, Any, bool, str]]:
             "must be in [0, 1], and 0 unless algo.augment.kind=colour",
         ),
         ("algo.augment.overlay", aug.overlay, 0 <= aug.overlay <= 1, "must be in [0, 1] (0: no overlay)"),
+        ("algo.augment.overlay", aug.overlay, aug.overlay == 0 or rgb, f"overlays RGB images; {needs_rgb}"),
     ]
 
 

@@ -132,6 +132,8 @@ BAD_ARM = (
     "grasp_link:panda_grasptarget,fingers:[{joint:panda_finger_joint1,open:0.04}],finger_links:[panda_leftfinger,panda_rightfinger],"
     "neutral_pose:[0,0],max_finger_width:0.08"
 )
+#: A DAgger depth student of the test's teacher.
+DEPTH_STUDENT = ["algo=distill", "cameras=wrist_depth", "model=cnn", "algo.teacher={teacher}"]
 # (entry point, what, arguments after BASE (placeholders filled by _fill), a fragment of the one line)
 TRAIN = [
     ("unknown key", ["algo.lrr=1"], "algo.lrr=1: unknown key 'lrr'; algo has _target_, name, loss, optim"),
@@ -145,6 +147,16 @@ TRAIN = [
         "a string key of before that is a group now",
         ["algo=distill", "cameras=wrist_depth", "model=cnn", "algo.teacher={teacher}", "algo.augment=colour"],
         "algo.augment is algo.augment.kind now",
+    ),
+    (
+        "a DAgger student's colour augmentation on a depth camera",
+        [*DEPTH_STUDENT, "algo.augment.kind=colour"],
+        "algo.augment.kind='colour': recolours RGB images; needs a camera with RGB (e.g. cameras=wrist_rgb)",
+    ),
+    (
+        "a DAgger student's overlay on a depth camera",
+        [*DEPTH_STUDENT, "algo.augment.overlay=0.5"],
+        "algo.augment.overlay=0.5: overlays RGB images; needs a camera with RGB (e.g. cameras=wrist_rgb)",
     ),
     (
         "new key of an open node",

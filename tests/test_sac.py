@@ -341,7 +341,8 @@ def test_the_actor_may_train_the_encoder_and_the_critic_then_reads_its_features_
 
 def test_replayed_rgb_images_are_recoloured_and_a_depth_camera_refuses_colour(tmp_path: Path) -> None:
     """``algo.augment.kind=colour``: each replayed RGB image its own recolouring (as a DAgger
-    student's, rlgrasp/vision/augment.py) on top of its shift; a camera without RGB says so."""
+    student's, rlgrasp/vision/augment.py) on top of its shift; a camera without RGB refuses it when the
+    config is checked, before anything is built."""
     rgb = [*CAMERA, "cameras=wrist_rgb", "algo.augment.shift=0"]
     images = torch.randint(0, 256, (64, 3, 64, 64), dtype=torch.uint8)
     plain = _sac(tmp_path, *rgb)._augmented(images, "rgb", target=False)
@@ -350,10 +351,9 @@ def test_replayed_rgb_images_are_recoloured_and_a_depth_camera_refuses_colour(tm
     assert recoloured.shape == images.shape and recoloured.is_floating_point()
     changed = (recoloured - images.float()).abs().flatten(1).amax(1) > 1
     assert changed.float().mean() > 0.5  # most images moved (an identity draw leaves a few near)
-    with pytest.raises(
-        ConfigError, match=r"^algo\.augment\.kind=colour: recolours RGB images; needs a camera"
-    ):
-        _sac(tmp_path, *CAMERA, "algo.augment.kind=colour")
+    refused = r"^algo\.augment\.kind='colour': recolours RGB images; needs a camera with RGB"
+    with pytest.raises(ConfigError, match=refused):
+        validate_train(compose_train([*SMALL, *CAMERA, "algo.augment.kind=colour"]))
 
 
 def test_overlay_blends_the_images_the_losses_read_not_the_targets_next_images(tmp_path: Path) -> None:
@@ -367,9 +367,9 @@ def test_overlay_blends_the_images_the_losses_read_not_the_targets_next_images(t
     assert overlaid.shape == images.shape and (moved > 0).float().mean() > 0.9
     assert moved.std() > 0.1 * moved.mean()  # a weight per image, not one for the batch
     assert sac._augmented(images, "rgb", target=True) is images
-    refused = r"^algo\.augment\.overlay=0\.5: overlays RGB images; needs a camera"
+    refused = r"^algo\.augment\.overlay=0\.5: overlays RGB images; needs a camera with RGB"
     with pytest.raises(ConfigError, match=refused):
-        _sac(tmp_path, *CAMERA, "algo.augment.overlay=0.5")
+        validate_train(compose_train([*SMALL, *CAMERA, "algo.augment.overlay=0.5"]))
 
 
 def _shipped_as_measured(experiment: str, measured_overrides: list[str]) -> Any:

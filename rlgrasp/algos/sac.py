@@ -126,14 +126,6 @@ class SAC(Algorithm):
         self.optimizers = self._optimizers(a.optim)
         if self.images:
             _check_replay_memory(a.replay, parts.spec, self.transition_keys)
-        aug = a.augment
-        rgb_only = {"kind": (aug.kind != "none", "recolours"), "overlay": (aug.overlay > 0, "overlays")}
-        for key, (asked, what) in rgb_only.items():
-            if asked and "rgb" not in self.images:
-                raise ConfigError(
-                    f"algo.augment.{key}={aug[key]}: {what} RGB images; needs a camera with RGB "
-                    "(e.g. cameras=wrist_rgb)"
-                )
         self.demos = self._demos() if a.get("demos") else None
         bc_on = self.demos is not None and a.terms.imitation.coeff > 0
         self.bc = mse_bc_loss(self._loss_actor()) if bc_on else None
