@@ -416,6 +416,27 @@ def test_the_rgb_objects_experiment_is_the_measured_overrides_of_the_rgb_one() -
     assert shipped.algo.optim.utd_ratio == 0.25 and shipped.env.objects != compose_train([]).env.objects
 
 
+def test_the_state_objects_experiment_with_demonstrations_is_the_measured_run() -> None:
+    """docs/algorithms.md measured grasp_objects_sac with 20 demonstrations as these overrides (and
+    bench_learning's time budget), the RGB objects learner's replay settings without its camera."""
+    shipped = _shipped_as_measured(
+        "grasp_objects_sac_demos",
+        [
+            "experiment=grasp_objects_sac",
+            "algo.demos=demos/train_mix_state/demos",
+            "algo.replay.learning_starts=512",
+            "algo.optim.utd_ratio=0.25",
+            "algo.replay.buffer_frames=61440",
+            "total_frames=71680",
+            "time_budget_min=30",
+        ],
+    )
+    rgb = compose_train(["experiment=grasp_objects_vision_sac_rgb_demos"])
+    assert shipped.env.camera is None and shipped.env.objects == rgb.env.objects
+    assert shipped.algo.optim.utd_ratio == rgb.algo.optim.utd_ratio
+    assert shipped.algo.replay.buffer_frames == rgb.algo.replay.buffer_frames
+
+
 def test_the_auxiliary_head_keeps_its_targets_learns_without_a_privileged_critic_and_needs_a_camera(
     tmp_path: Path,
 ) -> None:
