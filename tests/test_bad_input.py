@@ -145,7 +145,7 @@ TRAIN = [
     ),
     (
         "a string key of before that is a group now",
-        ["algo=distill", "cameras=wrist_depth", "model=cnn", "algo.teacher={teacher}", "algo.augment=colour"],
+        [*DEPTH_STUDENT, "algo.augment=colour"],
         "algo.augment is algo.augment.kind now",
     ),
     (
