@@ -9,7 +9,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 from rlgrasp.envs import GraspEnv
-from rlgrasp.envs.cameras import CameraSpec
+from rlgrasp.envs.cameras import CameraSpec, object_cells
 from rlgrasp.envs.randomization import Range
 from rlgrasp.envs.visuals import GENERATORS, TRAIN_TEXTURES, VISUAL_PRESETS, repaint_patterns
 
@@ -151,13 +151,42 @@ def test_repaint_replaces_the_grounds_pixels_and_nothing_else(cam_env, monkeypat
     camera = {"mount": "wrist", "modality": "rgb"}
     plain, painted = cam_env(camera=camera, visual="quiet"), cam_env(camera=camera, visual="quiet_repaint")
     seen, repainted = plain.reset(seed=2)[0]["rgb"], painted.reset(seed=2)[0]["rgb"]
-    ground = painted.camera.render(painted.robot.camera_mount())["mask"]
+    ground = painted.camera.render(painted.robot.camera_mount())["segmentation"] == painted.scene.ground
     assert 0.3 < ground.mean() < 1.0  # the wrist camera sees the ground, and more than the ground
     assert np.array_equal(seen[:, ~ground], repainted[:, ~ground])
     assert (seen[:, ground] != repainted[:, ground]).any(axis=0).mean() > 0.5
     action = np.zeros(painted.action_dim)
     first, second = painted.step(action)[0]["rgb"], painted.step(action)[0]["rgb"]
     assert not np.array_equal(first, second)  # a new pattern each frame
+
+
+def test_object_cells_are_the_share_of_object_pixels_in_each_cell():
+    mask = np.zeros((8, 12), bool)
+    mask[0:2, 0:3] = True  # the whole first cell of a 4 x 4 grid (2 x 3 pixels a cell)
+    mask[7, 11] = True  # one of the last cell's six pixels
+    cells = object_cells(mask, 4)
+    assert cells.shape == (16,) and cells.dtype == np.float32
+    assert cells[0] == 1.0 and cells[15] == pytest.approx(1 / 6) and cells[1:15].sum() == 0
+
+
+def test_a_camera_with_object_cells_reports_where_the_object_is_seen(cam_env):
+    """The cells are a privileged part, last, after every part they leave where it was; they
+    follow the object's pixels in the image (here the cube, lit by segmentation, against the
+    same episode rendered with the object hidden), and no policy's state reads them."""
+    camera = {"mount": "wrist", "modality": "rgb", "eye": [0.1, 0.0, -0.05]}
+    plain, labelled = cam_env(camera=camera), cam_env(camera={**camera, "object_cells": 8})
+    assert list(labelled.obs_slices)[:-1] == list(plain.obs_slices)
+    assert labelled.obs_slices["object_cells"] == slice(plain.layout.size, plain.layout.size + 64)
+    a, b = plain.reset(seed=0)[0], labelled.reset(seed=0)[0]
+    assert np.array_equal(a["rgb"], b["rgb"]) and np.array_equal(a["state"], b["state"])
+    np.testing.assert_array_equal(a["privileged"], b["privileged"][: plain.layout.size])
+    cells = b["privileged"][labelled.obs_slices["object_cells"]].reshape(8, 8)
+    segmentation = labelled.camera.render(labelled.robot.camera_mount())["segmentation"]
+    seen = segmentation == labelled.scene.object
+    assert seen.any() and np.array_equal(cells > 0, object_cells(seen, 8).reshape(8, 8) > 0)
+    labelled.client.resetBasePositionAndOrientation(labelled.scene.object, [5.0, 5.0, -1.0], [0, 0, 0, 1])
+    hidden = labelled.step(np.zeros(labelled.action_dim))[0]
+    assert hidden["privileged"][labelled.obs_slices["object_cells"]].sum() == 0
 
 
 def test_repaint_patterns_fit_any_image_shape():
@@ -202,6 +231,8 @@ def test_a_depth_cameras_computed_ground_matches_the_rendered_one(mount, cam_env
         ({"fov": 200}, "camera.fov=200"),
         ({"lens": 3}, "camera: unknown key 'lens'"),
         ({"frames": 0}, "camera.frames=0: must be an integer from 1 to 8"),
+        ({"object_cells": 5}, "camera.object_cells=5: .* cells dividing the image.s width 64 and height 64"),
+        ({"object_cells": -1}, "camera.object_cells=-1"),
     ],
 )
 def test_bad_camera_config_names_the_key(camera, match):

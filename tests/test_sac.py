@@ -462,6 +462,19 @@ def test_the_auxiliary_head_keeps_its_targets_learns_without_a_privileged_critic
         _sac(tmp_path, "algo.terms.aux.coeff=1")
 
 
+def test_the_auxiliary_head_can_say_where_the_camera_sees_the_object(tmp_path: Path) -> None:
+    """``object_cells`` as the head's target: a camera that reports them gives the head one output per
+    cell, read from their slice of the privileged state; a camera that does not is refused in one
+    line that says how to turn them on."""
+    aux = ["algo.terms.aux.coeff=1", "algo.terms.aux.parts=[object_cells]"]
+    sac = _sac(tmp_path, *CAMERA, "+env.camera.object_cells=4", *aux)
+    start, stop = sac.parts.spec["privileged_parts"]["object_cells"]
+    assert stop - start == 16 and sac.aux.head.out_features == 16
+    assert torch.equal(sac.aux.index, torch.arange(start, stop))
+    with pytest.raises(ConfigError, match=r"unknown part 'object_cells'; .* \+env.camera.object_cells=8\)$"):
+        _sac(tmp_path, *CAMERA, *aux)
+
+
 def test_an_image_replay_buffer_larger_than_the_memory_is_refused_in_one_line(tmp_path: Path) -> None:
     with pytest.raises(ConfigError) as info:
         _sac(tmp_path, *CAMERA, "algo.replay.buffer_frames=1000000000")

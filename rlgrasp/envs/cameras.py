@@ -50,6 +50,11 @@ class CameraSpec:
     # The last ``frames`` images, oldest first, stacked along the channels: with more than one the
     # policy sees motion (a cube starting to tip or slip), which one image cannot show.
     frames: int = 1
+    # For training only: with k > 0 the env also reports where the object lies in this camera's
+    # image, the share of object pixels in each cell of a k x k grid (``object_cells``), as a part
+    # of the privileged state. A camera learner's auxiliary head can regress its image features
+    # onto it (docs/algorithms.md); no policy reads it and no robot needs it.
+    object_cells: int = 0
 
     @staticmethod
     def from_config(cfg: Mapping[str, Any]) -> CameraSpec:
@@ -77,6 +82,12 @@ class CameraSpec:
                 raise ValueError(f"camera.{key}={value!r}: must be an integer from 1 to {MAX_SIZE}")
         if not (isinstance(self.frames, int) and 1 <= self.frames <= MAX_FRAMES):
             raise ValueError(f"camera.frames={self.frames!r}: must be an integer from 1 to {MAX_FRAMES}")
+        k = self.object_cells
+        if not (isinstance(k, int) and k >= 0 and (k == 0 or (self.width % k == 0 and self.height % k == 0))):
+            raise ValueError(
+                f"camera.object_cells={k!r}: must be 0 (off) or a whole number of cells dividing the "
+                f"image's width {self.width} and height {self.height}"
+            )
         if not 0 < self.fov < 180:
             raise ValueError(f"camera.fov={self.fov!r}: must be between 0 and 180 degrees")
         if not 0 < self.near < self.far:
@@ -179,17 +190,26 @@ def ground_depth(
     return np.where(t > 0, t, np.inf).astype(np.float32)
 
 
+def object_cells(mask: np.ndarray, cells: int) -> np.ndarray:
+    """A boolean ``[H, W]`` mask as the share of its true pixels in each cell of a ``cells`` x
+    ``cells`` grid, row by row: float32 ``[cells * cells]`` in [0, 1]."""
+    height, width = mask.shape
+    grid = mask.reshape(cells, height // cells, cells, width // cells)
+    return grid.mean(axis=(1, 3), dtype=np.float32).reshape(-1)
+
+
 class Camera:
     """Renders one ``CameraSpec`` in one client; ``render`` returns channel-first arrays by key.
     ``ground_height``: a depth-only camera whose scene shows no ground body computes the ground
     plane at this height itself (``ground_depth``); None: the ground is a body TinyRenderer draws.
-    ``masked_body``: a body whose pixels ``render`` also returns, as the boolean ``mask`` (visual
-    randomization repaints the ground's pixels with it)."""
+    ``segmented``: ``render`` also returns ``segmentation``, each pixel's body id (-1: none), from
+    which the env takes the ground's pixels (visual randomization repaints them) and the object's
+    (``object_cells``); off, TinyRenderer skips the mask, which costs it time."""
 
     def __init__(self, spec: CameraSpec, client: BulletClient):
         self.spec, self.client = spec, client
         self.ground_height: float | None = None
-        self.masked_body: int | None = None
+        self.segmented = False
         self.base_pose = spec.pose()
         self.fov = spec.fov
         self.offset = np.zeros(3)  # per-episode pose jitter (m), in the mount's frame
@@ -251,19 +271,18 @@ class Camera:
         eye, target, up = self.world_pose(mount_pose)
         view = self.client.computeViewMatrix(eye.tolist(), target.tolist(), up.tolist())
         projection = self.client.computeProjectionMatrixFOV(self.fov, s.width / s.height, s.near, s.far)
-        masked = self.masked_body is not None
         _, _, rgba, depth_buffer, segmentation = self.client.getCameraImage(
             s.width,
             s.height,
             view,
             projection,
             renderer=pybullet.ER_TINY_RENDERER,
-            flags=0 if masked else pybullet.ER_NO_SEGMENTATION_MASK,
+            flags=0 if self.segmented else pybullet.ER_NO_SEGMENTATION_MASK,
             **self.lighting.keywords(),
         )
         out = {}
-        if masked:  # without the link-index flag, each pixel holds its body's id (-1: no body)
-            out["mask"] = np.asarray(segmentation).reshape(s.height, s.width) == self.masked_body
+        if self.segmented:  # without the link-index flag, each pixel holds its body's id (-1: no body)
+            out["segmentation"] = np.asarray(segmentation).reshape(s.height, s.width)
         if "depth" in s.keys:
             z = np.asarray(depth_buffer, np.float32).reshape(1, s.height, s.width)
             metres = s.far * s.near / (s.far - (s.far - s.near) * z)  # OpenGL depth buffer -> distance

@@ -11,7 +11,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from rlgrasp.envs.cameras import Camera, CameraSpec, ImageHistory
+from rlgrasp.envs.cameras import Camera, CameraSpec, ImageHistory, object_cells
 from rlgrasp.envs.collision_model import COLLISION_MODELS
 from rlgrasp.envs.control import CONTROL_MODES, make_control
 from rlgrasp.envs.observation import PROPRIOCEPTION, ObservationLayout, full_parts
@@ -177,7 +177,8 @@ class GraspEnv(gym.Env):
     def _build_spaces(self) -> None:
         self.action_dim = self.control.action_dim
         self.action_space = gym.spaces.Box(-1.0, 1.0, (self.action_dim,), np.float32)
-        self.layout = ObservationLayout(full_parts(self.robot.arm_dof, self.action_dim))
+        cells = self.camera.spec.object_cells if self.camera is not None else 0
+        self.layout = ObservationLayout(full_parts(self.robot.arm_dof, self.action_dim, cells))
         self.obs_slices = self.layout.slices
         self.observation_space = self._observation_space()
         self._visual_rng: np.random.Generator | None = None
@@ -227,11 +228,12 @@ class GraspEnv(gym.Env):
         see (the robot is already its low-poly model)."""
         if "rgb" in self.camera.spec.keys:
             self.scene.use_compact_ground()
-            if self.visuals.preset.ground_repaint > 0:
-                self.camera.masked_body = self.scene.ground
+            self.camera.segmented = self.visuals.preset.ground_repaint > 0
         else:
             self.scene.hide_ground()
             self.camera.ground_height = 0.0
+        if self.camera.spec.object_cells > 0:
+            self.camera.segmented = True
         if self.camera.spec.mount == "wrist":
             self.robot.show_only(self.robot.wrist_links())
 
@@ -293,25 +295,39 @@ class GraspEnv(gym.Env):
     def _observe(self, first: bool = False) -> tuple[Any, dict[str, Any]]:
         """The observation (with this step's sensor noise) and the true readings it came from;
         ``first``: an episode's first, which starts the image history."""
-        vector, readings = self._state_vector()
-        self._readings = readings
         if self.camera is None:
+            vector, readings = self._state_vector()
+            self._readings = readings
             return vector, readings
-        mount = self.robot.camera_mount() if self.camera.spec.mount == "wrist" else None
-        images = self.camera.render(mount)
-        mask = images.pop("mask", None)
-        if mask is not None:
-            self.visuals.repaint_ground(images, mask, self._visual_rng)
+        images, labels = self._render()
+        vector, readings = self._state_vector(labels)
+        self._readings = readings
         self.visuals.corrupt(images, self._visual, self._visual_rng)
         images = self.image_history.push(images, first)
         return {"state": self.layout.select(vector, PROPRIOCEPTION), **images, "privileged": vector}, readings
 
-    def _state_vector(self) -> tuple[np.ndarray, dict[str, Any]]:
-        """The flat state (with this step's sensor noise) and the true readings it came from."""
+    def _render(self) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+        """The camera's images (the ground repainted where the preset says) and what its
+        segmentation tells for training: the object's ``object_cells`` when the camera reports them."""
+        mount = self.robot.camera_mount() if self.camera.spec.mount == "wrist" else None
+        images = self.camera.render(mount)
+        segmentation = images.pop("segmentation", None)
+        if segmentation is not None and self.visuals.preset.ground_repaint > 0:
+            self.visuals.repaint_ground(images, segmentation == self.scene.ground, self._visual_rng)
+        cells = self.camera.spec.object_cells
+        labels = {"object_cells": object_cells(segmentation == self.scene.object, cells)} if cells else {}
+        return images, labels
+
+    def _state_vector(
+        self, labels: Mapping[str, np.ndarray] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """The flat state (with this step's sensor noise) and the true readings it came from;
+        ``labels``: readings a camera's image gave (``_render``)."""
         robot = self.robot
         readings = robot.readings()
         readings.update(self.task.readings(readings["grasp_pos"], robot.body, robot.finger_links))
         readings["prev_action"] = self._prev_action
+        readings.update(labels or {})
         obs = self.layout.assemble(readings)
         ep = self.episode
         if ep["obs_noise_step"] > 0 or ep["obs_noise_episode"] > 0:

@@ -23,8 +23,11 @@ class Part:
     noisy: bool = True
 
 
-def full_parts(arm_dof: int, action_dim: int) -> list[Part]:
-    """Every state part, in the order of the flat observation every state policy reads."""
+def full_parts(arm_dof: int, action_dim: int, object_cells: int = 0) -> list[Part]:
+    """Every state part, in the order of the flat observation every state policy reads; with a
+    camera's ``object_cells`` (k > 0), its k x k map of the object's pixels last (a training label
+    for a camera learner, ``rlgrasp.envs.cameras.object_cells``), after the parts it leaves in place."""
+    cells = [Part("object_cells", object_cells * object_cells, noisy=False)] if object_cells else []
     return [
         Part("arm_q", arm_dof),
         Part("arm_qd", arm_dof),
@@ -39,6 +42,7 @@ def full_parts(arm_dof: int, action_dim: int) -> list[Part]:
         Part("object_extents", 3),
         Part("grasped", 1, noisy=False),
         Part("prev_action", action_dim, noisy=False),
+        *cells,
     ]
 
 

@@ -5,8 +5,11 @@ a weak and late signal of what in the image matters; a critic that reads the pri
 (SAC's asymmetric critics) needs little from the images at all. The privileged state holds the
 answer the encoder must find (the object's offset from the grasp point, whether it is held), so
 during training a linear head reads the encoder's features and is regressed onto those parts,
-standardized. The head is the learner's, not the policy's: nothing of it is deployed or
-exported, and the policy's observation stays proprioception and images.
+standardized. With a camera that reports ``object_cells`` (``rlgrasp.envs.cameras.CameraSpec``),
+the part can also be where in the image the object lies, a k x k map of its pixels: a label in the
+camera's own frame, on every texture the visuals draw. The head is the learner's, not the
+policy's: nothing of it is deployed or exported, and the policy's observation stays
+proprioception and images.
 """
 
 from __future__ import annotations
@@ -49,9 +52,11 @@ class ObjectFromImages(nn.Module):
         super().__init__()
         unknown = [n for n in names if n not in parts]
         if unknown or not names:
+            cells = "object_cells" in unknown
+            hint = " (the camera reports them with +env.camera.object_cells=8)" if cells else ""
             raise ConfigError(
                 f"algo.terms.aux.parts: unknown part {(unknown or [None])[0]!r}; parts of the privileged "
-                f"state: {', '.join(parts)}"
+                f"state: {', '.join(parts)}{hint}"
             )
         self.index = torch.cat([torch.arange(*parts[n]) for n in names])
         features = sum(e.project[0].out_features for e in encoders.values())
