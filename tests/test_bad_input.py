@@ -264,6 +264,12 @@ TRAIN = [
         "camera.eye=[0.0, 0.0, 0.3] (the world frame): inside the robot's link panda_link1",
     ),
     (
+        "object cells that do not divide the image",
+        ["cameras=wrist_depth", "model=cnn", "+env.camera.object_cells=5"],
+        "camera.object_cells=5: must be 0 (off) or a whole number of cells dividing the image's width 64 "
+        "and height 64",
+    ),
+    (
         "inverted randomization range",
         ["env.randomization={object_mass:[1.0,0.5]}"],
         "'object_mass': low (1.0) is greater than high (0.5)",
@@ -715,6 +721,11 @@ TRAIN_SAC = [
         "camera demonstrations from another camera view",
         ["cameras=wrist_depth", "model=cnn", "algo.demos={behind_demos}"],
         "recorded with the camera view {'mount': 'wrist'",
+    ),
+    (
+        "an auxiliary head on object cells the camera does not report",
+        ["cameras=wrist_depth", "model=cnn", "algo.terms.aux.coeff=1", "algo.terms.aux.parts=[object_cells]"],
+        "algo.terms.aux.parts: unknown part 'object_cells'; parts of the privileged state: arm_q, ",
     ),
     (
         "an image replay buffer larger than the memory",

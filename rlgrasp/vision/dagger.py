@@ -51,9 +51,15 @@ def load_teacher(path: str, spec: dict[str, Any], env_cfg: Any) -> tuple[Privile
             f"a teacher does not transfer between arms (give a teacher of {here!r})"
         )
     if t_spec["obs_dim"] != spec["privileged_dim"]:
+        cells = "object_cells" in spec.get("privileged_parts", {})  # a state teacher never read them
+        why = (
+            "env.camera.object_cells adds the object's image cells"
+            if cells
+            else "another robot, control mode or observation layout"
+        )
         raise CheckpointError(
             f"teacher={path}: it reads {t_spec['obs_dim']} state values, this env's privileged state has "
-            f"{spec['privileged_dim']} (another robot, control mode or observation layout)"
+            f"{spec['privileged_dim']} ({why})"
         )
     for key in ("control_mode", "ee_yaw"):
         if t_env.get(key) != env_cfg.get(key):
