@@ -400,20 +400,26 @@ def test_the_rgb_experiment_is_the_measured_overrides_of_the_camera_one() -> Non
 
 def test_the_rgb_objects_experiment_is_the_measured_overrides_of_the_rgb_one() -> None:
     """docs/algorithms.md measured the RGB learner on many objects as grasp_vision_sac_rgb_demos plus
-    these overrides (and bench_learning's time budget); grasp_objects_vision_sac_rgb_demos is that run."""
+    these overrides (the runs of 2026-12-05: the keypoint encoder and the object-cells head on top of
+    the utd-0.25 run, and bench_learning's time budget); grasp_objects_vision_sac_rgb_demos is that run."""
     shipped = _shipped_as_measured(
         "grasp_objects_vision_sac_rgb_demos",
         [
             "experiment=grasp_vision_sac_rgb_demos",
             "objects=train_mix",
-            "algo.demos=demos/train_mix_wrist_rgb_behind/demos",
             "algo.replay.buffer_frames=61440",
             "total_frames=200000",
             "algo.optim.utd_ratio=0.25",
             "time_budget_min=30",
+            "model=cnn_keypoints",
+            "+env.camera.object_cells=8",
+            "algo.terms.aux.coeff=1",
+            "algo.terms.aux.parts=[object_cells]",
+            "algo.demos=demos/train_mix_wrist_rgb_behind_cells/demos",
         ],
     )
     assert shipped.algo.optim.utd_ratio == 0.25 and shipped.env.objects != compose_train([]).env.objects
+    assert shipped.model.pooling == "keypoints" and shipped.env.camera.object_cells == 8
 
 
 def test_the_state_objects_experiment_with_demonstrations_is_the_measured_run() -> None:
