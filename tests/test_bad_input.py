@@ -264,6 +264,11 @@ TRAIN = [
         "camera.eye=[0.0, 0.0, 0.3] (the world frame): inside the robot's link panda_link1",
     ),
     (
+        "a DAgger teacher on a camera that reports object cells",
+        [*DEPTH_STUDENT, "+env.camera.object_cells=8"],
+        "this env's privileged state has 109 (env.camera.object_cells adds the object's image cells)",
+    ),
+    (
         "object cells that do not divide the image",
         ["cameras=wrist_depth", "model=cnn", "+env.camera.object_cells=5"],
         "camera.object_cells=5: must be 0 (off) or a whole number of cells dividing the image's width 64 "

@@ -226,14 +226,14 @@ class GraspEnv(gym.Env):
         """What cameras render, made cheap: no ground body for a depth-only camera (it adds the
         ground plane itself), a small one for colour, and for a wrist camera only the links it can
         see (the robot is already its low-poly model)."""
-        if "rgb" in self.camera.spec.keys:
+        rgb = "rgb" in self.camera.spec.keys
+        if rgb:
             self.scene.use_compact_ground()
-            self.camera.segmented = self.visuals.preset.ground_repaint > 0
         else:
             self.scene.hide_ground()
             self.camera.ground_height = 0.0
-        if self.camera.spec.object_cells > 0:
-            self.camera.segmented = True
+        repaint = rgb and self.visuals.preset.ground_repaint > 0
+        self.camera.segmented = repaint or self.camera.spec.object_cells > 0
         if self.camera.spec.mount == "wrist":
             self.robot.show_only(self.robot.wrist_links())
 
