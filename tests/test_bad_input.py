@@ -502,7 +502,8 @@ EVAL = [
     (
         "unknown visual option (a typo of heldout)",
         ["visual=heldoutt"],
-        "visual=heldoutt: no such option; visual is one of default, heldout, none, repaint, wide",
+        "visual=heldoutt: no such option; visual is one of default, heldout, none, repaint, repaint_scales, "
+        "wide",
     ),
     (
         "unknown cameras option",

@@ -137,7 +137,7 @@ def test_each_texture_generator_draws_a_pattern(kind):
 def test_heldout_visuals_are_disjoint_from_training():
     held = VISUAL_PRESETS["heldout"]
     assert not set(held.textures) & set(TRAIN_TEXTURES)  # repaint patterns draw from these
-    for name in ("default", "wide", "repaint"):
+    for name in ("default", "wide", "repaint", "repaint_scales"):
         train = VISUAL_PRESETS[name]
         assert set(train.textures) <= set(TRAIN_TEXTURES) and not set(held.textures) & set(train.textures)
         assert held.hues.low > train.hues.high
@@ -193,6 +193,19 @@ def test_repaint_patterns_fit_any_image_shape():
     patterns = repaint_patterns((48, 60), Range(0.0, 0.7), count=9)
     assert patterns.shape == (9, 3, 48, 60) and patterns.dtype == np.uint8
     assert all(p.std() > 5 for p in patterns)  # two colours each, not a flat fill
+
+
+def test_magnified_repaint_patterns_have_larger_cells():
+    """A pattern magnified s times is constant over s x s blocks, and is a corner of the pattern the
+    same draw gives unmagnified: fewer, larger cells, the same generator and colours."""
+    plain = repaint_patterns((64, 64), Range(0.0, 0.7), count=3)
+    magnified = repaint_patterns((64, 64), Range(0.0, 0.7), count=3, scales=(1, 2, 4))
+    np.testing.assert_array_equal(magnified[0], plain[0])
+    for i, scale in ((1, 2), (2, 4)):
+        blocks = magnified[i].reshape(3, 64 // scale, scale, 64 // scale, scale)
+        assert (blocks == blocks[:, :, :1, :, :1]).all()
+        corner = plain[i][:, : 64 // scale, : 64 // scale]
+        np.testing.assert_array_equal(magnified[i][:, ::scale, ::scale], corner)
 
 
 def test_depth_is_in_metres_and_sees_the_ground(cam_env):

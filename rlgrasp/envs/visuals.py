@@ -131,14 +131,19 @@ def write_tga(path: str, rgb: np.ndarray) -> None:
         f.write(header + np.ascontiguousarray(rgb[:, :, ::-1]).tobytes())
 
 
-def repaint_patterns(shape: tuple[int, int], hues: Range, count: int = 64, seed: int = 0) -> np.ndarray:
+def repaint_patterns(
+    shape: tuple[int, int], hues: Range, count: int = 64, seed: int = 0, scales: tuple[int, ...] = (1,)
+) -> np.ndarray:
     """``count`` channel-first uint8 images of ``shape``, each from a training generator (never the
-    held-out rings) drawn at the image's own scale, in two colours from ``hues``."""
+    held-out rings) in two colours from ``hues``, drawn at the image's own scale or magnified
+    ``scales[i % len(scales)]`` times (a corner of it blown up: fewer, larger cells and edges)."""
     rng = np.random.default_rng(seed)
     size = -(-max(shape) // 8) * 8  # the noise generator draws 8-pixel cells
     out = np.empty((count, 3, *shape), np.uint8)
     for i in range(count):
         image = _blend(GENERATORS[TRAIN_TEXTURES[i % len(TRAIN_TEXTURES)]](rng, size), _palette(rng, hues))
+        scale = scales[i % len(scales)]
+        image = image[: -(-size // scale), : -(-size // scale)].repeat(scale, 0).repeat(scale, 1)
         out[i] = (image[: shape[0], : shape[1]] * 255).astype(np.uint8).transpose(2, 0, 1)
     return out
 
@@ -168,6 +173,9 @@ class VisualPreset:
     # Per RGB frame, the probability that the ground's pixels are replaced by a pattern drawn in the
     # image itself (``VisualRandomizer.repaint_ground``): a training aid, not a look of the world.
     ground_repaint: float = 0.0
+    # How many times the repaint patterns are magnified, each a share of the bank: a wrist camera sees
+    # a ground texture's cells anywhere from a few pixels to half the image across.
+    repaint_scales: tuple[int, ...] = (1,)
     recolour: bool = False  # false: the scene keeps its own colours (preset none)
 
 
@@ -226,6 +234,10 @@ VISUAL_PRESETS: dict[str, VisualPreset] = {
     # the object, so that the ground's look carries nothing the student could key on (measured on
     # the RGB objects student: no gain in success, docs/benchmarks/cameras.md).
     "repaint": replace(_DEFAULT, ground_repaint=0.5),
+    # `repaint` with the patterns also magnified 2 and 4 times: the checker ground the training
+    # visuals draw fills a wrist image with one or two cells and a straight edge, which the
+    # image-scale patterns never show.
+    "repaint_scales": replace(_DEFAULT, ground_repaint=0.5, repaint_scales=(1, 2, 4)),
     # Never seen in training: the rings generator, hues 0.75-0.95 (violet to pink) and a low light;
     # everything else as `default`.
     "heldout": replace(
@@ -281,7 +293,8 @@ class VisualRandomizer:
             return
         rgb = images["rgb"]
         if self._patterns is None or self._patterns.shape[-2:] != rgb.shape[-2:]:
-            self._patterns = repaint_patterns(rgb.shape[-2:], self.preset.hues)
+            scales = self.preset.repaint_scales
+            self._patterns = repaint_patterns(rgb.shape[-2:], self.preset.hues, scales=scales)
         pattern = self._patterns[rng.integers(len(self._patterns))]
         pattern = np.roll(pattern, tuple(rng.integers(0, rgb.shape[-2:])), axis=(1, 2))
         if rng.uniform() < 0.5:
