@@ -401,7 +401,8 @@ def test_the_rgb_experiment_is_the_measured_overrides_of_the_camera_one() -> Non
 def test_the_rgb_objects_experiment_is_the_measured_overrides_of_the_rgb_one() -> None:
     """docs/algorithms.md measured the RGB learner on many objects as grasp_vision_sac_rgb_demos plus
     these overrides (the runs of 2026-12-05: the keypoint encoder and the object-cells head on top of
-    the utd-0.25 run, and bench_learning's time budget); grasp_objects_vision_sac_rgb_demos is that run."""
+    the utd-0.25 run, then a gradient step every eight frames, and bench_learning's time budget);
+    grasp_objects_vision_sac_rgb_demos is that run."""
     shipped = _shipped_as_measured(
         "grasp_objects_vision_sac_rgb_demos",
         [
@@ -409,7 +410,8 @@ def test_the_rgb_objects_experiment_is_the_measured_overrides_of_the_rgb_one() -
             "objects=train_mix",
             "algo.replay.buffer_frames=61440",
             "total_frames=200000",
-            "algo.optim.utd_ratio=0.25",
+            "algo.optim.utd_ratio=0.125",
+            "eval.interval_frames=20480",
             "time_budget_min=30",
             "model=cnn_keypoints",
             "+env.camera.object_cells=8",
@@ -418,13 +420,14 @@ def test_the_rgb_objects_experiment_is_the_measured_overrides_of_the_rgb_one() -
             "algo.demos=demos/train_mix_wrist_rgb_behind_cells/demos",
         ],
     )
-    assert shipped.algo.optim.utd_ratio == 0.25 and shipped.env.objects != compose_train([]).env.objects
+    assert shipped.algo.optim.utd_ratio == 0.125 and shipped.env.objects != compose_train([]).env.objects
     assert shipped.model.pooling == "keypoints" and shipped.env.camera.object_cells == 8
 
 
 def test_the_state_objects_experiment_with_demonstrations_is_the_measured_run() -> None:
     """docs/algorithms.md measured grasp_objects_sac with 20 demonstrations as these overrides (and
-    bench_learning's time budget), the RGB objects learner's replay settings without its camera."""
+    bench_learning's time budget), the RGB objects learner's replay settings without its camera (its
+    gradient steps a frame as they were then: the camera learner's were halved for its updates' cost)."""
     shipped = _shipped_as_measured(
         "grasp_objects_sac_demos",
         [
@@ -439,7 +442,7 @@ def test_the_state_objects_experiment_with_demonstrations_is_the_measured_run() 
     )
     rgb = compose_train(["experiment=grasp_objects_vision_sac_rgb_demos"])
     assert shipped.env.camera is None and shipped.env.objects == rgb.env.objects
-    assert shipped.algo.optim.utd_ratio == rgb.algo.optim.utd_ratio
+    assert shipped.algo.optim.utd_ratio == 2 * rgb.algo.optim.utd_ratio
     assert shipped.algo.replay.buffer_frames == rgb.algo.replay.buffer_frames
 
 
