@@ -484,36 +484,6 @@ def test_the_auxiliary_head_can_say_where_the_camera_sees_the_object(tmp_path: P
         _sac(tmp_path, *CAMERA, *aux)
 
 
-def test_the_object_cells_move_with_the_random_shift_of_the_images(tmp_path: Path) -> None:
-    """The head's object cells are a label in the image's frame: the minibatch keeps the offsets its
-    images were shifted by, and the head's target is the cells shifted by them."""
-    from rlgrasp.algos.sac import ACTOR_FEATURES_KEY
-    from rlgrasp.models.cnn import vision_net
-    from rlgrasp.vision.augment import shift_cells, shift_images
-    from rlgrasp.vision.auxiliary import SHIFT_KEY
-
-    aux = ["algo.terms.aux.coeff=1", "algo.terms.aux.parts=[grasped,object_cells]"]
-    sac = _sac(tmp_path, *CAMERA, "+env.camera.object_cells=4", *aux)
-    sample = _camera_batch(sac, 16).squeeze(0)
-    start, stop = sac.parts.spec["privileged_parts"]["object_cells"]
-    cells = torch.zeros(16, 16)
-    cells[:, 5] = 1.0  # the object fills the cell in row 1, column 1 of every image
-    sample["privileged"][:, start:stop] = cells
-    for_critic, _ = sac._inputs(sample)
-    offsets = for_critic[SHIFT_KEY].T
-    assert offsets.abs().max() <= sac.cfg.algo.augment.shift and offsets.unique().numel() > 1
-    images = sample["depth"]
-    shifted = vision_net(sac.actor).encode(shift_images(images, offsets))
-    assert torch.allclose(for_critic[ACTOR_FEATURES_KEY], shifted, atol=1e-5)  # the images moved by them
-    features = for_critic[ACTOR_FEATURES_KEY]
-    grasped = sample["privileged"][:, slice(*sac.parts.spec["privileged_parts"]["grasped"])]
-    target = sac.aux.norm(torch.cat([grasped, shift_cells(cells, offsets, *images.shape[-2:])], -1))
-    expected = (sac.aux.head(features) - target).pow(2).mean()
-    assert torch.allclose(sac.aux.loss_of(features, for_critic), expected)
-    unshifted = sac.aux.loss_of(features, for_critic.exclude(SHIFT_KEY))
-    assert not torch.allclose(unshifted, expected)
-
-
 def test_an_image_replay_buffer_larger_than_the_memory_is_refused_in_one_line(tmp_path: Path) -> None:
     with pytest.raises(ConfigError) as info:
         _sac(tmp_path, *CAMERA, "algo.replay.buffer_frames=1000000000")

@@ -10,19 +10,9 @@ from torchrl.envs import ExplorationType, set_exploration_type
 from torchrl.objectives import BCLoss
 
 from rlgrasp.config import ConfigError
-from rlgrasp.envs.cameras import object_cells
 from rlgrasp.models.cnn import SpatialSoftmax, actor_norm, average_weights, build_vision_actor
 from rlgrasp.train.checkpoint import CheckpointError
-from rlgrasp.vision.augment import (
-    augment,
-    overlay,
-    overlay_bank,
-    random_shift,
-    recolour,
-    shift_cells,
-    shift_images,
-    shift_offsets,
-)
+from rlgrasp.vision.augment import augment, overlay, overlay_bank, random_shift, recolour
 from rlgrasp.vision.auxiliary import ObjectFromImages
 from rlgrasp.vision.dagger import LABEL_KEY, DAggerPolicy, LabelledFrames, PrivilegedTeacher, load_teacher
 
@@ -216,21 +206,6 @@ def test_random_shift_moves_each_image_by_whole_pixels_and_repeats_the_border():
         assert torch.equal(after, before[:, rows][:, :, cols])
         offsets.add(found[0])
     assert len(offsets) > 10  # drawn per image, not once per batch
-
-
-def test_shifted_object_cells_say_where_the_shifted_image_shows_the_object():
-    """An object that fills whole cells of a 16 x 16 mask (4 x 4 cells of 4 pixels): moved by the
-    same offsets as the image, half a cell and more, border repeated, its cells are the cells of
-    the moved mask."""
-    generator = torch.Generator().manual_seed(0)
-    masks = torch.rand(32, 1, 4, 4, generator=generator) < 0.3
-    masks = masks.repeat_interleave(4, -2).repeat_interleave(4, -1)
-    offsets = shift_offsets(32, 3, generator)
-    moved = shift_images(masks, offsets)
-    cells = torch.stack([torch.from_numpy(object_cells(m[0].numpy(), 4)) for m in masks])
-    expected = torch.stack([torch.from_numpy(object_cells(m[0].numpy(), 4)) for m in moved])
-    assert torch.allclose(shift_cells(cells, offsets, 16, 16), expected)
-    assert not torch.allclose(cells, expected)  # the offsets moved the object
 
 
 def test_overlay_blends_each_image_toward_a_pattern_of_the_bank_by_its_own_weight():

@@ -40,8 +40,8 @@ from rlgrasp.models.cnn import head_actor, image_specs, vision_net
 from rlgrasp.models.mlp import ACTIVATIONS, OBS_KEY, RunningNorm
 from rlgrasp.models.spec import PRIVILEGED_KEY
 from rlgrasp.train.algorithm import Algorithm, finite_or_raise
-from rlgrasp.vision.augment import augment_images, shift_offsets
-from rlgrasp.vision.auxiliary import SHIFT_KEY, ObjectFromImages
+from rlgrasp.vision.augment import augment_images
+from rlgrasp.vision.auxiliary import ObjectFromImages
 
 #: The entries a transition keeps in the replay buffer (the collector's batch has more).
 TRANSITION_KEYS = (
@@ -335,20 +335,14 @@ class SAC(Algorithm):
             return sample, sample
         trained_by = self.cfg.algo.encoder.trained_by
         net = vision_net(self.actor)
-        pad = self.cfg.algo.augment.shift
-        # One shift for all of an observation's images, kept with the minibatch: the auxiliary
-        # head's object cells, a label in the image's frame, move with it (rlgrasp.vision.auxiliary).
-        offsets = shift_offsets(sample.batch_size[0], pad) if pad > 0 else None
 
-        def encode(td: TensorDictBase, target: bool, offsets: torch.Tensor | None = None) -> torch.Tensor:
-            return net.encode(*(self._augmented(td[k], k, target, offsets) for k in self.images))
+        def encode(td: TensorDictBase, target: bool) -> torch.Tensor:
+            return net.encode(*(self._augmented(td[k], k, target) for k in self.images))
 
-        features = encode(sample, target=False, offsets=offsets)
+        features = encode(sample, target=False)
         with torch.no_grad():
             next_features = encode(sample["next"], target=True)
         for_critic = sample.clone(False)
-        if offsets is not None:
-            for_critic[SHIFT_KEY] = offsets.T.to(features.device)
         for_critic[FEATURES_KEY] = features if trained_by != "actor" else features.detach()
         for_critic[ACTOR_FEATURES_KEY] = features
         for_critic["next", FEATURES_KEY] = next_features
@@ -358,17 +352,14 @@ class SAC(Algorithm):
         for_actor[ACTOR_FEATURES_KEY] = features if trained_by != "critic" else features.detach()
         return for_critic, for_actor
 
-    def _augmented(
-        self, images: torch.Tensor, key: str, target: bool, offsets: torch.Tensor | None = None
-    ) -> torch.Tensor:
-        """Replayed images as the encoders learn from them: each shifted (``algo.augment.shift``; by
-        ``offsets`` where given), RGB ones overlaid with patterns (``algo.augment.overlay``; not the
-        ``target``'s next images, whose values the losses regress onto) and, with
-        ``algo.augment.kind=colour``, recoloured; each image its own draw (the shift drawn once for
-        an observation's images where ``offsets`` are given)."""
+    def _augmented(self, images: torch.Tensor, key: str, target: bool) -> torch.Tensor:
+        """Replayed images as the encoders learn from them: each shifted (``algo.augment.shift``),
+        RGB ones overlaid with patterns (``algo.augment.overlay``; not the ``target``'s next images,
+        whose values the losses regress onto) and, with ``algo.augment.kind=colour``, recoloured;
+        each image its own draw."""
         aug = self.cfg.algo.augment
         overlay_strength = 0.0 if target else aug.overlay
-        return augment_images(images, key, aug.kind, aug.grey, aug.shift, overlay_strength, offsets)
+        return augment_images(images, key, aug.kind, aug.grey, aug.shift, overlay_strength)
 
     def trained_parameters(self) -> list[torch.nn.Parameter]:
         critics = _trainable(self.loss.qvalue_network_params)

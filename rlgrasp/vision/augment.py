@@ -14,8 +14,7 @@ evaluation see the camera's own images.
 border repeated: the random shift of DrQ (Kostrikov et al. 2020), so that an encoder cannot key on
 where in the image an edge lies (measured on the objects students, depth and RGB: no gain in
 success, docs/benchmarks/cameras.md). Hand-written: TorchRL's image transforms crop every image of a
-batch alike, and a shift must be drawn per image. A label in the image's frame moves with it:
-``shift_cells`` moves the object cells an auxiliary head learns by the same offsets.
+batch alike, and a shift must be drawn per image.
 
 ``overlay`` (RGB) blends each training image with a pattern from a bank of the training texture
 generators' (never the held-out rings), at a weight drawn per image in ``[0, overlay]``: SODA's and
@@ -69,43 +68,17 @@ def recolour(
     return out.add_((1 - spread) * mean).clamp_(0, 255).reshape(shape)
 
 
-def shift_offsets(n: int, pad: int, generator: torch.Generator | None = None) -> torch.Tensor:
-    """``[2, n]`` whole-pixel offsets (rows, columns), each drawn in [-pad, pad]."""
-    return torch.randint(2 * pad + 1, (2, n), generator=generator) - pad
-
-
-def shift_images(images: torch.Tensor, offsets: torch.Tensor) -> torch.Tensor:
-    """``[N, C, H, W]`` images (any dtype), image i moved by ``offsets[:, i]`` pixels (rows,
-    columns); the pixels shifted in repeat the border."""
+def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator | None = None) -> torch.Tensor:
+    """``[N, C, H, W]`` images (any dtype), each moved by whole pixels drawn in [-pad, pad] per axis
+    and per image; the pixels shifted in repeat the border."""
     n, channels, height, width = images.shape
     device = images.device
-    offsets = offsets.to(device)
+    offsets = (torch.randint(2 * pad + 1, (2, n), generator=generator) - pad).to(device)
     rows = (torch.arange(height, device=device) + offsets[0, :, None]).clamp_(0, height - 1)
     cols = (torch.arange(width, device=device) + offsets[1, :, None]).clamp_(0, width - 1)
     # One gather over the flattened pixels: several times faster than padding, then cropping each image.
     source = (rows[:, :, None] * width + cols[:, None, :]).reshape(n, 1, -1).expand(n, channels, -1)
     return images.reshape(n, channels, -1).gather(2, source).reshape(images.shape)
-
-
-def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator | None = None) -> torch.Tensor:
-    """``[N, C, H, W]`` images, each moved by whole pixels drawn in [-pad, pad] per axis and per
-    image (``shift_images``)."""
-    return shift_images(images, shift_offsets(images.shape[0], pad, generator))
-
-
-def shift_cells(cells: torch.Tensor, offsets: torch.Tensor, height: int, width: int) -> torch.Tensor:
-    """``[N, k * k]`` object cells of ``height`` x ``width`` images (the share of the object's
-    pixels in each cell, ``rlgrasp.envs.cameras.object_cells``) as they read after ``shift_images`` moved
-    the images by ``offsets``: each cell spread over its pixels, moved as the images were, and
-    averaged back. Exact where the object fills whole cells; elsewhere the object is taken as
-    spread evenly over each cell. Without it, a shifted image's label would say where the object
-    lay before the shift: up to half an 8-pixel cell off at a 4-pixel shift."""
-    n, k2 = cells.shape
-    k = round(k2**0.5)
-    rows, cols = height // k, width // k
-    pixels = cells.reshape(n, 1, k, k).repeat_interleave(rows, -2).repeat_interleave(cols, -1)
-    moved = shift_images(pixels, offsets)
-    return moved.reshape(n, k, rows, k, cols).mean((2, 4)).reshape(n, k2)
 
 
 @lru_cache(maxsize=4)
@@ -137,14 +110,11 @@ def augment_images(
     grey: float = 0.0,
     shift: int = 0,
     overlay_strength: float = 0.0,
-    offsets: torch.Tensor | None = None,
 ) -> torch.Tensor:
-    """One batch of ``key`` images (``depth`` or ``rgb``) shifted (``shift`` pixels, or by the
-    given ``offsets``, ``shift_offsets``) and, RGB, overlaid with patterns (``overlay_strength`` >
-    0) and, with ``kind="colour"``, recoloured; each image its own draw."""
-    if offsets is not None:
-        images = shift_images(images, offsets)
-    elif shift > 0:
+    """One batch of ``key`` images (``depth`` or ``rgb``) shifted (``shift`` pixels) and, RGB,
+    overlaid with patterns (``overlay_strength`` > 0) and, with ``kind="colour"``, recoloured; each
+    image its own draw."""
+    if shift > 0:
         images = random_shift(images, shift)
     if overlay_strength > 0 and key == "rgb":
         images = overlay(images, overlay_strength)

@@ -23,11 +23,6 @@ from torch import nn
 from rlgrasp.config import ConfigError
 from rlgrasp.models.mlp import RunningNorm
 from rlgrasp.models.spec import PRIVILEGED_KEY
-from rlgrasp.vision.augment import shift_cells
-
-#: A minibatch's ``[N, 2]`` pixel offsets (rows, columns) by which its images were shifted before
-#: encoding (``rlgrasp.vision.augment.shift_images``); the object cells are shifted alike.
-SHIFT_KEY = "image_shift"
 
 
 class FeatureTap:
@@ -64,12 +59,6 @@ class ObjectFromImages(nn.Module):
                 f"state: {', '.join(parts)}{hint}"
             )
         self.index = torch.cat([torch.arange(*parts[n]) for n in names])
-        self.image_keys = list(encoders)
-        # Where the object cells sit among the head's outputs (None: not predicted).
-        sizes = [parts[n][1] - parts[n][0] for n in names]
-        starts = [sum(sizes[:i]) for i in range(len(names))]
-        cells = [slice(at, at + size) for n, at, size in zip(names, starts, sizes) if n == "object_cells"]
-        self.cells: slice | None = cells[0] if cells else None
         features = sum(e.project[0].out_features for e in encoders.values())
         self.head = nn.Linear(features, int(self.index.numel()))
         self.norm = RunningNorm(int(self.index.numel()))
@@ -87,12 +76,6 @@ class ObjectFromImages(nn.Module):
 
     def loss_of(self, features: torch.Tensor, minibatch: TensorDictBase) -> torch.Tensor:
         """Mean squared error of the standardized targets, from these features (a learner that
-        encodes the minibatch itself, as SAC does, passes them). A minibatch whose images were
-        shifted (``SHIFT_KEY``) has its object cells shifted alike."""
-        target = minibatch[PRIVILEGED_KEY][..., self.index]
-        if self.cells is not None and SHIFT_KEY in minibatch.keys():
-            height, width = minibatch[self.image_keys[0]].shape[-2:]
-            target = target.clone()
-            offsets = minibatch[SHIFT_KEY].T
-            target[..., self.cells] = shift_cells(target[..., self.cells], offsets, height, width)
-        return (self.head(features) - self.norm(target)).pow(2).mean()
+        encodes the minibatch itself, as SAC does, passes them)."""
+        target = self.norm(minibatch[PRIVILEGED_KEY][..., self.index])
+        return (self.head(features) - target).pow(2).mean()
