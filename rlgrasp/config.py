@@ -306,6 +306,9 @@ class ReplayAugmentConfig:
     # RGB: each replayed image blended with a training-texture pattern at a weight drawn in [0, overlay]
     # (not the next images, the targets'); 0: none
     overlay: float = 0.0
+    # RGB, with the camera's ground mask (env.camera.ground_mask): the share of replayed images whose
+    # ground pixels take a training-texture pattern (not the next images, the targets'); 0: none
+    ground_swap: float = 0.0
 
 
 #: The losses that may train a camera SAC's image encoders (``algo.encoder.trained_by``).
@@ -1005,6 +1008,7 @@ def _sac_checks(a: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
         ),
         ("algo.augment.shift", a.augment.shift, a.augment.shift >= 0, "must be >= 0 (pixels)"),
         *_colour_checks(a.augment, camera),
+        *_ground_swap_checks(a.augment, camera),
         (
             "algo.encoder.trained_by",
             a.encoder.trained_by,
@@ -1189,6 +1193,21 @@ def _colour_checks(aug: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
         ),
         ("algo.augment.overlay", aug.overlay, 0 <= aug.overlay <= 1, "must be in [0, 1] (0: no overlay)"),
         ("algo.augment.overlay", aug.overlay, aug.overlay == 0 or rgb, f"overlays RGB images; {needs_rgb}"),
+    ]
+
+
+def _ground_swap_checks(aug: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
+    """``algo.augment.ground_swap`` reads the camera's ground mask, which only an RGB camera draws."""
+    masked = bool(camera) and bool(camera.get("ground_mask", False))
+    share = aug.ground_swap
+    return [
+        ("algo.augment.ground_swap", share, 0 <= share <= 1, "must be in [0, 1] (0: none)"),
+        (
+            "algo.augment.ground_swap",
+            aug.ground_swap,
+            aug.ground_swap == 0 or masked,
+            "needs the camera's ground mask: an RGB camera and +env.camera.ground_mask=true",
+        ),
     ]
 
 

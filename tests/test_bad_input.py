@@ -734,6 +734,18 @@ TRAIN_SAC = [
         "algo.terms.aux.parts: unknown part 'object_cells'; parts of the privileged state: arm_q, ",
     ),
     (
+        "other grounds without the camera's ground mask",
+        ["cameras=wrist_rgb", "model=cnn", "algo.augment.ground_swap=0.5"],
+        "algo.augment.ground_swap=0.5: needs the camera's ground mask: an RGB camera and "
+        "+env.camera.ground_mask=true",
+    ),
+    (
+        "a ground mask on a depth camera",
+        ["cameras=wrist_depth", "model=cnn", "+env.camera.ground_mask=true"],
+        "camera.ground_mask=True: must be true or false, and true only with RGB (modality rgb or rgbd; "
+        "here depth): a depth camera draws no ground body",
+    ),
+    (
         "an image replay buffer larger than the memory",
         ["cameras=wrist_depth", "model=cnn", "algo.replay.buffer_frames=1000000000"],
         "algo.replay.buffer_frames=1,000,000,000: the image replay buffer would take 15",

@@ -189,6 +189,26 @@ def test_a_camera_with_object_cells_reports_where_the_object_is_seen(cam_env):
     assert hidden["privileged"][labelled.obs_slices["object_cells"]].sum() == 0
 
 
+def test_a_camera_with_a_ground_mask_reports_where_the_ground_is_seen(cam_env):
+    """``ground_mask``: one uint8 channel a frame, 1 exactly where the segmentation shows the ground;
+    the images and the state are those of the same camera without it (it is read, never drawn)."""
+    camera = {"mount": "wrist", "modality": "rgb", "eye": [0.1, 0.0, -0.05], "frames": 2}
+    plain, masked = cam_env(camera=camera), cam_env(camera={**camera, "ground_mask": True})
+    assert masked.observation_space["ground_mask"].shape == (2, 64, 64)
+    a, b = plain.reset(seed=0)[0], masked.reset(seed=0)[0]
+    assert np.array_equal(a["rgb"], b["rgb"]) and np.array_equal(a["privileged"], b["privileged"])
+    action = np.zeros(masked.action_dim, np.float32)
+    action[2] = -1.0
+    for _ in range(8):
+        before, b = b, masked.step(action)[0]
+    mask = b["ground_mask"]
+    assert mask.dtype == np.uint8 and set(np.unique(mask)) == {0, 1}
+    segmentation = masked.camera.render(masked.robot.camera_mount())["segmentation"]
+    np.testing.assert_array_equal(mask[-1], segmentation == masked.scene.ground)
+    np.testing.assert_array_equal(mask[0], before["ground_mask"][1])  # the older frame's, stacked
+    check_env(masked.unwrapped, skip_render_check=True)
+
+
 def test_repaint_patterns_fit_any_image_shape():
     patterns = repaint_patterns((48, 60), Range(0.0, 0.7), count=9)
     assert patterns.shape == (9, 3, 48, 60) and patterns.dtype == np.uint8
@@ -246,6 +266,7 @@ def test_a_depth_cameras_computed_ground_matches_the_rendered_one(mount, cam_env
         ({"frames": 0}, "camera.frames=0: must be an integer from 1 to 8"),
         ({"object_cells": 5}, "camera.object_cells=5: .* cells dividing the image.s width 64 and height 64"),
         ({"object_cells": -1}, "camera.object_cells=-1"),
+        ({"ground_mask": True}, "camera.ground_mask=True: .* only with RGB .modality rgb or rgbd; here dep"),
     ],
 )
 def test_bad_camera_config_names_the_key(camera, match):

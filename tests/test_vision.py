@@ -12,7 +12,15 @@ from torchrl.objectives import BCLoss
 from rlgrasp.config import ConfigError
 from rlgrasp.models.cnn import SpatialSoftmax, actor_norm, average_weights, build_vision_actor
 from rlgrasp.train.checkpoint import CheckpointError
-from rlgrasp.vision.augment import augment, overlay, overlay_bank, random_shift, recolour
+from rlgrasp.vision.augment import (
+    augment,
+    ground_bank,
+    overlay,
+    overlay_bank,
+    random_shift,
+    recolour,
+    swap_ground,
+)
 from rlgrasp.vision.auxiliary import ObjectFromImages
 from rlgrasp.vision.dagger import LABEL_KEY, DAggerPolicy, LabelledFrames, PrivilegedTeacher, load_teacher
 
@@ -231,12 +239,35 @@ def test_overlay_blends_each_image_toward_a_pattern_of_the_bank_by_its_own_weigh
     assert overlaid["depth"].equal(depth) and overlaid["rgb"].is_floating_point()  # RGB only
 
 
+def test_swap_ground_puts_a_pattern_of_the_bank_where_the_mask_says_in_its_share_of_the_images():
+    """Each swapped image's ground pixels are one pattern of the bank, the same in each of its
+    stacked frames; every other pixel, and every image not drawn, stays as it was."""
+    rgb = torch.full((400, 6, 8, 8), 7, dtype=torch.uint8)  # two stacked frames; no bank colour is 7
+    mask = torch.zeros(400, 2, 8, 8, dtype=torch.uint8)
+    mask[:, 0, 4:] = 1  # the lower half of the older frame is ground, the upper half of the newer
+    mask[:, 1, :4] = 1
+    out = swap_ground(rgb, mask, 0.5, torch.Generator().manual_seed(0))
+    assert out.dtype == torch.uint8 and out.shape == rgb.shape
+    ground = mask.bool().repeat_interleave(3, dim=1)
+    assert (out[~ground] == 7).all()
+    swapped = (out != 7).flatten(1).any(1)
+    assert 150 < int(swapped.sum()) < 250  # drawn per image, about half
+    bank = ground_bank(8, 8)
+    for image in out[swapped][:20]:
+        older, newer = image[:3, 4:], image[3:, :4]
+        matches = (bank[:, :, 4:] == older).flatten(1).all(1) & (bank[:, :, :4] == newer).flatten(1).all(1)
+        assert matches.any()  # one pattern of the bank, in both frames
+    assert torch.equal(swap_ground(rgb, mask, 0.0), rgb)
+
+
 def test_augmentations_stay_on_the_images_device():
     """A camera SAC's replay, and so its images, live on ``device`` (CUDA when present) while the
     random draws are made on the CPU's generator: the meta device stands in for a GPU here (no
     machine in CI has one), and refuses a CPU operand the same way."""
     images = torch.zeros(4, 3, 8, 8, dtype=torch.uint8, device="meta")
-    for augmented in (random_shift(images, 2), recolour(images, grey=0.5), overlay(images, 0.5)):
+    mask = torch.ones(4, 1, 8, 8, dtype=torch.uint8, device="meta")
+    swapped = swap_ground(images, mask, 0.5)
+    for augmented in (random_shift(images, 2), recolour(images, grey=0.5), overlay(images, 0.5), swapped):
         assert augmented.device == images.device and augmented.shape == images.shape
 
 

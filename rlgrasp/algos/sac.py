@@ -36,6 +36,7 @@ from torchrl.objectives import SACLoss, SoftUpdate
 from rlgrasp.config import ConfigError
 from rlgrasp.demos.bc import mse_bc_loss
 from rlgrasp.demos.dataset import demo_transitions, demos_for
+from rlgrasp.envs.cameras import GROUND_MASK_KEY
 from rlgrasp.models.cnn import head_actor, image_specs, vision_net
 from rlgrasp.models.mlp import ACTIVATIONS, OBS_KEY, RunningNorm
 from rlgrasp.models.spec import PRIVILEGED_KEY
@@ -60,7 +61,7 @@ FEATURES_KEY = "image_features"
 ACTOR_FEATURES_KEY = "actor_image_features"
 #: What a replayed image is stored as: RGB arrives as uint8; depth (metres) loses nothing a 64-pixel
 #: policy reads at half precision.
-STORED_DTYPES = {"rgb": torch.uint8, "depth": torch.float16}
+STORED_DTYPES = {"rgb": torch.uint8, "depth": torch.float16, GROUND_MASK_KEY: torch.uint8}
 
 
 class QNet(nn.Module):
@@ -109,7 +110,8 @@ class SAC(Algorithm):
         a = cfg.algo
         self.norm = parts.norm
         self.images = image_specs(parts.spec)  # key -> shape; empty: a state policy
-        self.transition_keys = _transition_keys(self.images, a.critic.privileged or a.terms.aux.coeff > 0)
+        privileged = a.critic.privileged or a.terms.aux.coeff > 0
+        self.transition_keys = _transition_keys(self.images, privileged, a.augment.ground_swap > 0)
         self.aux = self._aux()
         act_dim = len(parts.spec["action_low"])
         self.loss = SACLoss(
@@ -191,6 +193,12 @@ class SAC(Algorithm):
         worker starts)."""
         a = self.cfg.algo
         frames = demo_transitions(demos_for(a.demos, self.parts.make_env, self.cfg.env), self.cfg.env)
+        if GROUND_MASK_KEY in self.transition_keys and GROUND_MASK_KEY not in frames.keys():
+            raise ConfigError(
+                f"algo.demos={a.demos}: recorded without the camera's ground mask, which "
+                f"algo.augment.ground_swap={a.augment.ground_swap} reads; record them with "
+                "+env.camera.ground_mask=true"
+            )
         batch = a.optim.batch_size
         demos = _buffer(
             frames.numel(), min(batch - 1, max(1, round(batch * a.replay.demo_ratio))), self.device
@@ -337,7 +345,8 @@ class SAC(Algorithm):
         net = vision_net(self.actor)
 
         def encode(td: TensorDictBase, target: bool) -> torch.Tensor:
-            return net.encode(*(self._augmented(td[k], k, target) for k in self.images))
+            mask = td.get(GROUND_MASK_KEY, None)
+            return net.encode(*(self._augmented(td[k], k, target, mask) for k in self.images))
 
         features = encode(sample, target=False)
         with torch.no_grad():
@@ -352,14 +361,19 @@ class SAC(Algorithm):
         for_actor[ACTOR_FEATURES_KEY] = features if trained_by != "critic" else features.detach()
         return for_critic, for_actor
 
-    def _augmented(self, images: torch.Tensor, key: str, target: bool) -> torch.Tensor:
-        """Replayed images as the encoders learn from them: each shifted (``algo.augment.shift``),
-        RGB ones overlaid with patterns (``algo.augment.overlay``; not the ``target``'s next images,
-        whose values the losses regress onto) and, with ``algo.augment.kind=colour``, recoloured;
-        each image its own draw."""
+    def _augmented(
+        self, images: torch.Tensor, key: str, target: bool, ground_mask: torch.Tensor | None = None
+    ) -> torch.Tensor:
+        """Replayed images as the encoders learn from them: RGB ones with their ground swapped
+        (``algo.augment.ground_swap``, where ``ground_mask`` says) and overlaid with patterns
+        (``algo.augment.overlay``), neither for the ``target``'s next images, whose values the losses
+        regress onto; each shifted (``algo.augment.shift``) and, with ``algo.augment.kind=colour``,
+        recoloured; each image its own draw."""
         aug = self.cfg.algo.augment
-        overlay_strength = 0.0 if target else aug.overlay
-        return augment_images(images, key, aug.kind, aug.grey, aug.shift, overlay_strength)
+        overlay_strength, ground_swap = (0.0, 0.0) if target else (aug.overlay, aug.ground_swap)
+        return augment_images(
+            images, key, aug.kind, aug.grey, aug.shift, overlay_strength, ground_mask, ground_swap
+        )
 
     def trained_parameters(self) -> list[torch.nn.Parameter]:
         critics = _trainable(self.loss.qvalue_network_params)
@@ -413,11 +427,13 @@ class SAC(Algorithm):
         log.info("replay buffer: %s frames from %s", f"{len(self.replay):,}", path)
 
 
-def _transition_keys(images: dict[str, Any], privileged: bool) -> tuple[Any, ...]:
+def _transition_keys(images: dict[str, Any], privileged: bool, ground: bool = False) -> tuple[Any, ...]:
     """What a transition keeps: the state's, and a camera's images (and, for a privileged critic,
-    the privileged state), each with its next."""
+    the privileged state), each with its next; with ``ground``, the images' ground mask (not the
+    next one: the targets' images keep their ground)."""
     extra = [*images, *([PRIVILEGED_KEY] if images and privileged else [])]
-    return (*TRANSITION_KEYS, *extra, *(("next", k) for k in extra))
+    mask = [GROUND_MASK_KEY] if images and ground else []
+    return (*TRANSITION_KEYS, *extra, *mask, *(("next", k) for k in extra))
 
 
 def _compact(transitions: TensorDictBase) -> TensorDictBase:
@@ -437,6 +453,8 @@ def replay_bytes_per_frame(spec: dict[str, Any], keys: tuple[Any, ...]) -> int:
         if name in spec.get("images", {}):
             numel = int(torch.Size(spec["images"][name]).numel())
             size += numel * STORED_DTYPES[name].itemsize
+        elif name == GROUND_MASK_KEY:  # a byte a pixel of each stacked RGB frame
+            size += int(torch.Size(spec["images"]["rgb"]).numel()) // 3
         else:
             dims = {
                 OBS_KEY: spec["obs_dim"],

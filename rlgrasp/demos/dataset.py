@@ -18,7 +18,7 @@ import torch
 from tensordict import TensorDict
 
 from rlgrasp.config import ConfigError
-from rlgrasp.envs.cameras import CameraSpec
+from rlgrasp.envs.cameras import GROUND_MASK_KEY, CameraSpec
 from rlgrasp.models.cnn import IMAGE_KEYS
 from rlgrasp.models.spec import PRIVILEGED_KEY
 from rlgrasp.targets import UntrustedConfigError, check_plain_memmap
@@ -206,7 +206,7 @@ def demo_transitions(demos: Demos, env_cfg: Any) -> TensorDict:
         "terminated": terminated[keep].reshape(n, 1),
     }
     now = {"observation": f["observation"][keep], "action": f["action"][keep]}
-    for key in (*IMAGE_KEYS, PRIVILEGED_KEY):  # a camera's entries (recorded with their next_)
+    for key in (*IMAGE_KEYS, GROUND_MASK_KEY, PRIVILEGED_KEY):  # a camera's entries, with their next_
         if key in f.keys():
             now[key], nxt[key] = f[key][keep], f[f"next_{key}"][keep]
     return TensorDict({**now, "next": nxt}, batch_size=[n])

@@ -24,6 +24,8 @@ MOUNTS = ("wrist", "fixed")
 MODALITIES = ("depth", "rgb", "rgbd")
 MAX_SIZE = 512
 MAX_FRAMES = 8
+#: The observation entry of a camera's ground mask (``CameraSpec.ground_mask``).
+GROUND_MASK_KEY = "ground_mask"
 #: Where each mount looks from by default: for ``wrist`` in the hand's frame (its z axis points
 #: along the fingers), for ``fixed`` in the world frame.
 MOUNT_DEFAULTS = {
@@ -55,6 +57,10 @@ class CameraSpec:
     # of the privileged state. A camera learner's auxiliary head can regress its image features
     # onto it (docs/algorithms.md); no policy reads it and no robot needs it.
     object_cells: int = 0
+    # For training only: with an RGB camera the env also returns ``ground_mask``, 1 where the ground
+    # shows in each image (uint8, one channel a frame), so that a learner can put other grounds
+    # behind the object in its replayed images (``algo.augment.ground_swap``); no policy reads it.
+    ground_mask: bool = False
 
     @staticmethod
     def from_config(cfg: Mapping[str, Any]) -> CameraSpec:
@@ -88,6 +94,11 @@ class CameraSpec:
                 f"camera.object_cells={k!r}: must be 0 (off) or a whole number of cells dividing the "
                 f"image's width {self.width} and height {self.height}"
             )
+        if not isinstance(self.ground_mask, bool) or (self.ground_mask and "rgb" not in self.keys):
+            raise ValueError(
+                f"camera.ground_mask={self.ground_mask!r}: must be true or false, and true only with RGB "
+                f"(modality rgb or rgbd; here {self.modality}): a depth camera draws no ground body"
+            )
         if not 0 < self.fov < 180:
             raise ValueError(f"camera.fov={self.fov!r}: must be between 0 and 180 degrees")
         if not 0 < self.near < self.far:
@@ -114,6 +125,8 @@ class CameraSpec:
             out["depth"] = gym.spaces.Box(0.0, self.far, (self.frames, self.height, self.width), np.float32)
         if "rgb" in self.keys:
             out["rgb"] = gym.spaces.Box(0, 255, (3 * self.frames, self.height, self.width), np.uint8)
+        if self.ground_mask:
+            out[GROUND_MASK_KEY] = gym.spaces.Box(0, 1, (self.frames, self.height, self.width), np.uint8)
         return out
 
 

@@ -11,7 +11,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from rlgrasp.envs.cameras import Camera, CameraSpec, ImageHistory, object_cells
+from rlgrasp.envs.cameras import GROUND_MASK_KEY, Camera, CameraSpec, ImageHistory, object_cells
 from rlgrasp.envs.collision_model import COLLISION_MODELS
 from rlgrasp.envs.control import CONTROL_MODES, make_control
 from rlgrasp.envs.observation import PROPRIOCEPTION, ObservationLayout, full_parts
@@ -233,7 +233,8 @@ class GraspEnv(gym.Env):
             self.scene.hide_ground()
             self.camera.ground_height = 0.0
         repaint = rgb and self.visuals.preset.ground_repaint > 0
-        self.camera.segmented = repaint or self.camera.spec.object_cells > 0
+        spec = self.camera.spec
+        self.camera.segmented = repaint or spec.object_cells > 0 or spec.ground_mask
         if self.camera.spec.mount == "wrist":
             self.robot.show_only(self.robot.wrist_links())
 
@@ -308,12 +309,15 @@ class GraspEnv(gym.Env):
 
     def _render(self) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
         """The camera's images (the ground repainted where the preset says) and what its
-        segmentation tells for training: the object's ``object_cells`` when the camera reports them."""
+        segmentation tells for training: the object's ``object_cells`` and the ``ground_mask`` image
+        when the camera reports them."""
         mount = self.robot.camera_mount() if self.camera.spec.mount == "wrist" else None
         images = self.camera.render(mount)
         segmentation = images.pop("segmentation", None)
         if segmentation is not None and self.visuals.preset.ground_repaint > 0:
             self.visuals.repaint_ground(images, segmentation == self.scene.ground, self._visual_rng)
+        if self.camera.spec.ground_mask:
+            images[GROUND_MASK_KEY] = (segmentation == self.scene.ground).astype(np.uint8)[None]
         cells = self.camera.spec.object_cells
         labels = {"object_cells": object_cells(segmentation == self.scene.object, cells)} if cells else {}
         return images, labels

@@ -22,6 +22,13 @@ SVEA's overlay (Hansen et al. 2021), procedural patterns standing in for their n
 that strong edges and colours anywhere in the image, not only the ground texture cells an episode
 happens to show, stop looking like the object. A camera SAC overlays the images its losses read and
 not the next images the targets are computed from (SVEA's clean targets).
+
+``ground_swap`` (RGB, with the camera's ground mask) replaces, in that share of the images, the
+pixels where the ground shows by a pattern of the training generators (never the held-out rings),
+at the image's scale or magnified: the same replayed image comes back on many grounds, the object
+and the arm as they were, so that nothing of the ground's look tells where the object is. Green-
+screen background swapping, with the simulator's segmentation as the screen; it needs a mask a
+real camera lacks, so it is a training aid for simulation only.
 """
 
 from __future__ import annotations
@@ -36,6 +43,9 @@ from rlgrasp.envs.visuals import VISUAL_PRESETS, repaint_patterns
 PERMUTATIONS = torch.tensor([[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]])
 LUMINANCE = torch.tensor([0.299, 0.587, 0.114])  # ITU-R BT.601 weights, as PIL's convert("L")
 OVERLAY_PATTERNS = 256  # in the bank, each also flipped left to right
+GROUND_PATTERNS = 256  # in the ground bank, each also flipped left to right
+# A wrist camera sees a ground texture's cells anywhere from a few pixels to the whole image across.
+GROUND_SCALES = (1, 2, 4, 8)
 
 
 def recolour(
@@ -103,6 +113,32 @@ def overlay(rgb: torch.Tensor, strength: float, generator: torch.Generator | Non
     return torch.lerp(x, pattern, weight).reshape(shape)  # a new tensor: float input is not changed
 
 
+@lru_cache(maxsize=4)
+def ground_bank(height: int, width: int, device: torch.device | str = "cpu") -> torch.Tensor:
+    """``[2 * GROUND_PATTERNS, 3, height, width]`` uint8 grounds in the training visuals' hues, a
+    third each at the image's scale and magnified 2 and 4 times, made once per image size and device
+    (the same bank in every run)."""
+    hues = VISUAL_PRESETS["default"].hues
+    patterns = repaint_patterns((height, width), hues, GROUND_PATTERNS, seed=1, scales=GROUND_SCALES)
+    bank = torch.from_numpy(patterns)
+    return torch.cat([bank, bank.flip(-1)]).to(device)
+
+
+def swap_ground(
+    rgb: torch.Tensor, mask: torch.Tensor, share: float, generator: torch.Generator | None = None
+) -> torch.Tensor:
+    """``[N, 3k, H, W]`` images (``k`` stacked frames) and their ``[N, k, H, W]`` ground masks: in
+    ``share`` of the images, drawn per image, the ground's pixels take a pattern of the bank (the
+    same one in each stacked frame); the rest as they were."""
+    n, _, height, width = rgb.shape
+    device = rgb.device
+    bank = ground_bank(height, width, device)
+    swapped = (torch.rand(n, generator=generator) < share).to(device)
+    pattern = bank[torch.randint(len(bank), (n,), generator=generator).to(device)]
+    where = mask.bool().repeat_interleave(3, dim=1) & swapped[:, None, None, None]
+    return torch.where(where, pattern.repeat(1, mask.shape[1], 1, 1).to(rgb.dtype), rgb)
+
+
 def augment_images(
     images: torch.Tensor,
     key: str,
@@ -110,10 +146,15 @@ def augment_images(
     grey: float = 0.0,
     shift: int = 0,
     overlay_strength: float = 0.0,
+    ground_mask: torch.Tensor | None = None,
+    ground_swap: float = 0.0,
 ) -> torch.Tensor:
-    """One batch of ``key`` images (``depth`` or ``rgb``) shifted (``shift`` pixels) and, RGB,
+    """One batch of ``key`` images (``depth`` or ``rgb``): RGB ones with their ground swapped
+    (``ground_swap`` > 0, where ``ground_mask`` says), then shifted (``shift`` pixels) and, RGB,
     overlaid with patterns (``overlay_strength`` > 0) and, with ``kind="colour"``, recoloured; each
     image its own draw."""
+    if ground_swap > 0 and key == "rgb" and ground_mask is not None:
+        images = swap_ground(images, ground_mask, ground_swap)
     if shift > 0:
         images = random_shift(images, shift)
     if overlay_strength > 0 and key == "rgb":
