@@ -372,6 +372,45 @@ def test_overlay_blends_the_images_the_losses_read_not_the_targets_next_images(t
         validate_train(compose_train([*SMALL, *CAMERA, "algo.augment.overlay=0.5"]))
 
 
+def test_ground_swap_changes_the_ground_of_the_images_the_losses_read_and_nothing_else(
+    tmp_path: Path,
+) -> None:
+    """``algo.augment.ground_swap``: the replay keeps each image's ground mask (not the next one's;
+    the memory estimate counts it), and the images the losses read get other grounds there, the
+    object and the arm untouched; the targets' next images keep theirs. Demonstrations recorded
+    without the mask, and a camera without it, are refused in one line."""
+    from rlgrasp.algos.sac import replay_bytes_per_frame
+
+    out = tmp_path / "rgb"
+    camera = ["cameras=wrist_rgb", "env.ee_yaw=true"]
+    masked = [*camera, "+env.camera.ground_mask=true"]
+    record_demos(compose_config("demos", ["episodes=1", f"out={out}", "workers=1", "keep=all", *masked]))
+    swap = [*CAMERA, *masked, "algo.augment.shift=0", "algo.optim.batch_size=8"]
+    sac = _sac(tmp_path, *swap, "algo.augment.ground_swap=1", f"algo.demos={out / 'demos'}")
+    assert "ground_mask" in sac.transition_keys and ("next", "ground_mask") not in sac.transition_keys
+    plain_keys = tuple(k for k in sac.transition_keys if k != "ground_mask")
+    spec = sac.parts.spec
+    mask_bytes = replay_bytes_per_frame(spec, sac.transition_keys) - replay_bytes_per_frame(spec, plain_keys)
+    assert mask_bytes == 64 * 64
+    demos = sac.demos[:]
+    images, mask = demos["rgb"], demos["ground_mask"]
+    assert mask.dtype == torch.uint8 and mask.shape[1:] == (1, 64, 64) and mask.float().mean() > 0.3
+    swapped = sac._augmented(images, "rgb", target=False, ground_mask=mask)
+    ground = mask.bool().expand_as(images)
+    assert torch.equal(swapped[~ground], images[~ground])
+    assert (swapped != images).flatten(1).any(1).float().mean() > 0.9  # nearly every ground changed
+    assert sac._augmented(images, "rgb", target=True, ground_mask=mask) is images
+    sac.store(demos[:8].clone())  # online rows as the collector's batch holds them
+    sac._inputs(sac._sample())  # both halves of a minibatch carry their masks to the encoder
+    unmasked = tmp_path / "unmasked"
+    record_demos(compose_config("demos", ["episodes=1", f"out={unmasked}", "workers=1", "keep=all", *camera]))
+    with pytest.raises(ConfigError, match=r"recorded without the camera's ground mask, which algo\.augment"):
+        _sac(tmp_path, *swap, "algo.augment.ground_swap=0.5", f"algo.demos={unmasked / 'demos'}")
+    refused = r"^algo\.augment\.ground_swap=0\.5: needs the camera's ground mask: an RGB camera and \+env"
+    with pytest.raises(ConfigError, match=refused):
+        validate_train(compose_train([*SMALL, *CAMERA, *camera, "algo.augment.ground_swap=0.5"]))
+
+
 def _shipped_as_measured(experiment: str, measured_overrides: list[str]) -> Any:
     """``experiment`` composed, after asserting it equals the run the docs measured (its overrides)."""
     from omegaconf import OmegaConf
@@ -401,7 +440,8 @@ def test_the_rgb_experiment_is_the_measured_overrides_of_the_camera_one() -> Non
 def test_the_rgb_objects_experiment_is_the_measured_overrides_of_the_rgb_one() -> None:
     """docs/algorithms.md measured the RGB learner on many objects as grasp_vision_sac_rgb_demos plus
     these overrides (the runs of 2026-12-05: the keypoint encoder and the object-cells head on top of
-    the utd-0.25 run, then a gradient step every eight frames, and bench_learning's time budget);
+    the utd-0.25 run, then a gradient step every eight frames, and bench_learning's time budget; then
+    other grounds behind half the replayed images, on demonstrations recorded with the ground mask);
     grasp_objects_vision_sac_rgb_demos is that run."""
     shipped = _shipped_as_measured(
         "grasp_objects_vision_sac_rgb_demos",
@@ -417,11 +457,14 @@ def test_the_rgb_objects_experiment_is_the_measured_overrides_of_the_rgb_one() -
             "+env.camera.object_cells=8",
             "algo.terms.aux.coeff=1",
             "algo.terms.aux.parts=[object_cells]",
-            "algo.demos=demos/train_mix_wrist_rgb_behind_cells/demos",
+            "+env.camera.ground_mask=true",
+            "algo.augment.ground_swap=0.5",
+            "algo.demos=demos/train_mix_wrist_rgb_behind_cells_mask/demos",
         ],
     )
     assert shipped.algo.optim.utd_ratio == 0.125 and shipped.env.objects != compose_train([]).env.objects
     assert shipped.model.pooling == "keypoints" and shipped.env.camera.object_cells == 8
+    assert shipped.env.camera.ground_mask and shipped.algo.augment.ground_swap == 0.5
 
 
 def test_the_state_objects_experiment_with_demonstrations_is_the_measured_run() -> None:
