@@ -1204,8 +1204,8 @@ def _ground_swap_checks(aug: Any, camera: Any) -> list[tuple[str, Any, bool, str
         ("algo.augment.ground_swap", share, 0 <= share <= 1, "must be in [0, 1] (0: none)"),
         (
             "algo.augment.ground_swap",
-            aug.ground_swap,
-            aug.ground_swap == 0 or masked,
+            share,
+            share == 0 or masked,
             "needs the camera's ground mask: an RGB camera and +env.camera.ground_mask=true",
         ),
     ]

@@ -235,7 +235,7 @@ class GraspEnv(gym.Env):
         repaint = rgb and self.visuals.preset.ground_repaint > 0
         spec = self.camera.spec
         self.camera.segmented = repaint or spec.object_cells > 0 or spec.ground_mask
-        if self.camera.spec.mount == "wrist":
+        if spec.mount == "wrist":
             self.robot.show_only(self.robot.wrist_links())
 
     def _randomize_visuals(self, seed: int | None) -> None:

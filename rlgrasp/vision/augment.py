@@ -116,8 +116,8 @@ def overlay(rgb: torch.Tensor, strength: float, generator: torch.Generator | Non
 @lru_cache(maxsize=4)
 def ground_bank(height: int, width: int, device: torch.device | str = "cpu") -> torch.Tensor:
     """``[2 * GROUND_PATTERNS, 3, height, width]`` uint8 grounds in the training visuals' hues, a
-    third each at the image's scale and magnified 2 and 4 times, made once per image size and device
-    (the same bank in every run)."""
+    quarter each at the image's scale and magnified 2, 4 and 8 times (``GROUND_SCALES``), made once
+    per image size and device (the same bank in every run)."""
     hues = VISUAL_PRESETS["default"].hues
     patterns = repaint_patterns((height, width), hues, GROUND_PATTERNS, seed=1, scales=GROUND_SCALES)
     bank = torch.from_numpy(patterns)
