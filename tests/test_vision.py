@@ -260,6 +260,21 @@ def test_swap_ground_puts_a_pattern_of_the_bank_where_the_mask_says_in_its_share
     assert torch.equal(swap_ground(rgb, mask, 0.0), rgb)
 
 
+def test_swap_ground_is_exact_for_any_pixel_values_uint8_or_float():
+    """The swap is arithmetic (``x + (p - x) g``, wrapping in uint8): over every pixel value, uint8
+    and float images come out alike, each pixel either the image's or the pattern's."""
+    rgb = torch.randint(0, 256, (64, 3, 8, 8), dtype=torch.uint8, generator=torch.Generator().manual_seed(1))
+    mask = (torch.rand(64, 1, 8, 8, generator=torch.Generator().manual_seed(2)) < 0.5).to(torch.uint8)
+    as_uint8 = swap_ground(rgb, mask, 1.0, torch.Generator().manual_seed(3))
+    as_float = swap_ground(rgb.float(), mask, 1.0, torch.Generator().manual_seed(3))
+    assert as_float.is_floating_point() and torch.equal(as_float, as_uint8.float())
+    ground = mask.bool().expand(-1, 3, -1, -1)
+    assert torch.equal(as_uint8[~ground], rgb[~ground])
+    bank = ground_bank(8, 8)
+    for image, where in zip(as_uint8[:16], ground[:16]):
+        assert ((bank == image) | ~where).flatten(1).all(1).any()  # one pattern of the bank on the ground
+
+
 def test_augmentations_stay_on_the_images_device():
     """A camera SAC's replay, and so its images, live on ``device`` (CUDA when present) while the
     random draws are made on the CPU's generator: the meta device stands in for a GPU here (no
