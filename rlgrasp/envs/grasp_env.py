@@ -314,10 +314,11 @@ class GraspEnv(gym.Env):
         mount = self.robot.camera_mount() if self.camera.spec.mount == "wrist" else None
         images = self.camera.render(mount)
         segmentation = images.pop("segmentation", None)
-        if segmentation is not None and self.visuals.preset.ground_repaint > 0:
-            self.visuals.repaint_ground(images, segmentation == self.scene.ground, self._visual_rng)
+        ground = segmentation == self.scene.ground if segmentation is not None else None
+        if ground is not None and self.visuals.preset.ground_repaint > 0:
+            self.visuals.repaint_ground(images, ground, self._visual_rng)
         if self.camera.spec.ground_mask:
-            images[GROUND_MASK_KEY] = (segmentation == self.scene.ground).astype(np.uint8)[None]
+            images[GROUND_MASK_KEY] = ground.astype(np.uint8)[None]
         cells = self.camera.spec.object_cells
         labels = {"object_cells": object_cells(segmentation == self.scene.object, cells)} if cells else {}
         return images, labels
