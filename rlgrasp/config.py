@@ -246,8 +246,8 @@ class ReplayConfig:
     learning_starts: int = 5_000  # frames in the buffer before the first gradient step
     # With algo.demos: this share of each minibatch is drawn from them (RLPD's symmetric sampling).
     demo_ratio: float = 0.5
-    # The buffer is written beside the checkpoints (replay.pt), so a resumed run continues with it;
-    # false: a resumed run starts with an empty one.
+    # The buffer is written beside the checkpoints (<run>/replay/, each checkpoint the transitions
+    # stored since the last), so a resumed run continues with it; false: it starts with an empty one.
     save: bool = True
 
 

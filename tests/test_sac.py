@@ -5,6 +5,7 @@ checkpoint evaluation and export take as they take PPO's."""
 from __future__ import annotations
 
 import os
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -13,7 +14,8 @@ import torch
 from tensordict import TensorDict
 from torchrl.envs import ExplorationType, set_exploration_type
 
-from rlgrasp.algos.sac import REPLAY_FILE, SAC
+from rlgrasp.algos.replay_files import LEGACY_FILE, REPLAY_DIR, ReplayFiles
+from rlgrasp.algos.sac import SAC
 from rlgrasp.compose import compose_config, compose_train
 from rlgrasp.config import ConfigError, validate_train
 from rlgrasp.demos.cli import record_demos
@@ -182,17 +184,59 @@ def test_resume_restores_the_learner_and_its_replay_buffer(tmp_path: Path) -> No
     trainer.frames = 96
     trainer.save()
     trainer.logger.close()
-    assert (run / REPLAY_FILE).is_file()
+    assert ReplayFiles(run).exist()
     again = _resumed(run)
     assert len(again.algo.replay) == 96 and again.updates == trainer.updates
     for key, value in trainer.algo.loss.state_dict().items():
         assert torch.equal(value, again.algo.loss.state_dict()[key]), key
     again.logger.close()
-    (run / REPLAY_FILE).unlink()  # without the file: an empty buffer, said in the log
+    shutil.rmtree(run / REPLAY_DIR)  # without the files: an empty buffer, said in the log
     third = _resumed(run)
     assert len(third.algo.replay) == 0
     third.logger.close()
     assert "starts with an empty replay buffer" in (run / "train.log").read_text()
+
+
+def _numbered(sac: SAC, first: int, n: int) -> TensorDict:
+    """``n`` transitions whose reward numbers them ``first``, ``first + 1``, ... (their order)."""
+    batch = _batch(sac, n)
+    batch["next", "reward"] = torch.arange(first, first + n, dtype=torch.float32).reshape(1, n, 1)
+    return batch
+
+
+def test_a_checkpoint_writes_its_new_transitions_only_and_a_resume_keeps_their_order(tmp_path: Path) -> None:
+    sac = _sac(tmp_path, "algo.replay.buffer_frames=100", "algo.replay.learning_starts=1000")
+    for first in (0, 60, 120):  # 180 transitions through a buffer of 100: it wraps
+        sac.store(_numbered(sac, first, 60).reshape(-1))
+        sac.save_extra(tmp_path)
+        files = ReplayFiles(tmp_path).chunks()
+        assert files[-1][1] == 60  # the checkpoint's file holds its 60 new transitions only
+    # the oldest file's 60 are all overwritten: removed; the two newest hold the buffer's 100
+    assert [frames for _, frames, _ in ReplayFiles(tmp_path).chunks()] == [60, 60]
+    sac.save_extra(tmp_path)  # nothing new: no file
+    assert len(ReplayFiles(tmp_path).chunks()) == 2
+
+    resumed = _sac(tmp_path, "algo.replay.buffer_frames=100", "algo.replay.learning_starts=1000")
+    resumed.load_replay(tmp_path)
+    kept = sorted(resumed.replay[:]["next", "reward"].flatten().tolist())
+    assert kept == [float(r) for r in range(80, 180)]  # the newest 100
+    resumed.store(_numbered(resumed, 180, 10).reshape(-1))  # the next ones overwrite the oldest
+    kept = sorted(resumed.replay[:]["next", "reward"].flatten().tolist())
+    assert kept == [float(r) for r in range(90, 190)]
+
+
+def test_a_replay_file_written_before_the_chunks_is_read_then_removed(tmp_path: Path) -> None:
+    sac = _sac(tmp_path, "algo.replay.buffer_frames=50", "algo.replay.learning_starts=1000")
+    old = _numbered(sac, 0, 40).reshape(-1).select(*sac.transition_keys)
+    torch.save({"frames": 40, "data": old.to_dict()}, tmp_path / LEGACY_FILE)
+    sac.load_replay(tmp_path)
+    assert len(sac.replay) == 40
+    sac.store(_numbered(sac, 40, 20).reshape(-1))
+    sac.save_extra(tmp_path)
+    assert (tmp_path / LEGACY_FILE).is_file()  # the new file alone does not hold the buffer's 50
+    sac.store(_numbered(sac, 60, 40).reshape(-1))
+    sac.save_extra(tmp_path)
+    assert not (tmp_path / LEGACY_FILE).exists()
 
 
 def test_a_state_learner_keeps_one_thread_and_the_camera_experiments_take_every_core(tmp_path: Path) -> None:

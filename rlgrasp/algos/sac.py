@@ -26,13 +26,14 @@ from pathlib import Path
 from typing import Any
 
 import torch
-from tensordict import TensorDict, TensorDictBase
+from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModule
 from torch import nn
 from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.envs import ExplorationType, set_exploration_type
 from torchrl.objectives import SACLoss, SoftUpdate
 
+from rlgrasp.algos.replay_files import ReplayFiles
 from rlgrasp.config import ConfigError
 from rlgrasp.demos.bc import mse_bc_loss
 from rlgrasp.demos.dataset import demo_transitions, demos_for
@@ -53,8 +54,6 @@ TRANSITION_KEYS = (
     ("next", "done"),
     ("next", "terminated"),
 )
-#: The replay buffer's file in the run directory (plain tensors, read with ``weights_only=True``).
-REPLAY_FILE = "replay.pt"
 #: Where a camera learner puts the images' features in a minibatch: the critics read this key, the
 #: actor head the second (the same features, each detached or not as ``algo.encoder.trained_by`` says).
 FEATURES_KEY = "image_features"
@@ -134,7 +133,10 @@ class SAC(Algorithm):
         online = a.optim.batch_size - (self.demos.batch_size if self.demos is not None else 0)
         self.replay = _buffer(a.replay.buffer_frames, online, device)
         self.owed = 0.0  # gradient steps due but not yet taken (the ratio is kept across batches)
-        self.replay_file: Path | None = None
+        # Transitions ever put in the buffer (its ring's write position is this modulo its size),
+        # and of them, those already in the run's replay files.
+        self.stored = 0
+        self.saved = 0
 
     def _optimizers(self, optim: Any) -> dict[str, torch.optim.Optimizer]:
         """Adam for the actor, the critics and the temperature; with a camera, for the encoders too,
@@ -269,7 +271,16 @@ class SAC(Algorithm):
             self.parts.norms[PRIVILEGED_KEY].update(flat[PRIVILEGED_KEY])
         if self.aux is not None:
             self.aux.update(flat)
-        self.replay.extend(_compact(flat.select(*self.transition_keys)).to(self.device))
+        self._extend(_compact(flat.select(*self.transition_keys)))
+
+    def _extend(self, transitions: TensorDictBase) -> None:
+        self.replay.extend(transitions.to(self.device))
+        self.stored += transitions.shape[0]
+
+    def _newest(self, count: int) -> TensorDictBase:
+        """The ``count`` transitions stored last, oldest first."""
+        size = self.cfg.algo.replay.buffer_frames
+        return self.replay[torch.arange(self.stored - count, self.stored) % size]
 
     def _sample(self) -> TensorDictBase:
         """A minibatch: online transitions, and with demonstrations ``demo_ratio`` of it theirs."""
@@ -402,29 +413,31 @@ class SAC(Algorithm):
         self.load_replay(Path(self.cfg.paths.output_dir))
 
     def save_extra(self, run_dir: Any) -> None:
-        """The replay buffer, beside the checkpoints: ``replay.pt`` (written atomically)."""
+        """The transitions stored since the last checkpoint, one more file beside the checkpoints
+        (``rlgrasp.algos.replay_files``); the files older than the buffer holds are removed."""
         if not self.cfg.algo.replay.save or len(self.replay) == 0:
             return
-        path = Path(run_dir) / REPLAY_FILE
-        tmp = path.with_name(f".{path.name}.tmp")
-        data = self.replay[:].to("cpu").to_dict()
-        torch.save({"frames": len(self.replay), "data": data}, tmp)
-        tmp.replace(path)
+        files = ReplayFiles(run_dir)
+        new = min(self.stored - self.saved, len(self.replay))
+        if new > 0:
+            files.write(self._newest(new))
+            self.saved = self.stored
+        files.prune(self.cfg.algo.replay.buffer_frames)
 
     def load_replay(self, run_dir: Path) -> None:
         """Continue with the run's replay buffer, or say that the run starts with an empty one."""
         from rlgrasp.train.logger import log
 
-        path = run_dir / REPLAY_FILE
-        if not path.is_file():
+        files = ReplayFiles(run_dir)
+        if not files.exist():
             log.warning(
-                "no %s in %s: the resumed run starts with an empty replay buffer", REPLAY_FILE, run_dir
+                "no replay files in %s: the resumed run starts with an empty replay buffer", files.folder
             )
             return
-        saved = torch.load(path, map_location="cpu", weights_only=True)
-        data = TensorDict(saved["data"], batch_size=[saved["frames"]])
-        self.replay.extend(data.to(self.device))
-        log.info("replay buffer: %s frames from %s", f"{len(self.replay):,}", path)
+        for transitions in files.read():
+            self._extend(transitions)
+        self.saved = self.stored
+        log.info("replay buffer: %s frames from %s", f"{len(self.replay):,}", files.folder)
 
 
 def _transition_keys(images: dict[str, Any], privileged: bool, ground: bool = False) -> tuple[Any, ...]:

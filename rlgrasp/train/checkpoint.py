@@ -8,7 +8,8 @@ writes it, for every algorithm):
   ``norm.mean``/``norm.var``/``norm.count``); every algorithm's, so evaluation and export read any
 - what the algorithm adds (``rlgrasp.train.algorithm.Algorithm.state_dict``): PPO ``critic`` and
   ``optimizer`` (Adam's state); SAC ``sac`` (its loss's critics, target critics and temperature, the
-  optimizers, the gradient steps owed; the replay buffer is ``replay.pt`` in the run directory);
+  optimizers, the gradient steps owed; the replay buffer is in the run directory's ``replay/``,
+  ``rlgrasp.algos.replay_files``);
   DAgger ``student``, ``aux``, ``optimizer``
 - ``frames``, ``updates``: counters; ``generation``: how many times the run was resumed
 - ``best_eval_success``, ``last_eval``: evaluation bookkeeping (``last_eval`` may be None)
