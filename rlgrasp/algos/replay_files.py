@@ -1,10 +1,11 @@
 """A replay buffer on disk, beside the checkpoints: each checkpoint adds one file holding the
 transitions stored since the one before, and a resumed run reads them back in the order they came.
 
-Writing the whole buffer at every checkpoint wrote each transition about three times in a 30-minute
-camera run, and took 92 s of its 30 minutes (docs/algorithms.md, "What a checkpoint costs"); here
-each transition is written once. Read back in order into a ring buffer, the newest frames are kept
-and the oldest are the next overwritten, as they were before the run stopped.
+Writing the whole buffer at every checkpoint wrote each transition several times over, and cost a
+camera run a share of its time budget (docs/algorithms.md, "Collecting between the updates, and a
+checkpoint that writes each frame once"); here each transition is written once. Read back in order
+into a ring buffer, the newest frames are kept and the oldest are the next overwritten, as they
+were before the run stopped.
 
 Each file is a ``torch.save``d dict of plain tensors, read with ``weights_only=True``, named
 ``<sequence>_<frames>.pt`` in ``<run>/replay/``. A run written before these files (one
