@@ -206,6 +206,7 @@ def _numbered(sac: SAC, first: int, n: int) -> TensorDict:
 
 def test_a_checkpoint_writes_its_new_transitions_only_and_a_resume_keeps_their_order(tmp_path: Path) -> None:
     sac = _sac(tmp_path, "algo.replay.buffer_frames=100", "algo.replay.learning_starts=1000")
+    ReplayFiles(tmp_path).write(_numbered(sac, 1000, 5).reshape(-1))  # an older run's, in the same folder
     for first in (0, 60, 120):  # 180 transitions through a buffer of 100: it wraps
         sac.store(_numbered(sac, first, 60).reshape(-1))
         sac.save_extra(tmp_path)

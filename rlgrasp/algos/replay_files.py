@@ -24,7 +24,7 @@ from tensordict import TensorDict, TensorDictBase
 REPLAY_DIR = "replay"
 #: The whole buffer in one file, as runs wrote it before ``REPLAY_DIR``: still read.
 LEGACY_FILE = "replay.pt"
-_CHUNK = re.compile(r"^(\d{6})_(\d+)\.pt$")
+_CHUNK = re.compile(r"^(\d+)_(\d+)\.pt$")
 
 
 class ReplayFiles:
@@ -65,6 +65,13 @@ class ReplayFiles:
             held += frames
         if held >= keep_frames:
             self.legacy.unlink(missing_ok=True)
+
+    def clear(self) -> None:
+        """Remove every replay file: a new run's first checkpoint must not leave an older run's
+        transitions for its resume to read."""
+        for _, _, path in self.chunks():
+            path.unlink()
+        self.legacy.unlink(missing_ok=True)
 
     def read(self) -> Iterator[TensorDict]:
         """Each file's transitions, oldest first (a legacy ``replay.pt`` before them)."""

@@ -418,6 +418,8 @@ class SAC(Algorithm):
         if not self.cfg.algo.replay.save or len(self.replay) == 0:
             return
         files = ReplayFiles(run_dir)
+        if self.saved == 0:  # nothing of this run's on disk yet: whatever is there is another run's
+            files.clear()
         new = min(self.stored - self.saved, len(self.replay))
         if new > 0:
             files.write(self._newest(new))
