@@ -42,6 +42,7 @@ class ReplayFiles:
         return sorted((int(m[1]), int(m[2]), p) for m, p in found if m)
 
     def exist(self) -> bool:
+        """Whether the run has any replay file to read."""
         return self.legacy.is_file() or bool(self.chunks())
 
     def write(self, transitions: TensorDictBase) -> Path:
