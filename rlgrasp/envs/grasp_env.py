@@ -314,8 +314,10 @@ class GraspEnv(gym.Env):
         mount = self.robot.camera_mount() if self.camera.spec.mount == "wrist" else None
         images = self.camera.render(mount)
         segmentation = images.pop("segmentation", None)
-        ground = segmentation == self.scene.ground if segmentation is not None else None
-        if ground is not None and self.visuals.preset.ground_repaint > 0:
+        repaint = self.visuals.preset.ground_repaint > 0
+        needs_ground = segmentation is not None and (repaint or self.camera.spec.ground_mask)
+        ground = segmentation == self.scene.ground if needs_ground else None
+        if ground is not None and repaint:
             self.visuals.repaint_ground(images, ground, self._visual_rng)
         if self.camera.spec.ground_mask:
             images[GROUND_MASK_KEY] = ground.astype(np.uint8)[None]
