@@ -290,9 +290,18 @@ class AuxTermConfig:
 
 
 @dataclass
+class ObjectMapTermConfig:
+    """With the keypoint encoder and the camera's object cells: the encoder's first keypoint map trained
+    onto the object's pixels, weighted coeff (0: off; rlgrasp/vision/object_map.py). Training only."""
+
+    coeff: float = 0.0
+
+
+@dataclass
 class SACTermsConfig:
     imitation: SACImitationConfig = field(default_factory=SACImitationConfig)
     aux: AuxTermConfig = field(default_factory=AuxTermConfig)  # with a camera
+    object_map: ObjectMapTermConfig = field(default_factory=ObjectMapTermConfig)  # with a camera
 
 
 @dataclass
@@ -1016,6 +1025,12 @@ def _sac_checks(a: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
             "must be " + ", ".join(ENCODER_TRAINERS[:-1]) + " or " + ENCODER_TRAINERS[-1],
         ),
         ("algo.terms.aux.coeff", a.terms.aux.coeff, a.terms.aux.coeff >= 0, "must be >= 0 (0: off)"),
+        (
+            "algo.terms.object_map.coeff",
+            a.terms.object_map.coeff,
+            a.terms.object_map.coeff >= 0,
+            "must be >= 0 (0: off)",
+        ),
         _learner_threads_check(a),
         *[check for group, key in rates for check in _rate_checks(f"algo.{group}.{key}", a[group][key])],
     ]

@@ -44,6 +44,7 @@ from rlgrasp.models.spec import PRIVILEGED_KEY
 from rlgrasp.train.algorithm import Algorithm, finite_or_raise
 from rlgrasp.vision.augment import augment_images
 from rlgrasp.vision.auxiliary import ObjectFromImages
+from rlgrasp.vision.object_map import ObjectMap
 
 #: The entries a transition keeps in the replay buffer (the collector's batch has more).
 TRANSITION_KEYS = (
@@ -109,9 +110,10 @@ class SAC(Algorithm):
         a = cfg.algo
         self.norm = parts.norm
         self.images = image_specs(parts.spec)  # key -> shape; empty: a state policy
-        privileged = a.critic.privileged or a.terms.aux.coeff > 0
+        privileged = a.critic.privileged or a.terms.aux.coeff > 0 or a.terms.object_map.coeff > 0
         self.transition_keys = _transition_keys(self.images, privileged, a.augment.ground_swap > 0)
         self.aux = self._aux()
+        self.object_map = self._object_map()
         act_dim = len(parts.spec["action_low"])
         self.loss = SACLoss(
             self._loss_actor(),
@@ -165,6 +167,16 @@ class SAC(Algorithm):
             )
         head = ObjectFromImages(self._encoder(), self.parts.spec["privileged_parts"], aux.parts, tap=False)
         return head.to(self.device)
+
+    def _object_map(self) -> ObjectMap | None:
+        """With ``algo.terms.object_map.coeff`` > 0: the encoders' first keypoint trained onto the
+        object's pixels (rlgrasp.vision.object_map)."""
+        if self.cfg.algo.terms.object_map.coeff <= 0:
+            return None
+        if not self.images:
+            raise ConfigError("algo.terms.object_map.coeff: trains an image encoder; needs a camera")
+        spec = self.parts.spec
+        return ObjectMap(self._encoder(), spec["privileged_parts"], self.images, self.cfg.model)
 
     def _aux_parameters(self) -> list[torch.nn.Parameter]:
         return list(self.aux.parameters()) if self.aux is not None else []
@@ -301,11 +313,14 @@ class SAC(Algorithm):
         loss_aux = None
         if self.aux is not None:  # on features that carry gradient: it trains the encoders too
             loss_aux = self.aux.loss_of(for_critic[ACTOR_FEATURES_KEY], for_critic)
+        loss_map = self.object_map.loss(for_critic) if self.object_map is not None else None
         self.updates += 1
         actor_step = self.updates % a.optim.actor_every == 0
         total = loss_qvalue + (loss_actor + loss_alpha if actor_step else 0.0)
         if loss_aux is not None:
             total = total + a.terms.aux.coeff * loss_aux
+        if loss_map is not None:
+            total = total + a.terms.object_map.coeff * loss_map
         finite_or_raise(total.detach(), "SAC loss")
         for opt in self.optimizers.values():
             opt.zero_grad(set_to_none=True)
@@ -327,6 +342,8 @@ class SAC(Algorithm):
             metrics["loss_bc"] = float(loss_bc.detach())
         if loss_aux is not None:
             metrics["loss_aux"] = float(loss_aux.detach())
+        if loss_map is not None:
+            metrics["loss_object_map"] = float(loss_map.detach())
         return metrics
 
     def _bc_loss(self, for_critic: TensorDictBase) -> torch.Tensor | None:
@@ -360,6 +377,8 @@ class SAC(Algorithm):
             return net.encode(*(self._augmented(td[k], k, target, mask) for k in self.images))
 
         features = encode(sample, target=False)
+        if self.object_map is not None:
+            self.object_map.keep()  # the maps of these images, before the next images' pass
         with torch.no_grad():
             next_features = encode(sample["next"], target=True)
         for_critic = sample.clone(False)
