@@ -21,6 +21,7 @@ from rlgrasp.config import ConfigError, validate_train
 from rlgrasp.demos.cli import record_demos
 from rlgrasp.demos.dataset import DemoError, demo_transitions, load_demos
 from rlgrasp.train.algorithm import algorithm_class
+from rlgrasp.train.checkpoint import load_checkpoint
 from rlgrasp.train.loop import Trainer, train
 from rlgrasp.train.parts import build_parts
 from rlgrasp.train.resume import prepare_run
@@ -212,10 +213,12 @@ def test_a_checkpoint_writes_its_new_transitions_only_and_a_resume_keeps_their_o
         sac.save_extra(tmp_path)
         files = ReplayFiles(tmp_path).chunks()
         assert files[-1][1] == 60  # the checkpoint's file holds its 60 new transitions only
-    # the oldest file's 60 are all overwritten: removed; the two newest hold the buffer's 100
-    assert [frames for _, frames, _ in ReplayFiles(tmp_path).chunks()] == [60, 60]
-    sac.save_extra(tmp_path)  # nothing new: no file
-    assert len(ReplayFiles(tmp_path).chunks()) == 2
+    # The oldest file's 60 are all overwritten, but the last checkpoint's buffer still needed them
+    # until the newest file's checkpoint exists: they go at the next checkpoint.
+    assert [frames for _, frames, _ in ReplayFiles(tmp_path).chunks()] == [60, 60, 60]
+    sac.save_extra(tmp_path)  # nothing new: no file, and the oldest one removed
+    assert [seq for seq, _, _ in ReplayFiles(tmp_path).chunks()] == [2, 3]
+    assert sac.replay_sequence == 3
 
     resumed = _sac(tmp_path, "algo.replay.buffer_frames=100", "algo.replay.learning_starts=1000")
     resumed.load_replay(tmp_path)
@@ -224,6 +227,33 @@ def test_a_checkpoint_writes_its_new_transitions_only_and_a_resume_keeps_their_o
     resumed.store(_numbered(resumed, 180, 10).reshape(-1))  # the next ones overwrite the oldest
     kept = sorted(resumed.replay[:]["next", "reward"].flatten().tolist())
     assert kept == [float(r) for r in range(90, 190)]
+
+
+def test_a_run_killed_between_its_replay_file_and_its_checkpoint_resumes_from_the_one_before(
+    tmp_path: Path,
+) -> None:
+    """The replay file goes first, the checkpoint names it: killed between the two, the run resumes
+    from the checkpoint before with that checkpoint's transitions, not the orphan file's, and what a
+    cut-short write left is removed."""
+    run = tmp_path / "run"
+    cfg = compose_train([*SMALL, f"paths.output_dir={run}"])
+    trainer = Trainer(cfg)
+    trainer.update(_numbered(trainer.algo, 0, 40))
+    trainer.frames = 40
+    trainer.save()
+    trainer.logger.close()
+    assert load_checkpoint(run / "checkpoints" / "last.pt")["sac"]["replay_sequence"] == 1
+    trainer.update(_numbered(trainer.algo, 40, 30))
+    trainer.algo.save_extra(run)  # the file of a checkpoint the kill never let be written
+    (run / REPLAY_DIR / ".000003_5.pt.tmp").write_bytes(b"half a file")
+    assert len(ReplayFiles(run).chunks()) == 2
+    again = _resumed(run)
+    rewards = sorted(again.algo.replay[:]["next", "reward"].flatten().tolist())
+    assert rewards == [float(r) for r in range(40)] and again.frames == 40
+    assert [seq for seq, _, _ in ReplayFiles(run).chunks()] == [1]
+    assert not list((run / REPLAY_DIR).glob("*.tmp"))
+    again.logger.close()
+    assert "not part of the checkpoint resumed" in (run / "train.log").read_text()
 
 
 def test_a_replay_file_written_before_the_chunks_is_read_then_removed(tmp_path: Path) -> None:

@@ -10,6 +10,11 @@ were before the run stopped.
 Each file is a ``torch.save``d dict of plain tensors, read with ``weights_only=True``, named
 ``<sequence>_<frames>.pt`` in ``<run>/replay/``. A run written before these files (one
 ``replay.pt``, the whole buffer) is read first and removed once the files cover the buffer.
+
+A checkpoint names the sequence number of the newest file it goes with, and that file is written
+before the checkpoint: a run killed between the two resumes from the checkpoint before, whose files
+are all there, and the newer file (transitions that checkpoint never saw) is removed, as is a
+``.tmp`` left by a write cut short.
 """
 
 from __future__ import annotations
@@ -45,8 +50,8 @@ class ReplayFiles:
         """Whether the run has any replay file to read."""
         return self.legacy.is_file() or bool(self.chunks())
 
-    def write(self, transitions: TensorDictBase) -> Path:
-        """One more file with ``transitions`` (oldest first), written atomically."""
+    def write(self, transitions: TensorDictBase) -> int:
+        """One more file with ``transitions`` (oldest first), written atomically; its sequence number."""
         chunks = self.chunks()
         sequence = chunks[-1][0] + 1 if chunks else 1
         self.folder.mkdir(parents=True, exist_ok=True)
@@ -54,7 +59,7 @@ class ReplayFiles:
         tmp = path.with_name(f".{path.name}.tmp")
         torch.save({"frames": transitions.shape[0], "data": transitions.to("cpu").to_dict()}, tmp)
         tmp.replace(path)
-        return path
+        return sequence
 
     def prune(self, keep_frames: int) -> None:
         """Remove the files older than the newest ones that hold ``keep_frames`` transitions (the
@@ -67,12 +72,28 @@ class ReplayFiles:
         if held >= keep_frames:
             self.legacy.unlink(missing_ok=True)
 
+    def discard_after(self, sequence: int) -> list[Path]:
+        """Remove the files newer than ``sequence`` (written for a checkpoint that never was, or
+        one newer than the checkpoint a run resumes from) and any temporary file a cut-short write
+        left; the paths removed."""
+        gone = [p for seq, _, p in self.chunks() if seq > sequence]
+        gone += self._temporary()
+        for path in gone:
+            path.unlink()
+        return gone
+
     def clear(self) -> None:
         """Remove every replay file: a new run's first checkpoint must not leave an older run's
         transitions for its resume to read."""
         for _, _, path in self.chunks():
             path.unlink()
+        for path in self._temporary():
+            path.unlink()
         self.legacy.unlink(missing_ok=True)
+
+    def _temporary(self) -> list[Path]:
+        """Files a write cut short left (``write`` names them ``.<name>.tmp``)."""
+        return list(self.folder.glob(".*.tmp")) if self.folder.is_dir() else []
 
     def read(self) -> Iterator[TensorDict]:
         """Each file's transitions, oldest first (a legacy ``replay.pt`` before them)."""

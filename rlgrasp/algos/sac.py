@@ -139,6 +139,7 @@ class SAC(Algorithm):
         # and of them, those already in the run's replay files.
         self.stored = 0
         self.saved = 0
+        self.replay_sequence = 0  # the newest replay file's number: the checkpoint names it
 
     def _optimizers(self, optim: Any) -> dict[str, torch.optim.Optimizer]:
         """Adam for the actor, the critics and the temperature; with a camera, for the encoders too,
@@ -417,6 +418,7 @@ class SAC(Algorithm):
                 "loss": self.loss.state_dict(),
                 "optimizers": {k: o.state_dict() for k, o in self.optimizers.items()},
                 "owed": self.owed,
+                "replay_sequence": self.replay_sequence,
                 **({"aux": self.aux.state_dict()} if self.aux is not None else {}),
             }
         }
@@ -429,27 +431,36 @@ class SAC(Algorithm):
         self.owed = saved["owed"]
         if self.aux is not None and "aux" in saved:
             self.aux.load_state_dict(saved["aux"])
-        self.load_replay(Path(self.cfg.paths.output_dir))
+        # Checkpoints written before the number was saved read every file there is.
+        self.load_replay(Path(self.cfg.paths.output_dir), saved.get("replay_sequence"))
 
     def save_extra(self, run_dir: Any) -> None:
         """The transitions stored since the last checkpoint, one more file beside the checkpoints
-        (``rlgrasp.algos.replay_files``); the files older than the buffer holds are removed."""
+        (``rlgrasp.algos.replay_files``), written before the checkpoint that names it. The files
+        older than the last checkpoint's buffer held are removed first: that checkpoint, the one a
+        run killed before the next is written resumes from, keeps all of its own."""
         if not self.cfg.algo.replay.save or len(self.replay) == 0:
             return
         files = ReplayFiles(run_dir)
         if self.saved == 0:  # nothing of this run's on disk yet: whatever is there is another run's
             files.clear()
+        files.prune(self.cfg.algo.replay.buffer_frames)
         new = min(self.stored - self.saved, len(self.replay))
         if new > 0:
-            files.write(self._newest(new))
+            self.replay_sequence = files.write(self._newest(new))
             self.saved = self.stored
-        files.prune(self.cfg.algo.replay.buffer_frames)
 
-    def load_replay(self, run_dir: Path) -> None:
-        """Continue with the run's replay buffer, or say that the run starts with an empty one."""
+    def load_replay(self, run_dir: Path, sequence: int | None = None) -> None:
+        """Continue with the run's replay buffer up to the file numbered ``sequence`` (the one the
+        checkpoint names; None: every file), or say that the run starts with an empty one."""
         from rlgrasp.train.logger import log
 
         files = ReplayFiles(run_dir)
+        if sequence is not None:
+            for path in files.discard_after(sequence):
+                log.warning(
+                    "removed %s: not part of the checkpoint resumed (written after it, or cut short)", path
+                )
         if not files.exist():
             log.warning(
                 "no replay files in %s: the resumed run starts with an empty replay buffer", files.folder
@@ -458,6 +469,7 @@ class SAC(Algorithm):
         for transitions in files.read():
             self._extend(transitions)
         self.saved = self.stored
+        self.replay_sequence = files.chunks()[-1][0] if files.chunks() else 0
         log.info("replay buffer: %s frames from %s", f"{len(self.replay):,}", files.folder)
 
 

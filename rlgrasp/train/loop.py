@@ -191,10 +191,11 @@ class Trainer:
             self._save(is_best)
 
     def _save(self, is_best: bool) -> None:
+        # What the checkpoint goes with first (a replay file): a checkpoint on disk always has it.
+        self.algo.save_extra(self.run_dir)
         path = ckpt_lib.write_checkpoints(
             self.ckpt_dir, self.state_dict(), self.cfg.checkpoint.keep_last, is_best
         )
-        self.algo.save_extra(self.run_dir)
         log.info("checkpoint %s", path)
         if self.adr is not None:  # the ranges reached so far, for rlgrasp-eval
             self.adr.write_ranges(self.run_dir)
