@@ -1,16 +1,18 @@
 """One keypoint of a camera learner's encoder made the object's: its map trained onto the object's pixels.
 
 The keypoint encoder (``model.pooling=keypoints``) ends each image in a spatial softmax: every channel
-of its last feature map becomes the expected (x, y) of that channel's activity. Which channel tracks
-what is left to the losses, and on a textured ground the measurements say the channels that should
-follow the object also follow the ground's edges (docs/algorithms.md, "One keypoint made the
-object's"). This term names one channel, the first, the object's: its map, under a softmax over its
-pixels, is trained by cross-entropy onto where the object's pixels are (the camera's
-``object_cells``, a training label from the simulator's segmentation, resampled onto the map's
-grid). The gradient is dense, one target per map cell, and arrives on every replayed image, the
-ground-swapped ones too (``algo.augment.ground_swap``): a detector learned by supervision rather than
-through the critics' values. The actor reads that channel's keypoint as it reads every other; the
-exported policy is unchanged, and the label is needed in training only.
+of its last feature map becomes the expected (x, y) of that channel's activity, and which channel
+tracks what is left to the losses. The RGB learner finds a small object on a patterned ground poorly,
+on the training textures too (docs/algorithms.md, "One keypoint made the object's, and what the
+encoder can locate"). This term names one channel, the first, the object's: its map, under a softmax
+over its cells, is trained by cross-entropy onto where the object's pixels are (the camera's
+``object_cells``, a training label from the simulator's segmentation, resampled onto the cells'
+receptive fields). The gradient is dense, one target per map cell, and arrives on every replayed
+image, the ground-swapped ones too (``algo.augment.ground_swap``): a detector learned by supervision
+rather than through the critics' values. The actor reads that channel's keypoint as it reads every
+other; the exported policy is unchanged, and the label is needed in training only. Measured on the
+RGB objects experiment: no gain in 30 minutes, and the map located the object only coarsely (the
+page above), so it is off unless asked for.
 
 Hand-written: TorchRL has no spatial-softmax encoder, hence no loss on one.
 """
