@@ -266,7 +266,9 @@ def test_a_replay_file_written_before_the_chunks_is_read_then_removed(tmp_path: 
     sac.save_extra(tmp_path)
     assert (tmp_path / LEGACY_FILE).is_file()  # the new file alone does not hold the buffer's 50
     sac.store(_numbered(sac, 60, 40).reshape(-1))
-    sac.save_extra(tmp_path)
+    sac.save_extra(tmp_path)  # the files now hold 60, but the checkpoint before still needs the old one
+    assert (tmp_path / LEGACY_FILE).is_file()
+    sac.save_extra(tmp_path)  # the next checkpoint: the newest files cover the buffer
     assert not (tmp_path / LEGACY_FILE).exists()
 
 
