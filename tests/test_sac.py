@@ -256,6 +256,28 @@ def test_a_run_killed_between_its_replay_file_and_its_checkpoint_resumes_from_th
     assert "not part of the checkpoint resumed" in (run / "train.log").read_text()
 
 
+def test_a_replay_file_that_cannot_be_written_does_not_cost_the_checkpoint(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    run = tmp_path / "run"
+    trainer = Trainer(compose_train([*SMALL, f"paths.output_dir={run}"]))
+    trainer.update(_numbered(trainer.algo, 0, 40))
+    trainer.frames = 40
+    trainer.save()
+
+    def full_disk(*_args: Any) -> None:
+        raise OSError(28, "No space left on device")
+
+    trainer.update(_numbered(trainer.algo, 40, 20))
+    trainer.frames = 60
+    monkeypatch.setattr(ReplayFiles, "write", full_disk)
+    trainer.save()
+    trainer.logger.close()
+    state = load_checkpoint(run / "checkpoints" / "last.pt")
+    assert state["frames"] == 60 and state["sac"]["replay_sequence"] == 1  # the file before
+    assert "replay file not written ([Errno 28] No space left on device)" in (run / "train.log").read_text()
+
+
 def test_a_replay_file_written_before_the_chunks_is_read_then_removed(tmp_path: Path) -> None:
     sac = _sac(tmp_path, "algo.replay.buffer_frames=50", "algo.replay.learning_starts=1000")
     old = _numbered(sac, 0, 40).reshape(-1).select(*sac.transition_keys)
