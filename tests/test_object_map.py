@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import runpy
 from pathlib import Path
 
 import pytest
@@ -119,3 +120,21 @@ def test_the_term_without_keypoints_or_object_cells_is_refused_in_one_line(
 ) -> None:
     with pytest.raises(ConfigError, match=f"^algo.terms.object_map.coeff: .*{message}"):
         _sac(tmp_path, *overrides)
+
+
+def test_locate_object_scores_a_map_against_the_object_and_skips_images_without_it() -> None:
+    """benchmarks/locate_object.py's score: ln 121 for a map that says nothing, the peak on the
+    object's map cell when the map says it, and no object, no score."""
+    score = runpy.run_path(str(Path(__file__).resolve().parents[1] / "benchmarks" / "locate_object.py"))
+    cells = torch.zeros(3, 64)
+    cells[:2, 3 * 8 + 4] = 1.0  # the object on map cells (3-5, 5-7), the middle one (4, 6) whole
+    maps = torch.zeros(3, 4, 11, 11)
+    maps[1, 0, 3:6, 5:8] = 2.0  # the second image's map points at the object, its peak in the middle
+    maps[1, 0, 4, 6] = 3.0
+    cross, entropy, peak_on_object, shows = score["_cross_entropy"](
+        maps, cells, map_window((8, 3, 3), (4, 1, 1))
+    )
+    assert shows.tolist() == [True, True, False]
+    assert cross[0].item() == pytest.approx(math.log(121))
+    assert cross[1] < cross[0] and entropy[1] < cross[1]
+    assert peak_on_object[1] and not peak_on_object[0]
