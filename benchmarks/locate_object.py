@@ -35,7 +35,7 @@ from rlgrasp.envs.factory import env_factory
 from rlgrasp.models.cnn import build_vision_actor, vision_net
 from rlgrasp.train.checkpoint import load_checkpoint
 from rlgrasp.vision.augment import augment_images
-from rlgrasp.vision.object_map import MapTap, cells_on_map, map_window
+from rlgrasp.vision.object_map import MapTap, last_conv, map_cross_entropy, map_window
 
 
 def _encoder(spec: dict, model_cfg, weights: dict | None):
@@ -44,20 +44,18 @@ def _encoder(spec: dict, model_cfg, weights: dict | None):
         actor.load_state_dict(weights)
     encoder = vision_net(actor.eval()).encoders["rgb"]
     tap = MapTap()
-    [m for m in encoder.conv if isinstance(m, torch.nn.Conv2d)][-1].register_forward_hook(tap)
+    last_conv(encoder).register_forward_hook(tap)
     return actor, encoder, tap
 
 
-def _cross_entropy(maps: torch.Tensor, cells: torch.Tensor, window: tuple[float, int]) -> tuple:
-    """Per image: the first map's cross-entropy against the object's pixels, the target's entropy,
-    whether the map's peak is the target's, and whether the object shows."""
-    target = cells_on_map(cells, 64, maps.shape[-1], *window)
-    shows = target.sum(-1) > 0
-    target = target / target.sum(-1, keepdim=True).clamp_min(1e-8)
-    log_p = torch.log_softmax(maps[:, 0].flatten(1), -1)
-    cross = -(target * log_p).sum(-1)
+def _cross_entropy(
+    maps: torch.Tensor, cells: torch.Tensor, window: tuple[float, int], image: int = 64
+) -> tuple:
+    """Per image: the term's cross-entropy (``map_cross_entropy``), the target's own entropy (its
+    floor), whether the map's peak is the target's, and whether the object shows."""
+    cross, target, shows = map_cross_entropy(maps, cells, image, window)
     entropy = -(target * target.clamp_min(1e-12).log()).sum(-1)
-    return cross, entropy, log_p.argmax(-1) == target.argmax(-1), shows
+    return cross, entropy, maps[:, 0].flatten(1).argmax(-1) == target.argmax(-1), shows
 
 
 def rollouts(run: Path, visual: str, episodes: int) -> None:
@@ -85,7 +83,7 @@ def rollouts(run: Path, visual: str, episodes: int) -> None:
             with torch.no_grad():
                 action = actor(td)["action"][0].numpy()
             cells = torch.as_tensor(obs["privileged"][start:stop]).float()[None]
-            cross, entropy, hit, shows = _cross_entropy(tap.maps, cells, window)
+            cross, entropy, hit, shows = _cross_entropy(tap.maps, cells, window, obs["rgb"].shape[-1])
             if step < 20 and shows.item():
                 rows[ground].append((cross.item(), entropy.item(), float(hit.item())))
             obs, _, terminated, truncated, _ = env.step(action)
@@ -126,7 +124,7 @@ def fit(run: Path, steps: int, model: dict) -> None:
                 images, "rgb", aug.kind, aug.grey, aug.shift, 0.0, mask[index], aug.ground_swap
             )
         encoder(images)
-        cross, _, _, shows = _cross_entropy(tap.maps, cells[index], window)
+        cross, _, _, shows = _cross_entropy(tap.maps, cells[index], window, rgb.shape[-1])
         size = tap.maps.shape[-1]
         ticks = torch.arange(size) * window[1] + window[0]
         grid = torch.stack(torch.meshgrid(ticks, ticks, indexing="ij"), -1).reshape(-1, 2)

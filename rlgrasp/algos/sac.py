@@ -469,7 +469,8 @@ class SAC(Algorithm):
         for transitions in files.read():
             self._extend(transitions)
         self.saved = self.stored
-        self.replay_sequence = files.chunks()[-1][0] if files.chunks() else 0
+        chunks = files.chunks()
+        self.replay_sequence = chunks[-1][0] if chunks else 0
         log.info("replay buffer: %s frames from %s", f"{len(self.replay):,}", files.folder)
 
 

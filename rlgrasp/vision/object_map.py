@@ -66,6 +66,23 @@ def cells_on_map(cells: torch.Tensor, image: int, map_size: int, centre: float, 
     return F.avg_pool2d(pixels, step).flatten(1)
 
 
+def last_conv(encoder: nn.Module) -> nn.Conv2d:
+    """An image encoder's last convolution: its output, before the ELU, is the map the term trains."""
+    return [m for m in encoder.conv if isinstance(m, nn.Conv2d)][-1]
+
+
+def map_cross_entropy(
+    maps: torch.Tensor, cells: torch.Tensor, image: int, window: tuple[float, int]
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Per image: the first map's cross-entropy (softmax over its cells) against the object's pixels
+    resampled onto those cells, that target (normalized), and whether the object shows at all."""
+    target = cells_on_map(cells, image, maps.shape[-1], *window)
+    shows = target.sum(-1) > 0
+    target = target / target.sum(-1, keepdim=True).clamp_min(1e-8)
+    log_p = torch.log_softmax(maps[:, 0].flatten(1), -1)
+    return -(target * log_p).sum(-1), target, shows
+
+
 class ObjectMap(nn.Module):
     """The cross-entropy between each encoder's first keypoint map (softmax over its cells) and the
     object's pixels resampled onto those cells, on the images that show the object. It owns no weights:
@@ -88,9 +105,7 @@ class ObjectMap(nn.Module):
             raise ConfigError("algo.terms.object_map.coeff: needs the keypoint encoder (model=cnn_keypoints)")
         # The last convolution's output, before its ELU: an ELU floors a map at -1, and a map pushed
         # below zero everywhere stops learning (trained alone at a rate of 3e-3 it did, at once).
-        last_convs = [
-            [m for m in encoder.conv if isinstance(m, nn.Conv2d)][-1] for encoder in encoders.values()
-        ]
+        last_convs = [last_conv(encoder) for encoder in encoders.values()]
         self.index = torch.arange(*parts["object_cells"])
         self.image_sizes = [int(shape[-1]) for shape in image_shapes.values()]
         self.window = map_window(model_cfg.kernel_sizes, model_cfg.strides)
@@ -101,8 +116,8 @@ class ObjectMap(nn.Module):
 
     def keep(self) -> None:
         """Keep the maps of the forward pass just run: the one the loss reads (later passes, the
-        target's next images, overwrite the taps). The taps let go of them: maps that carry a graph
-        would not pickle with the actor."""
+        target's next images, overwrite the taps). The taps let go of them: a map that carries a
+        graph cannot be deep-copied with the actor."""
         self.kept = [tap.maps for tap in self.taps]
         for tap in self.taps:
             tap.maps = None
@@ -110,13 +125,10 @@ class ObjectMap(nn.Module):
     def loss(self, minibatch: TensorDictBase) -> torch.Tensor:
         """Mean cross-entropy over the encoders and the images where the object shows."""
         cells = minibatch[PRIVILEGED_KEY][..., self.index].float()
-        shows = (cells.sum(-1) > 0).float()
         total = cells.new_zeros(())
         for maps, image in zip(self.kept, self.image_sizes):
-            target = cells_on_map(cells, image, maps.shape[-1], *self.window)
-            target = target / target.sum(-1, keepdim=True).clamp_min(1e-8)
-            log_p = torch.log_softmax(maps[:, 0].flatten(1), -1)
-            cross_entropy = -(target * log_p).sum(-1)
+            cross_entropy, _, shows = map_cross_entropy(maps, cells, image, self.window)
+            shows = shows.float()
             total = total + (cross_entropy * shows).sum() / shows.sum().clamp_min(1.0)
         count, self.kept = len(self.kept), []
         return total / count
