@@ -112,8 +112,10 @@ def fit(run: Path, steps: int, model: dict) -> None:
     rgb, mask, cells = data["rgb"], data["ground_mask"], data["privileged"][:, start:stop].float()
     held_back, n = torch.arange(len(rgb) - 1024, len(rgb)), len(rgb) - 2048
     window = map_window(cfg.model.kernel_sizes, cfg.model.strides)
-    centres = torch.arange(8) * 8 + 3.5  # the 8-pixel cells' centres
-    cell_xy = torch.stack(torch.meshgrid(centres, centres, indexing="ij"), -1).reshape(64, 2)
+    per_side = round(cells.shape[-1] ** 0.5)  # the camera's object cells: per_side x per_side
+    pixels = rgb.shape[-1] / per_side  # a cell's side in pixels
+    centres = torch.arange(per_side) * pixels + (pixels - 1) / 2
+    cell_xy = torch.stack(torch.meshgrid(centres, centres, indexing="ij"), -1).reshape(-1, 2)
     aug = cfg.algo.augment
     optimizer = torch.optim.Adam(encoder.conv.parameters(), lr=1e-3)
 
