@@ -438,17 +438,24 @@ class SAC(Algorithm):
         """The transitions stored since the last checkpoint, one more file beside the checkpoints
         (``rlgrasp.algos.replay_files``), written before the checkpoint that names it. The files
         older than the last checkpoint's buffer held are removed first: that checkpoint, the one a
-        run killed before the next is written resumes from, keeps all of its own."""
+        run killed before the next is written resumes from, keeps all of its own. A file that cannot
+        be written (a full disk) does not cost the checkpoint too: it then names the files before,
+        and a resume lacks this interval's transitions, as the log says."""
+        from rlgrasp.train.logger import log
+
         if not self.cfg.algo.replay.save or len(self.replay) == 0:
             return
         files = ReplayFiles(run_dir)
-        if self.saved == 0:  # nothing of this run's on disk yet: whatever is there is another run's
-            files.clear()
-        files.prune(self.cfg.algo.replay.buffer_frames)
-        new = min(self.stored - self.saved, len(self.replay))
-        if new > 0:
-            self.replay_sequence = files.write(self._newest(new))
-            self.saved = self.stored
+        try:
+            if self.saved == 0:  # nothing of this run's on disk yet: whatever is there is another run's
+                files.clear()
+            files.prune(self.cfg.algo.replay.buffer_frames)
+            new = min(self.stored - self.saved, len(self.replay))
+            if new > 0:
+                self.replay_sequence = files.write(self._newest(new))
+                self.saved = self.stored
+        except OSError as exc:
+            log.warning("replay file not written (%s): the checkpoint goes without them", exc)
 
     def load_replay(self, run_dir: Path, sequence: int | None = None) -> None:
         """Continue with the run's replay buffer up to the file numbered ``sequence`` (the one the

@@ -191,13 +191,8 @@ class Trainer:
             self._save(is_best)
 
     def _save(self, is_best: bool) -> None:
-        # What the checkpoint goes with first (a replay file): a checkpoint on disk always has it. A
-        # file that cannot be written (a full disk) must not cost the checkpoint too: it then names
-        # the files before, and a resume lacks this interval's transitions, as the log says.
-        try:
-            self.algo.save_extra(self.run_dir)
-        except OSError as exc:
-            log.warning("%s not written (%s): the checkpoint goes without them", "replay file", exc)
+        # What the checkpoint goes with first (a replay file): a checkpoint on disk always has it.
+        self.algo.save_extra(self.run_dir)
         path = ckpt_lib.write_checkpoints(
             self.ckpt_dir, self.state_dict(), self.cfg.checkpoint.keep_last, is_best
         )
