@@ -42,6 +42,7 @@ from rlgrasp.models.cnn import head_actor, image_specs, vision_net
 from rlgrasp.models.mlp import ACTIVATIONS, OBS_KEY, RunningNorm
 from rlgrasp.models.spec import PRIVILEGED_KEY
 from rlgrasp.train.algorithm import Algorithm, finite_or_raise
+from rlgrasp.train.logger import log
 from rlgrasp.vision.augment import augment_images
 from rlgrasp.vision.auxiliary import ObjectFromImages
 from rlgrasp.vision.object_map import ObjectMap
@@ -441,8 +442,6 @@ class SAC(Algorithm):
         run killed before the next is written resumes from, keeps all of its own. A file that cannot
         be written (a full disk) does not cost the checkpoint too: it then names the files before,
         and a resume lacks this interval's transitions, as the log says."""
-        from rlgrasp.train.logger import log
-
         if not self.cfg.algo.replay.save or len(self.replay) == 0:
             return
         files = ReplayFiles(run_dir)
@@ -460,8 +459,6 @@ class SAC(Algorithm):
     def load_replay(self, run_dir: Path, sequence: int | None = None) -> None:
         """Continue with the run's replay buffer up to the file numbered ``sequence`` (the one the
         checkpoint names; None: every file), or say that the run starts with an empty one."""
-        from rlgrasp.train.logger import log
-
         files = ReplayFiles(run_dir)
         if sequence is not None:
             for path in files.discard_after(sequence):
