@@ -20,9 +20,10 @@ def write_episodes(path: Path) -> Path:
     ]
     with open(path, "w", newline="") as f:
         writer = csv.writer(f)
-        writer.writerow(["visual_object_texture", "visual_ground_texture", "success_at_end", "outcome"])
-        for obj, ground, success in rows:
-            writer.writerow([obj, ground, success, "success" if success else "never grasped"])
+        header = ["seed", "visual_object_texture", "visual_ground_texture", "success_at_end", "outcome"]
+        writer.writerow(header)
+        for seed, (obj, ground, success) in enumerate(rows):
+            writer.writerow([seed, obj, ground, success, "success" if success else "never grasped"])
     return path
 
 
@@ -31,7 +32,7 @@ def test_split_by_ground_object_and_both(tmp_path):
     episodes = write_episodes(tmp_path / "episodes.csv")
     by_ground, outcomes = split(episodes, "heldout")
     assert by_ground == {"plain": [1.0, 1.0], "rings": [0.0, 1.0]}
-    assert outcomes == {"success": 3, "never grasped": 1}
+    assert outcomes == {"plain": {"success": 2}, "rings": {"success": 1, "never grasped": 1}}
     assert split(episodes, "heldout", "object")[0] == {"plain": [1.0, 0.0], "rings": [1.0, 1.0]}
     both = split(episodes, "heldout", "both")[0]  # object / ground
     assert both == {
@@ -40,3 +41,11 @@ def test_split_by_ground_object_and_both(tmp_path):
         "rings / plain": [1.0],
         "rings / rings": [1.0],
     }
+
+
+def test_split_by_ground_reads_only_the_seeds_asked_for(tmp_path):
+    script = runpy.run_path(str(ROOT / "benchmarks" / "split_by_ground.py"))
+    episodes = write_episodes(tmp_path / "episodes.csv")
+    by_ground, outcomes = script["split"](episodes, "heldout", seeds=script["seed_range"]("1-2"))
+    assert by_ground == {"plain": [1.0], "rings": [0.0]}  # seeds 1 and 2 only
+    assert script["describe"]("rings", [0.0, 1.0], outcomes["rings"]) == "rings 0.50 (2; never grasped 1)"
