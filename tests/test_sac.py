@@ -521,49 +521,56 @@ def _shipped_as_measured(experiment: str, measured_overrides: list[str]) -> Any:
     return shipped
 
 
+_RGB_CUBE_AS_MEASURED = [
+    "experiment=grasp_vision_sac_demos",
+    "cameras=wrist_rgb_behind",
+    "algo.augment.kind=colour",
+    "total_frames=61440",
+    "model=cnn_keypoints",
+    "+env.camera.object_cells=8",
+    "algo.terms.aux.coeff=1",
+    "algo.terms.aux.parts=[object_cells]",
+    "+env.camera.ground_mask=true",
+    "algo.augment.ground_swap=0.5",
+    "algo.demos=demos/cube_yaw_wrist_rgb_behind_cells_mask/demos",
+]
+
+
 def test_the_rgb_experiment_is_the_measured_overrides_of_the_camera_one() -> None:
-    """docs/algorithms.md measured the RGB learner as grasp_vision_sac_demos plus these overrides;
-    grasp_vision_sac_rgb_demos must stay that run, so its figures hold for it."""
-    shipped = _shipped_as_measured(
-        "grasp_vision_sac_rgb_demos",
-        [
-            "experiment=grasp_vision_sac_demos",
-            "cameras=wrist_rgb_behind",
-            "algo.demos=demos/cube_yaw_wrist_rgb_behind/demos",
-            "algo.augment.kind=colour",
-        ],
-    )
+    """docs/algorithms.md measured the RGB learner on the cube as grasp_vision_sac_demos plus these
+    overrides (2026-12-06, seeds 0-2: the camera behind the hand and recoloured replays of
+    2026-12-03, then the objects' recipe: the keypoint encoder, the object-cells head and other
+    grounds behind half the replayed images, for 61,440 frames); grasp_vision_sac_rgb_demos must
+    stay that run, so its figures hold for it."""
+    shipped = _shipped_as_measured("grasp_vision_sac_rgb_demos", _RGB_CUBE_AS_MEASURED)
     assert shipped.env.camera is not None and shipped.algo.augment.kind == "colour"
+    assert shipped.model.pooling == "keypoints" and shipped.env.camera.object_cells == 8
+    assert shipped.env.camera.ground_mask and shipped.algo.augment.ground_swap == 0.5
 
 
 def test_the_rgb_objects_experiment_is_the_measured_overrides_of_the_rgb_one() -> None:
-    """docs/algorithms.md measured the RGB learner on many objects as grasp_vision_sac_rgb_demos plus
-    these overrides (the runs of 2026-12-05: the keypoint encoder and the object-cells head on top of
-    the utd-0.25 run, then a gradient step every eight frames, and bench_learning's time budget; then
-    other grounds behind half the replayed images, on demonstrations recorded with the ground mask);
-    grasp_objects_vision_sac_rgb_demos is that run."""
+    """docs/algorithms.md measured the RGB learner on many objects as the RGB cube learner of
+    2026-12-03 plus these overrides (the runs of 2026-12-05: the keypoint encoder and the object-cells
+    head on top of the utd-0.25 run, then a gradient step every eight frames, and bench_learning's
+    time budget; then other grounds behind half the replayed images, on demonstrations recorded with
+    the ground mask); grasp_objects_vision_sac_rgb_demos is that run, though it now inherits the
+    encoder, the head and the swap from grasp_vision_sac_rgb_demos."""
+    cube_recipe = [o for o in _RGB_CUBE_AS_MEASURED if not o.startswith(("total_frames=", "algo.demos="))]
     shipped = _shipped_as_measured(
         "grasp_objects_vision_sac_rgb_demos",
-        [
-            "experiment=grasp_vision_sac_rgb_demos",
+        cube_recipe
+        + [
             "objects=train_mix",
             "algo.replay.buffer_frames=61440",
             "total_frames=200000",
             "algo.optim.utd_ratio=0.125",
             "eval.interval_frames=20480",
             "time_budget_min=30",
-            "model=cnn_keypoints",
-            "+env.camera.object_cells=8",
-            "algo.terms.aux.coeff=1",
-            "algo.terms.aux.parts=[object_cells]",
-            "+env.camera.ground_mask=true",
-            "algo.augment.ground_swap=0.5",
             "algo.demos=demos/train_mix_wrist_rgb_behind_cells_mask/demos",
         ],
     )
     assert shipped.algo.optim.utd_ratio == 0.125 and shipped.env.objects != compose_train([]).env.objects
     assert shipped.model.pooling == "keypoints" and shipped.env.camera.object_cells == 8
-    assert shipped.env.camera.ground_mask and shipped.algo.augment.ground_swap == 0.5
 
 
 def test_the_state_objects_experiment_with_demonstrations_is_the_measured_run() -> None:
