@@ -87,6 +87,11 @@ def test_foreign_missing_and_empty_files_are_refused(tmp_path: Path) -> None:
         load_demos(files["foreign_demos"], _layout())
     with pytest.raises(DemoError, match="holds no demonstrations"):
         load_demos(files["empty_demos"], _layout())
+    with_cells = _layout()
+    with_cells["obs_slices"] = {**with_cells["obs_slices"], "object_cells": [46, 110]}
+    with pytest.raises(DemoError, match="this run's state has object_cells, the recording's not") as refused:
+        load_demos(files["empty_demos"], with_cells)  # the layout is checked before the episodes
+    assert "\n" not in str(refused.value) and "[46, 110]" not in str(refused.value)
     with pytest.raises(DemoError, match="no such file or directory"):
         load_demos(tmp_path / "nowhere", _layout())
     with pytest.raises(DemoError, match="not a demonstration directory"):

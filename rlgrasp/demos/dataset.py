@@ -106,6 +106,22 @@ def _meta(path: Path) -> dict[str, Any]:
     )
 
 
+def _parts_difference(recorded: dict[str, Any], run: dict[str, Any]) -> str:
+    """Which named parts of the state one layout has and the other lacks, or holds elsewhere: the
+    slices themselves run to a hundred entries, too many to compare by eye in one line."""
+    only_run = [name for name in run if name not in recorded]
+    only_recorded = [name for name in recorded if name not in run]
+    moved = [name for name in run if name in recorded and run[name] != recorded[name]]
+    said = []
+    if only_run:
+        said.append(f"this run's state has {', '.join(only_run)}, the recording's not")
+    if only_recorded:
+        said.append(f"the recording's state has {', '.join(only_recorded)}, this run's not")
+    if moved:
+        said.append(f"{', '.join(moved)} at other places")
+    return "; ".join(said)
+
+
 def load_demos(path: str | Path, layout: dict[str, Any]) -> Demos:
     """The demonstrations at ``path``, refused (``DemoError``, one line) when missing, empty or
     recorded with another observation layout or control than ``layout`` (``layout_of``)."""
@@ -122,11 +138,18 @@ def load_demos(path: str | Path, layout: dict[str, Any]) -> Demos:
             f"algo.demos={path}: recorded with the camera view {meta['camera_view']}, this run's camera is "
             f"{layout.get('camera_view')} (record them with the run's cameras=)"
         )
-    for key in (*LAYOUT_KEYS, "obs_dim", "action_dim", "obs_slices"):
+    for key in (*LAYOUT_KEYS, "obs_dim", "action_dim"):
         if meta.get(key) != layout.get(key):
             raise DemoError(
                 f"algo.demos={path}: recorded with {key}={meta.get(key)!r}, this run has {layout.get(key)!r}"
             )
+    if meta.get("obs_slices") != layout.get("obs_slices"):
+        difference = _parts_difference(meta.get("obs_slices") or {}, layout.get("obs_slices") or {})
+        cells = ", the camera's object_cells among them" if "object_cells" in difference else ""
+        raise DemoError(
+            f"algo.demos={path}: recorded with another state layout: {difference} (record them with "
+            f"this run's env settings{cells})"
+        )
     if not meta.get("summary", {}).get("kept"):
         raise DemoError(f"algo.demos={path}: holds no demonstrations (0 episodes kept)")
     frames = _frames(path, Path(meta["dir"]) / FRAMES)
