@@ -145,10 +145,9 @@ def load_demos(path: str | Path, layout: dict[str, Any]) -> Demos:
             )
     if meta.get("obs_slices") != layout.get("obs_slices"):
         difference = _parts_difference(meta.get("obs_slices") or {}, layout.get("obs_slices") or {})
-        cells = ", the camera's object_cells among them" if "object_cells" in difference else ""
         raise DemoError(
             f"algo.demos={path}: recorded with another state layout: {difference} (record them with "
-            f"this run's env settings{cells})"
+            "this run's env settings)"
         )
     if not meta.get("summary", {}).get("kept"):
         raise DemoError(f"algo.demos={path}: holds no demonstrations (0 episodes kept)")
