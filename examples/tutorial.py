@@ -128,7 +128,7 @@ def sparse(out: str) -> None:
     from rlgrasp.train.loop import train
 
     # A sparse reward pays only success: random actions see nothing but zeros.
-    env = GraspEnv(control_mode="ee_delta", reward="sparse")
+    env = GraspEnv(control_mode="ee_delta", task={"name": "lift", "reward": "sparse"})
     env.reset(seed=0)
     rewards = [env.step(env.action_space.sample())[1] for _ in range(env.max_episode_steps)]
     print("sparse rewards of a random episode:", sorted(set(np.round(rewards, 3))))

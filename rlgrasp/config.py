@@ -48,12 +48,10 @@ class EnvConfig:
     # One control step = substeps x time_step seconds of simulation.
     time_step: float = 1.0 / 240.0
     substeps: int = 12
-    reward: str = "dense"
-    # null: the default weights; a mapping of rlgrasp.envs.task.RewardWeights keys, e.g. {lift: 3}.
-    # Typed Any: OmegaConf cannot merge `env.reward_weights={lift:3}` into a None Dict node.
-    reward_weights: Any = None
-    success_height: float = 0.05
-    terminate_on_success: bool = False
+    # The task part (the `task` config group sets it): a `_target_` node of rlgrasp.envs.tasks (lift,
+    # pick_place, push, stack, or a task class of your own) with its keywords, e.g. env.task.reward=sparse,
+    # env.task.weights={lift: 4}. Typed Any: each task checks its own keywords (docs/tasks.md).
+    task: Any = field(default_factory=lambda: {"_target_": "rlgrasp.envs.tasks.LiftTask"})
     ee_step: float = 0.04
     ee_yaw: bool = False
     yaw_step: float = 0.2

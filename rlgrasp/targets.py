@@ -41,6 +41,14 @@ REGISTRY: dict[str, frozenset[str]] = {
         }
     ),
     "algo": frozenset({"rlgrasp.algos.ppo.PPO", "rlgrasp.algos.sac.SAC", "rlgrasp.vision.distill.DAgger"}),
+    "env.task": frozenset(
+        {
+            "rlgrasp.envs.tasks.LiftTask",
+            "rlgrasp.envs.tasks.PickPlaceTask",
+            "rlgrasp.envs.tasks.PushTask",
+            "rlgrasp.envs.tasks.StackTask",
+        }
+    ),
 }
 #: The classes an algorithm's auxiliary term (a node of ``algo.terms``) may name.
 TERMS = frozenset(
@@ -77,7 +85,7 @@ def check_received_config(config: Any, source: str, trusted: Iterable[str] = ())
         if key in INSTANTIATE_KEYS and not (_builds(path) and key == "_target_"):
             raise UntrustedConfigError(
                 f"{source}: refused: {_where(path, key)} would be called when the config is built "
-                "(a file's config may name a class only at env, collector, logger, algo or algo.terms.*)"
+                "(a file's config may name a class only at env, env.task, collector, logger, algo or algo.terms.*)"
             )
 
 
@@ -93,6 +101,9 @@ def _allowed_at(path: str) -> frozenset[str]:
 def _built_nodes(config: Mapping) -> dict[str, Mapping]:
     """Each node rlgrasp builds from a ``_target_``, by its path: the top ones and ``algo``'s terms."""
     nodes = {n: config[n] for n in REGISTRY if isinstance(config.get(n), Mapping)}
+    task = nodes.get("env", {}).get("task")
+    if isinstance(task, Mapping):
+        nodes["env.task"] = task
     terms = nodes.get("algo", {}).get("terms")
     if isinstance(terms, Mapping):
         nodes.update({f"{TERMS_NODE}.{k}": v for k, v in terms.items() if isinstance(v, Mapping)})

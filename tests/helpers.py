@@ -246,7 +246,7 @@ SMOKE_IN_PROCESS = [
     "eval.final_episodes=1",
     "eval.num_envs=1",
     "checkpoint.interval_frames=128",
-    "env.reward=sparse",
+    "env.task.reward=sparse",
     "device=cpu",
 ]
 #: Tags that measure the wall clock, not the run.

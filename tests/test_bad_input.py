@@ -245,8 +245,8 @@ TRAIN = [
     ),
     (
         "unknown reward weight",
-        ["env.reward_weights={lfit:3}"],
-        "env: unknown reward weight 'lfit' (env.reward_weights); weights: reach, grasp, lift, success",
+        ["env.task.weights={lfit:3}"],
+        "unknown reward term 'lfit' (env.task.weights); terms: reach, grasp, lift, success",
     ),
     (
         "unknown image pooling",

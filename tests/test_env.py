@@ -207,7 +207,7 @@ def test_reward_is_dense_staged_and_at_most_one(make_env):
 
 
 def test_sparse_reward_and_terminate_on_success(make_env):
-    env = make_env(randomization="none", reward="sparse", terminate_on_success=True)
+    env = make_env(randomization="none", task={"name": "lift", "reward": "sparse", "terminate_on_success": True})
     expert = ScriptedExpert(env.obs_slices)
     obs, _ = env.reset(seed=2)
     steps = 0
@@ -221,7 +221,11 @@ def test_sparse_reward_and_terminate_on_success(make_env):
 
 @pytest.mark.parametrize("terminate_on_success", [False, True])
 def test_episode_info_comes_at_reset_and_at_the_last_step_only(terminate_on_success, make_env):
-    env = make_env(randomization="default", max_episode_steps=40, terminate_on_success=terminate_on_success)
+    env = make_env(
+        randomization="default",
+        max_episode_steps=40,
+        task={"name": "lift", "terminate_on_success": terminate_on_success},
+    )
     expert = ScriptedExpert(env.obs_slices)
     episode_keys = {"object", "object_extents", "randomization"}
     obs, first = env.reset(seed=2)

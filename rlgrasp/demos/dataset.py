@@ -19,9 +19,11 @@ from tensordict import TensorDict
 
 from rlgrasp.config import ConfigError
 from rlgrasp.envs.cameras import GROUND_MASK_KEY, CameraSpec
+from rlgrasp.envs.tasks import task_name
 from rlgrasp.models.cnn import IMAGE_KEYS
 from rlgrasp.models.spec import PRIVILEGED_KEY
 from rlgrasp.targets import UntrustedConfigError, check_plain_memmap
+from rlgrasp.train.legacy import nest_task
 
 FORMAT = 1
 META = "demos.json"
@@ -199,18 +201,28 @@ def summary(episodes: list[dict[str, Any]], kept: int) -> dict[str, Any]:
     }
 
 
+def task_reward(env_cfg: Any) -> str:
+    """``task=lift env.task.reward=dense``: which task paid which reward (an env config of before the
+    task part counts as lift's)."""
+    task = nest_task(dict(env_cfg or {})).get("task") or "lift"
+    name = task_name(task)
+    reward = task.get("reward") if isinstance(task, dict) else None
+    reward = reward or ("dense" if name == "lift" else "sparse")
+    reward = reward if isinstance(reward, str) else "custom terms"
+    return f"task={name} env.task.reward={reward}"
+
+
 def demo_transitions(demos: Demos, env_cfg: Any) -> TensorDict:
     """The demonstrations as an off-policy learner's transitions (``observation``, ``action``,
     ``next``: ``observation``, ``reward``, ``done``, ``terminated``). Their rewards are the recording
     env's, so a run with another reward is refused. A file recorded before next observations were
     kept gives each step the following one, and drops each episode's last step (its successor is
     the next episode's first)."""
-    recorded = demos.meta.get("env", {}).get("reward", "dense")
-    if recorded != env_cfg.get("reward", "dense"):
+    recorded, here = (task_reward(env) for env in (demos.meta.get("env", {}), env_cfg))
+    if recorded != here:
         raise DemoError(
-            f"algo.demos={demos.meta['dir']}: recorded with env.reward={recorded}, this run has "
-            f"env.reward={env_cfg.get('reward')} (the replay learns from the recorded rewards; record "
-            "them with the run's reward)"
+            f"algo.demos={demos.meta['dir']}: recorded with {recorded}, this run has {here} (the replay "
+            "learns from the recorded rewards; record them with the run's task and reward)"
         )
     f = demos.frames
     if "next_observation" in f.keys():

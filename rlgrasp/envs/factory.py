@@ -18,6 +18,6 @@ def env_factory(env_cfg: DictConfig | Mapping[str, Any]) -> EnvFactory:
     Used by the collector workers, training's evaluation, ``rlgrasp-eval``, export and the
     benchmarks. Being a partial, it travels to spawned workers and Ray actors as it is;
     ``_convert_`` makes the keywords (``randomization`` as a preset name or a mapping) plain Python
-    values.
+    values. ``_recursive_=False``: the env builds its parts (``env.task``) itself, on its own scene.
     """
-    return instantiate(env_cfg, _partial_=True, _convert_="all")
+    return instantiate(env_cfg, _partial_=True, _convert_="all", _recursive_=False)

@@ -17,8 +17,8 @@ from rlgrasp.envs.control import CONTROL_MODES, make_control
 from rlgrasp.envs.observation import PROPRIOCEPTION, ObservationLayout, full_parts
 from rlgrasp.envs.randomization import Randomizer
 from rlgrasp.envs.robot import make_robot
-from rlgrasp.envs.scene import Scene
-from rlgrasp.envs.task import LiftTask, RewardWeights
+from rlgrasp.envs.scene import MARKER_COLOUR, Scene
+from rlgrasp.envs.tasks import Task, make_task
 from rlgrasp.envs.visuals import VisualRandomizer
 
 
@@ -43,6 +43,9 @@ def _check_args(
             raise ValueError(f"{name} must be a positive integer, got {value!r}")
     if not (time_step > 0 and math.isfinite(time_step)):
         raise ValueError(f"time_step must be a positive number, got {time_step!r}")
+
+
+MARKER_ALPHA = MARKER_COLOUR[3]
 
 
 class GraspEnv(gym.Env):
@@ -75,10 +78,7 @@ class GraspEnv(gym.Env):
         max_episode_steps: int = 50,
         time_step: float = 1.0 / 240.0,
         substeps: int = 12,
-        reward: str = "dense",
-        reward_weights: Mapping[str, float] | None = None,
-        success_height: float = 0.05,
-        terminate_on_success: bool = False,
+        task: str | Mapping[str, Any] = "lift",
         ee_step: float = 0.04,
         ee_yaw: bool = False,
         yaw_step: float = 0.2,
@@ -102,9 +102,8 @@ class GraspEnv(gym.Env):
         _check_args(control_mode, render_mode, max_episode_steps, substeps, time_step, collision_model)
         camera_spec = CameraSpec.from_config(camera) if camera else None
         self.randomizer = Randomizer(randomization)
-        weights = RewardWeights.from_mapping(reward_weights)
         self.max_episode_steps, self.substeps = int(max_episode_steps), int(substeps)
-        self.terminate_on_success, self.render_mode = terminate_on_success, render_mode
+        self.render_mode = render_mode
         self.viewer = dict(
             width=render_width,
             height=render_height,
@@ -117,7 +116,7 @@ class GraspEnv(gym.Env):
         self._build_world(
             time_step, solver_iterations, robot, robot_urdf, camera_spec, visual, collision_model
         )
-        self._build_task(objects, reward, weights, success_height)
+        self._build_task(objects, task)
         self.control_mode = control_mode
         self._build_control(
             ee_step=ee_step,
@@ -167,9 +166,12 @@ class GraspEnv(gym.Env):
             self._prepare_rendering()
         self.scene.save()
 
-    def _build_task(self, objects: Any, reward: str, weights: RewardWeights, success_height: float) -> None:
+    def _build_task(self, objects: Any, task: Any) -> None:
+        """The task part (``rlgrasp.envs.tasks``), given the scene; its goal marker only where people
+        watch (a render mode)."""
         try:
-            self.task = LiftTask(self.scene, objects, reward, weights, success_height)
+            self.scene.markers_visible = self.render_mode is not None
+            self.task: Task = make_task(task, self.scene, objects)
         except BaseException:
             self.close()
             raise
@@ -178,7 +180,11 @@ class GraspEnv(gym.Env):
         self.action_dim = self.control.action_dim
         self.action_space = gym.spaces.Box(-1.0, 1.0, (self.action_dim,), np.float32)
         cells = self.camera.spec.object_cells if self.camera is not None else 0
-        self.layout = ObservationLayout(full_parts(self.robot.arm_dof, self.action_dim, cells))
+        # A task's parts (a goal) after the env's own: the desired goal last, so that a goal task's
+        # Dict ``observation`` is the vector without it and the parts' slices hold for both.
+        parts = full_parts(self.robot.arm_dof, self.action_dim, cells) + self.task.observation_parts()
+        self.layout = ObservationLayout(parts)
+        self.goal_dict = self.task.goal_conditioned and getattr(self.task, "observation", "flat") == "dict"
         self.obs_slices = self.layout.slices
         self.observation_space = self._observation_space()
         self._visual_rng: np.random.Generator | None = None
@@ -204,7 +210,7 @@ class GraspEnv(gym.Env):
         robot.reset(np.clip(arm_q, robot.lower, robot.upper))
         self.control.reset(ep)
         robot.command_fingers(robot.max_finger_width)
-        self.task.reset(choice, ep, set(self.randomizer.ranges))  # settles a mesh: after the robot
+        self.task.reset(choice, ep, set(self.randomizer.ranges), rng)  # settles a mesh: after the robot
         self._randomize_visuals(seed)
 
         self._pending = collections.deque([self._idle_action.copy()] * ep["action_delay"])
@@ -269,8 +275,8 @@ class GraspEnv(gym.Env):
         self._steps += 1
 
         obs, readings = self._observe()
-        reward, success = self.task.evaluate(readings, readings["grasp_pos"])
-        terminated = bool(success and self.terminate_on_success)
+        reward, success = self.task.evaluate(readings)
+        terminated = bool(success and self.task.terminate_on_success)
         truncated = self._steps >= self.max_episode_steps
         return obs, reward, terminated, truncated, self._info(readings, success, terminated or truncated)
 
@@ -287,9 +293,13 @@ class GraspEnv(gym.Env):
     # --- internals -----------------------------------------------------------------------------
     def _observation_space(self) -> gym.spaces.Space:
         flat = gym.spaces.Box(-np.inf, np.inf, (self.layout.size,), np.float32)
+        if self.camera is None and self.goal_dict:
+            goal = gym.spaces.Box(-np.inf, np.inf, (3,), np.float32)
+            observation = gym.spaces.Box(-np.inf, np.inf, (self.layout.size - 3,), np.float32)
+            return gym.spaces.Dict({"observation": observation, "achieved_goal": goal, "desired_goal": goal})
         if self.camera is None:
             return flat
-        state_size = sum(self.layout.slices[n].stop - self.layout.slices[n].start for n in PROPRIOCEPTION)
+        state_size = sum(self.layout.slices[n].stop - self.layout.slices[n].start for n in self.state_parts)
         state = gym.spaces.Box(-np.inf, np.inf, (state_size,), np.float32)
         return gym.spaces.Dict({"state": state, **self.camera.spec.spaces(), "privileged": flat})
 
@@ -299,20 +309,44 @@ class GraspEnv(gym.Env):
         if self.camera is None:
             vector, readings = self._state_vector()
             self._readings = readings
+            if self.goal_dict:
+                achieved = np.asarray(readings["achieved_goal"], np.float32)
+                return {
+                    "observation": vector[:-3],
+                    "achieved_goal": achieved,
+                    "desired_goal": vector[-3:],
+                }, readings
             return vector, readings
         images, labels = self._render()
         vector, readings = self._state_vector(labels)
         self._readings = readings
         self.visuals.corrupt(images, self._visual, self._visual_rng)
         images = self.image_history.push(images, first)
-        return {"state": self.layout.select(vector, PROPRIOCEPTION), **images, "privileged": vector}, readings
+        return {
+            "state": self.layout.select(vector, self.state_parts),
+            **images,
+            "privileged": vector,
+        }, readings
+
+    @property
+    def state_parts(self) -> tuple[str, ...]:
+        """What a camera policy reads beside its images: proprioception, and a goal task's goal."""
+        return (*PROPRIOCEPTION, "desired_goal") if self.task.goal_conditioned else PROPRIOCEPTION
+
+    def compute_reward(self, achieved_goal: Any, desired_goal: Any, info: Any = None) -> np.ndarray:
+        """A goal task's sparse reward for any goals, vectorized (HER relabels with it)."""
+        if not self.task.goal_conditioned:
+            raise AttributeError(f"compute_reward: the task {type(self.task).__name__} has no goal")
+        return self.task.compute_reward(achieved_goal, desired_goal, info)
 
     def _render(self) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
         """The camera's images (the ground repainted where the preset says) and what its
         segmentation tells for training: the object's ``object_cells`` and the ``ground_mask`` image
         when the camera reports them."""
         mount = self.robot.camera_mount() if self.camera.spec.mount == "wrist" else None
+        self.scene.set_marker_alpha(0.0)  # the goal marker is for people: the policy's camera never sees it
         images = self.camera.render(mount)
+        self.scene.set_marker_alpha(MARKER_ALPHA)
         segmentation = images.pop("segmentation", None)
         repaint = self.visuals.preset.ground_repaint > 0
         needs_ground = segmentation is not None and (repaint or self.camera.spec.ground_mask)

@@ -21,6 +21,7 @@ from rlgrasp.envs.objects import ObjectChoice, obj_bounds
 PRIMITIVE_COLOUR = (0.85, 0.45, 0.2, 1.0)
 MESH_COLOUR = (0.57, 0.85, 0.78, 1.0)
 GROUND_COLOUR = (0.8, 0.8, 0.8, 1.0)
+MARKER_COLOUR = (0.1, 0.8, 0.2, 0.6)
 VIEWER_TARGET = (0.45, 0.0, 0.2)  # the viewer looks a little in front of the object's nominal place
 
 
@@ -70,6 +71,10 @@ class Scene:
         self.plane = c.loadURDF(data_path("plane.urdf"))
         self.ground: int | None = self.plane  # the body cameras see as the ground (None: none)
         self.object: int | None = None
+        self.extras: list[int] = []  # a task's further bodies this episode (stack's base cube)
+        #: The goal marker people see in renders and GIFs (``show_marker``); None: not shown.
+        self.marker: int | None = None
+        self.markers_visible = False
         self._shapes: dict[tuple, tuple[int, int]] = {}
         self._saved: int | None = None
 
@@ -96,6 +101,9 @@ class Scene:
         """Back to the saved world, with this episode's gravity. Restoring is bit-reproducible where
         resetting joint states alone is not (gymnasium's determinism check fails on that)."""
         self.remove_object()  # the saved state holds no object: restoring needs the same bodies
+        for body in [*self.extras, *([self.marker] if self.marker is not None else [])]:
+            self.client.removeBody(body)
+        self.extras, self.marker = [], None
         self.client.restoreState(self._saved)
         self.client.setGravity(0, 0, gravity_z)
 
@@ -116,6 +124,30 @@ class Scene:
             body = self.client.createMultiBody(0.1, collision, visual, position, orientation)
         self.object = body
         return body
+
+    def spawn_extra(self, choice: ObjectChoice, size_scale: float, position, orientation, colour=None) -> int:
+        """A further body for this episode (removed at the next restore), e.g. stack's base cube."""
+        collision, visual = self._shape(choice, choice.scale * size_scale)
+        body = self.client.createMultiBody(0.1, collision, visual, position, orientation)
+        if colour is not None:
+            self.client.changeVisualShape(body, -1, rgbaColor=list(colour))
+        self.extras.append(body)
+        return body
+
+    def show_marker(self, position) -> None:
+        """A green, collision-free sphere at a goal, for people's renders only (``markers_visible``:
+        set by the env when it renders for people); policy cameras hide it (``hide_marker``)."""
+        if not self.markers_visible:
+            return
+        if "marker" not in self._shapes:
+            visual = self.client.createVisualShape(pybullet.GEOM_SPHERE, radius=0.02, rgbaColor=MARKER_COLOUR)
+            self._shapes["marker"] = (-1, visual)
+        self.marker = self.client.createMultiBody(0.0, -1, self._shapes["marker"][1], list(position))
+
+    def set_marker_alpha(self, alpha: float) -> None:
+        """Hide (0) or show (1) the goal marker: a policy's camera never sees it."""
+        if self.marker is not None:
+            self.client.changeVisualShape(self.marker, -1, rgbaColor=[*MARKER_COLOUR[:3], alpha])
 
     def _shape(self, choice: ObjectChoice, scale: float) -> tuple[int, int]:
         key = (choice.kind, choice.path, choice.dims, round(scale, 9))

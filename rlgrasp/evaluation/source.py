@@ -29,7 +29,7 @@ from rlgrasp.overrides import explain
 from rlgrasp.targets import UntrustedConfigError, check_received_config
 from rlgrasp.train.checkpoint import FORMAT as CHECKPOINT_FORMAT
 from rlgrasp.train.checkpoint import unpickler_reason
-from rlgrasp.train.legacy import upgrade_config
+from rlgrasp.train.legacy import nest_task, upgrade_config
 
 CKPT_KINDS = ("best", "last")
 # What a checkpoint must hold for evaluation (see rlgrasp.train.checkpoint's docstring).
@@ -114,7 +114,7 @@ def build_env_cfg(
 ) -> dict[str, Any]:
     """The env's ``_target_`` node: a training ``env`` config (``None``: the env's defaults), with
     evaluation's overrides on top and rendering on. Keys of the grasp env are type-checked."""
-    cfg = _upgrade_env_cfg(dict(env_cfg or asdict(EnvConfig())))
+    cfg = nest_task(_upgrade_env_cfg(dict(env_cfg or asdict(EnvConfig()))))
     overrides = dict(overrides or {})
     camera = overrides.get("camera")
     if isinstance(camera, dict) and isinstance(cfg.get("camera"), dict):

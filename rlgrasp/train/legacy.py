@@ -54,6 +54,28 @@ def nest_algo(algo: dict[str, Any]) -> dict[str, Any]:
     return nested
 
 
+#: The env's keywords of before the task was a part, now the lift task's (``env.task``).
+TASK_KEYS = {"reward": "reward", "reward_weights": "weights", "success_height": "success_height"}
+LIFT_TASK = "rlgrasp.envs.tasks.LiftTask"
+
+
+def nest_task(env: dict[str, Any]) -> dict[str, Any]:
+    """An ``env`` node of before the task part (``reward``, ``reward_weights``, ``success_height``,
+    ``terminate_on_success`` as the env's own keywords) with them under ``env.task`` (a copy; one of
+    today's shape comes back unchanged)."""
+    env = dict(env)
+    if "task" in env:
+        return env
+    task: dict[str, Any] = {"_target_": LIFT_TASK}
+    for old, new in (*TASK_KEYS.items(), ("terminate_on_success", "terminate_on_success")):
+        if old in env:
+            value = env.pop(old)
+            if value is not None:
+                task[new] = value
+    env["task"] = task
+    return env
+
+
 def upgrade_config(config: dict[str, Any]) -> dict[str, Any]:
     """``config`` with string-named backends turned into ``_target_`` nodes (a copy; a config of
     today's shape comes back unchanged)."""
@@ -74,4 +96,6 @@ def upgrade_config(config: dict[str, Any]) -> dict[str, Any]:
         config["logger"] = {"_target_": LOGGERS.get(kind, kind), **kept}
     if isinstance(config.get("algo"), dict):
         config["algo"] = nest_algo(config["algo"])
+    if isinstance(config.get("env"), dict):
+        config["env"] = nest_task(config["env"])
     return config

@@ -1,72 +1,54 @@
-"""Lift: the task owns the episode's object, measures it, and says what success and reward are.
+"""What every task shares: the episode's object (drawn, placed, measured) and the reward terms.
 
-Like panda-gym's ``Task``, it places its own bodies on reset (the object drawn from the object
-sets, at the drawn pose and dynamics), so the env only resets the robot and then the task.
+Like panda-gym's ``Task``, a task places its own bodies on reset (the object drawn from the object
+sets, at the drawn pose and dynamics), so the env only resets the robot and then the task. A task
+says what success is (``succeeded``), names its reward term sets (``TERM_SETS``) and the term
+functions they may use (``TERMS``), and may add parts to the observation (``observation_parts``:
+a goal task's goal). Its constructor's keywords are its config (``env.task``): checked here, with
+one line naming the key, before any worker starts.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
 from rlgrasp.envs.objects import ObjectChoice, ObjectSampler, snap_scale, tilt
+from rlgrasp.envs.observation import Part
 from rlgrasp.envs.scene import Scene
+from rlgrasp.envs.tasks.terms import RewardTerms, TermFn
 
-REWARD_KINDS = ("dense", "sparse")
 NOMINAL_OBJECT_XY = (0.6, 0.0)  # below the grasp point at the neutral pose
 
 
-@dataclass(frozen=True)
-class RewardWeights:
-    """Weights of the dense reward's stages; the reward is divided by their sum (max 1 a step)."""
+class Task:
+    """The episode's object and the reward; subclasses say what success is."""
 
-    reach: float = 1.0
-    grasp: float = 1.0
-    lift: float = 2.0
-    success: float = 1.0
-
-    @staticmethod
-    def from_mapping(weights: Mapping[str, float] | None) -> RewardWeights:
-        """Weights from a config mapping (None: the defaults); an unknown name fails naming it."""
-        names = [f.name for f in fields(RewardWeights)]
-        unknown = sorted(set(weights or {}) - set(names))
-        if unknown:
-            raise ValueError(
-                f"unknown reward weight {unknown[0]!r} (env.reward_weights); weights: " + ", ".join(names)
-            )
-        return RewardWeights(**(weights or {}))
-
-    def __post_init__(self):
-        for name in ("reach", "grasp", "lift", "success"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"reward weight {name!r} must be finite and >= 0, got {value}")
-        if self.reach + self.grasp + self.lift + self.success <= 0:
-            raise ValueError("reward weights must not all be zero")
-
-
-class LiftTask:
-    """Success = the object at least ``success_height`` above its own rest height, held by both fingers."""
+    #: Each term set a config may name (``env.task.reward: dense``): terms and normalization.
+    TERM_SETS: ClassVar[dict[str, dict[str, Any]]] = {}
+    #: The term functions a term set may use by name.
+    TERMS: ClassVar[dict[str, TermFn]] = {}
+    #: The term set used when the config names none.
+    DEFAULT_REWARD: ClassVar[str] = "dense"
+    #: The observation of a goal task is a Dict (``observation``, ``achieved_goal``, ``desired_goal``).
+    goal_conditioned: ClassVar[bool] = False
 
     def __init__(
         self,
         scene: Scene,
         objects: Any = "cube",
-        reward: str = "dense",
-        weights: RewardWeights | dict | None = None,
-        success_height: float = 0.05,
+        reward: Any = None,
+        weights: Mapping[str, float] | None = None,
+        terminate_on_success: bool = False,
     ):
-        if reward not in REWARD_KINDS:
-            raise ValueError(f"unknown reward {reward!r}; valid rewards: {', '.join(REWARD_KINDS)}")
         self.scene, self.client = scene, scene.client
         self.objects = objects if isinstance(objects, ObjectSampler) else ObjectSampler(objects)
-        self.reward_kind = reward
-        self.weights = weights if isinstance(weights, RewardWeights) else RewardWeights(**(weights or {}))
-        self.success_height = success_height
+        reward = self.DEFAULT_REWARD if reward is None else reward
+        self.reward_name = reward if isinstance(reward, str) else "custom"
+        self.reward = RewardTerms(reward, self.TERM_SETS, self.TERMS, weights)
+        self.terminate_on_success = bool(terminate_on_success)
         self.object_name = ""
         self.object_extents = np.zeros(3, np.float32)
         self._offset = np.zeros(3)
@@ -74,8 +56,32 @@ class LiftTask:
         self.rest_z = 0.0
         self.settle_substeps = 0
 
+    # --- what subclasses say -------------------------------------------------------------------
+    def succeeded(self, readings: Mapping[str, Any]) -> bool:
+        raise NotImplementedError
+
+    def observation_parts(self) -> list[Part]:
+        """Parts the task adds after the env's own (a goal task: its goal)."""
+        return []
+
+    def sample_goal(self, rng: np.random.Generator) -> None:
+        """A goal task draws its goal here, after the object is placed."""
+
     # --- the object ----------------------------------------------------------------------------
-    def reset(self, choice: ObjectChoice, episode: dict[str, Any], randomized: set[str]) -> None:
+    def reset(
+        self,
+        choice: ObjectChoice,
+        episode: dict[str, Any],
+        randomized: set[str],
+        rng: np.random.Generator | None = None,
+    ) -> None:
+        """Place the drawn object, then (a goal task) draw the goal; the reward's sums restart."""
+        self.place_object(choice, episode, randomized)
+        if rng is not None:
+            self.sample_goal(rng)
+        self.reward.reset()
+
+    def place_object(self, choice: ObjectChoice, episode: dict[str, Any], randomized: set[str]) -> None:
         """Build the drawn object upright at the drawn pose with the drawn (or its own) dynamics.
 
         ``randomized``: the parameters the randomizer draws; mass and friction it leaves alone are the
@@ -112,7 +118,7 @@ class LiftTask:
         """Let a mesh come to rest and take its height then as its rest height.
 
         A mesh's bounding box says where its lowest point is, not whether it stands: many
-        random_urdfs rock or tip onto a flatter side. Lifting is measured from where it settled.
+        random_urdfs rock or tip onto a flatter side. Heights are measured from where it settled.
         Those substeps simulate the robot too: reset the robot first.
         """
         c, body = self.client, self.scene.object
@@ -153,28 +159,19 @@ class LiftTask:
             "object_centre": centre,
         }
 
-    def evaluate(self, readings: dict[str, Any], grasp_pos: np.ndarray) -> tuple[float, bool]:
-        """Reward and success for one step; the reach term pulls towards the object's centre."""
-        lift = readings["object_pos"][2] - self.rest_z
-        grasped = bool(readings["grasped"][0])
-        success = bool(grasped and lift >= self.success_height)
-        if self.reward_kind == "sparse":
-            return float(success), success
-        w = self.weights
-        offset = readings["object_centre"] - grasp_pos  # its norm as np.linalg.norm computes it
-        reach = 1.0 - math.tanh(5.0 * math.sqrt(offset.dot(offset)))
-        progress = min(max(lift / self.success_height, 0.0), 1.0) if grasped else 0.0
-        total = w.reach * reach + w.grasp * grasped + w.lift * progress + w.success * success
-        return total / (w.reach + w.grasp + w.lift + w.success), success
+    def evaluate(self, readings: Mapping[str, Any]) -> tuple[float, bool]:
+        """The step's reward (its terms' weighted sum) and success."""
+        return self.reward(self, readings), self.succeeded(readings)
 
-    def info(self, readings: dict[str, Any], success: bool) -> dict[str, Any]:
-        """What changes every step."""
+    def info(self, readings: Mapping[str, Any], success: bool) -> dict[str, Any]:
+        """What changes every step; ``reward_terms``: each term's sum so far this episode."""
         # numpy scalars, not Python ones: TorchRL's info reader needs a dtype.
         return {
             "is_success": np.bool_(success),
             "grasped": np.bool_(readings["grasped"][0] > 0.5),
             "lift_height": np.float32(readings["object_pos"][2] - self.rest_z),
             "object_tilt": np.float32(tilt(readings["object_quat"])),
+            "reward_terms": self.reward.episode_sums.copy(),
         }
 
     def episode_info(self) -> dict[str, Any]:
