@@ -249,6 +249,31 @@ TRAIN = [
         "unknown reward term 'lfit' (env.task.weights); terms: reach, grasp, lift, success",
     ),
     (
+        "unknown task",
+        ["+env.task.name=fly", "~env.task._target_"],
+        "unknown task 'fly' (env.task); tasks: lift",
+    ),
+    (
+        "unknown reward term",
+        ["env.task.reward={terms: {lfit: {weight: 1}}}"],
+        "unknown reward term 'lfit' (env.task.reward.terms); this task's terms: reach, grasp, lift, success",
+    ),
+    (
+        "a term weight that is not finite",
+        ["env.task.weights={lift: .nan}"],
+        "env.task.reward.terms.lift.weight must be a finite number, got nan",
+    ),
+    (
+        "a goal out of the arm's reach",
+        ["task=pick_place", "env.task.observation=flat", "env.task.goal_range=[0.5,0.5]"],
+        "env.task.goal_range=[0.5, 0.5] puts goals 1.20 m from the arm's base",
+    ),
+    (
+        "a goal task's Dict observation with a learner that reads one vector",
+        ["task=push"],
+        "env.task.observation=dict: the env observes a Dict (achieved_goal, desired_goal, observation)",
+    ),
+    (
         "unknown image pooling",
         ["cameras=wrist_depth", "model=cnn", "model.pooling=max"],
         "model.pooling='max': must be one of flat, keypoints",

@@ -40,6 +40,11 @@ REQUIRED_TAGS = {
     "eval/success_rate",
     "time/collect_s",
     "time/train_s",
+    # each of the task's reward terms, its mean episode sum (rlgrasp.envs.tasks.terms)
+    "rewards/reach",
+    "rewards/grasp",
+    "rewards/lift",
+    "rewards/success",
 }
 
 

@@ -22,6 +22,7 @@ from torchrl.data import Composite, Unbounded
 from torchrl.envs import EnvBase, GymWrapper, default_info_dict_reader
 from torchrl.envs.transforms import Compose, RewardSum, StepCounter, TransformedEnv
 
+from rlgrasp.config import ConfigError
 from rlgrasp.envs.factory import EnvFactory
 from rlgrasp.utils import die_with_parent
 
@@ -31,21 +32,30 @@ INFO_DTYPES = {
     "is_success": torch.bool,
     "grasped": torch.bool,
     "lift_height": torch.float32,
-    "adr_boundary": torch.int64,
-}  # rlgrasp.adr: the episode's boundary code (ADR runs only)
+    "adr_boundary": torch.int64,  # rlgrasp.adr: the episode's boundary code (ADR runs only)
+    "reward_terms": torch.float32,  # each reward term's sum so far this episode (a vector)
+}
 
 
 def env_spec(make_env: EnvFactory) -> dict[str, Any]:
-    """Observation/action sizes and bounds, from one throw-away env."""
+    """Observation/action sizes and bounds and the reward's term names, from one throw-away env.
+    A goal task's Dict observation is refused in one line: these learners read one vector."""
     env = make_env()
     try:
         space = env.action_space
+        if isinstance(env.observation_space, gym.spaces.Dict):
+            keys = ", ".join(env.observation_space.spaces)
+            raise ConfigError(
+                f"env.task.observation=dict: the env observes a Dict ({keys}) and this learner reads one "
+                "vector; set env.task.observation=flat (the goal appended to the state)"
+            )
         spec = {
             "obs_key": "observation",
             "obs_dim": int(env.observation_space.shape[-1]),
             "action_dim": int(space.shape[0]),
             "action_low": [float(x) for x in space.low.flatten()],
             "action_high": [float(x) for x in space.high.flatten()],
+            "reward_terms": list(getattr(getattr(env.unwrapped, "task", None), "reward", None).names),
         }
     finally:
         env.close()
@@ -136,7 +146,10 @@ class _VectorInfoReader(default_info_dict_reader):
             value = info_dict.get(key)
             if isinstance(value, np.ndarray) and value.dtype == object:
                 dtype = torch.empty((), dtype=INFO_DTYPES[key]).numpy().dtype
-                info_dict[key] = np.array([0 if v is None else v for v in value], dtype=dtype)
+                shape = next((np.shape(v) for v in value if v is not None), ())
+                info_dict[key] = np.stack(
+                    [np.zeros(shape, dtype) if v is None else np.asarray(v, dtype) for v in value]
+                )
         return super().__call__(info_dict, tensordict)
 
 
@@ -165,7 +178,9 @@ def make_vector_env(
     keys = [k for k in INFO_DTYPES if k in info]
     env = GymWrapper(venv)
     if keys:
-        spec = Composite({k: Unbounded((num_envs,), dtype=INFO_DTYPES[k]) for k in keys}, shape=(num_envs,))
+        # A vector entry (reward_terms) keeps its length: (num_envs, n).
+        shapes = {k: (num_envs, *np.shape(info[k])[1:]) for k in keys}
+        spec = Composite({k: Unbounded(shapes[k], dtype=INFO_DTYPES[k]) for k in keys}, shape=(num_envs,))
         env.set_info_dict_reader(_VectorInfoReader(keys, spec=spec))
     env.set_seed(base_seed)  # envs seeded base_seed + i
     return env

@@ -365,7 +365,8 @@ class Trainer:
     def episode_metrics(self, batch: TensorDictBase) -> dict[str, float]:
         """Return, length and success of the episodes that ended in this batch (for the console too)."""
         stagger = self.parts.collector.stagger_starts
-        ep = finished_episodes(batch, self.cfg.env.get("max_episode_steps") if stagger else None)
+        full_length = self.cfg.env.get("max_episode_steps") if stagger else None
+        ep = finished_episodes(batch, full_length, self.parts.spec.get("reward_terms", ()))
         for key in ("charts/episodic_return", "charts/success_rate"):
             if key in ep:
                 self.recent[key] = ep[key]

@@ -7,7 +7,7 @@ import contextlib
 import os
 import re
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import torch
@@ -116,9 +116,12 @@ def finished_mask(batch: TensorDictBase, full_length: int | None = None) -> torc
     return done
 
 
-def finished_episodes(batch: TensorDictBase, full_length: int | None = None) -> dict[str, float]:
+def finished_episodes(
+    batch: TensorDictBase, full_length: int | None = None, reward_terms: Sequence[str] = ()
+) -> dict[str, float]:
     """Return, length and success-at-episode-end of the episodes that ended in this batch
-    (``finished_mask``)."""
+    (``finished_mask``), and each reward term's mean episode sum (``rewards/<term>``: which term
+    drives learning)."""
     done = finished_mask(batch, full_length)
     keys = batch.keys(True)
     if not done.any():
@@ -132,4 +135,7 @@ def finished_episodes(batch: TensorDictBase, full_length: int | None = None) -> 
         if ("next", key) in keys:
             out[f"charts/{name}"] = float(batch["next", key].reshape(batch.shape)[done].float().mean())
     out["charts/episodes"] = float(done.sum())
+    if reward_terms and ("next", "reward_terms") in keys:
+        sums = batch["next", "reward_terms"].reshape(*batch.shape, -1)[done].float().mean(0)
+        out.update({f"rewards/{name}": float(value) for name, value in zip(reward_terms, sums)})
     return out

@@ -14,7 +14,7 @@ from typing import Any
 from rlgrasp.envs.tasks.base import NOMINAL_OBJECT_XY, Task
 from rlgrasp.envs.tasks.goal import GoalTask, PickPlaceTask, PushTask, StackTask, goal_distance
 from rlgrasp.envs.tasks.lift import LiftTask
-from rlgrasp.envs.tasks.terms import RewardConfigError, RewardTerms
+from rlgrasp.envs.tasks.terms import RewardConfigError, RewardTerms, import_object
 
 #: The tasks a config (or a received checkpoint) may name by their short name.
 TASKS: dict[str, type[Task]] = {
@@ -30,12 +30,7 @@ def task_class(spec: Any) -> type[Task]:
     if isinstance(spec, str):
         name = spec
     elif isinstance(spec, Mapping) and "_target_" in spec:
-        from hydra.utils import get_class  # the user's own config names the class
-
-        try:
-            cls = get_class(str(spec["_target_"]))
-        except Exception as exc:  # Hydra wraps import and attribute errors alike
-            raise ValueError(f"env.task._target_={spec['_target_']!r} cannot be imported ({exc})") from None
+        cls = import_object(str(spec["_target_"]), "env.task")  # the user's own config names the class
         if not (isinstance(cls, type) and issubclass(cls, Task)):
             raise ValueError(
                 f"env.task._target_={spec['_target_']!r} is not a task (rlgrasp.envs.tasks.Task)"

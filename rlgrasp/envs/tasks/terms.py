@@ -12,6 +12,8 @@ term is in [0, 1]) and keeps each term's episode sum for the logs (``info["rewar
 from __future__ import annotations
 
 import functools
+import importlib
+import inspect
 import math
 from collections.abc import Callable, Mapping
 from typing import Any
@@ -113,9 +115,10 @@ class RewardTerms:
                 f"unknown reward term {name!r} ({where}.terms); this task's terms: {', '.join(library)} "
                 "(or give the term a _target_: your own function)"
             )
-        try:
+        try:  # a parameter the function does not take fails here, not at the first step
+            inspect.signature(function).bind(None, {}, **params)
             bound = functools.partial(function, **params)
-        except TypeError as exc:
+        except (TypeError, ValueError) as exc:
             raise RewardConfigError(f"{where}.terms.{name}: {exc}") from None
         self.names.append(name)
         self.weights.append(float(weight))
@@ -134,14 +137,21 @@ class RewardTerms:
         return total / self.total_weight if self.normalize else total
 
 
-def _import_term(target: str, where: str) -> TermFn:
-    """A user's term function (or class, called with its parameters and then per step)."""
-    from hydra.utils import get_object  # lazily: only a user's own term needs it
-
+def import_object(target: str, where: str) -> Any:
+    """What a user's own config names (``module.name``), or one line saying why it cannot be had.
+    Not Hydra's ``get_object``: it logs a multi-line error of its own before raising."""
+    module, _, name = target.rpartition(".")
     try:
-        function = get_object(target)
-    except Exception as exc:  # Hydra wraps import and attribute errors alike
-        raise RewardConfigError(f"{where}._target_={target!r} cannot be imported ({exc})") from None
+        return getattr(importlib.import_module(module), name)
+    except (ImportError, AttributeError, ValueError) as exc:
+        raise RewardConfigError(
+            f"{where}._target_={target!r} cannot be imported ({type(exc).__name__}: {exc})"
+        ) from None
+
+
+def _import_term(target: str, where: str) -> TermFn:
+    """A user's term function: ``term(task, readings, **params) -> float``."""
+    function = import_object(target, where)
     if not callable(function):
         raise RewardConfigError(f"{where}._target_={target!r} is not callable")
     return function
