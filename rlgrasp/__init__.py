@@ -36,9 +36,24 @@ def _skip_lookups_of_missing_pandas() -> None:
 
 _skip_lookups_of_missing_pandas()
 
+#: The goal tasks by gymnasium id (panda-gym's names, rlgrasp's namespace): a Dict observation of
+#: ``observation``, ``achieved_goal`` and ``desired_goal`` and a vectorized ``compute_reward``.
+GOAL_ENV_IDS = {
+    "rlgrasp/PandaPickAndPlace-v0": "pick_place",
+    "rlgrasp/PandaPush-v0": "push",
+    "rlgrasp/PandaStack-v0": "stack",
+}
+
 if ENV_ID not in gymnasium.registry:
     gymnasium.register(
         ENV_ID, entry_point="rlgrasp:make_registered_env", max_episode_steps=DEFAULT_EPISODE_STEPS
     )
+    for env_id, task in GOAL_ENV_IDS.items():
+        gymnasium.register(
+            env_id,
+            entry_point="rlgrasp:make_registered_env",
+            max_episode_steps=DEFAULT_EPISODE_STEPS,
+            kwargs={"task": task},
+        )
 
 __version__ = "0.1.0"

@@ -51,7 +51,7 @@ class EnvConfig:
     # The task part (the `task` config group sets it): a `_target_` node of rlgrasp.envs.tasks (lift,
     # pick_place, push, stack, or a task class of your own) with its keywords, e.g. env.task.reward=sparse,
     # env.task.weights={lift: 4}. Typed Any: each task checks its own keywords (docs/tasks.md).
-    task: Any = field(default_factory=lambda: {"_target_": "rlgrasp.envs.tasks.LiftTask"})
+    task: Any = "lift"
     ee_step: float = 0.04
     ee_yaw: bool = False
     yaw_step: float = 0.2

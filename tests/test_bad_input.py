@@ -260,13 +260,13 @@ TRAIN = [
     ),
     (
         "a term weight that is not finite",
-        ["env.task.weights={lift: .nan}"],
+        ["env.task.weights={lift: nan}"],
         "env.task.reward.terms.lift.weight must be a finite number, got nan",
     ),
     (
         "a goal out of the arm's reach",
         ["task=pick_place", "env.task.observation=flat", "env.task.goal_range=[0.5,0.5]"],
-        "env.task.goal_range=[0.5, 0.5] puts goals 1.20 m from the arm's base",
+        "env.task.goal_range=[0.5, 0.5] puts goals 1.21 m from the arm's base",
     ),
     (
         "a goal task's Dict observation with a learner that reads one vector",

@@ -221,6 +221,7 @@ SMOKE_SPEC = {
     "action_dim": 4,
     "action_low": [-1.0] * 4,
     "action_high": [1.0] * 4,
+    "reward_terms": ["reach", "grasp", "lift", "success"],
 }
 #: Each weight matrix after the seeded init: shape, L1 norm and its first three entries. The init is
 #: orthogonal, from LAPACK's QR: another CPU's rounding moves these by ~1e-7, a seed change by ~1e-1.
@@ -249,7 +250,9 @@ def test_guard_the_composed_smoke_config(train_cfg) -> None:
     assert flatten(cfg) == flatten(OmegaConf.to_container(OmegaConf.create(SMOKE_CONFIG)))
     # the env node: the group choices over EnvConfig's own defaults
     defaults = {k: v for k, v in OmegaConf.to_container(OmegaConf.structured(EnvConfig)).items()}
-    assert env == {**defaults, "randomization": "default", "objects": "cube"}
+    lift = {"_target_": "rlgrasp.envs.tasks.LiftTask", "reward": "dense", "success_height": 0.05}
+    lift |= {"terminate_on_success": False, "weights": None}  # configs/task/lift.yaml
+    assert env == {**defaults, "randomization": "default", "objects": "cube", "task": lift}
 
 
 def test_guard_the_spec_and_the_seeded_initial_networks(tmp_path: Path, train_cfg) -> None:

@@ -55,11 +55,17 @@ def env_spec(make_env: EnvFactory) -> dict[str, Any]:
             "action_dim": int(space.shape[0]),
             "action_low": [float(x) for x in space.low.flatten()],
             "action_high": [float(x) for x in space.high.flatten()],
-            "reward_terms": list(getattr(getattr(env.unwrapped, "task", None), "reward", None).names),
+            "reward_terms": reward_term_names(env),
         }
     finally:
         env.close()
     return spec
+
+
+def reward_term_names(env: Any) -> list[str]:
+    """The names of the env's reward terms (none for an env without a task part: a user's own env)."""
+    reward = getattr(getattr(env.unwrapped, "task", None), "reward", None)
+    return list(getattr(reward, "names", ()))
 
 
 def _guard(env: Any, name: str, error_dir: str | None) -> Any:

@@ -64,8 +64,8 @@ def nest_task(env: dict[str, Any]) -> dict[str, Any]:
     ``terminate_on_success`` as the env's own keywords) with them under ``env.task`` (a copy; one of
     today's shape comes back unchanged)."""
     env = dict(env)
-    if "task" in env:
-        return env
+    if "task" in env or not any(k in env for k in (*TASK_KEYS, "terminate_on_success")):
+        return env  # today's shape, or nothing to move (an env of the user's own, a default lift)
     task: dict[str, Any] = {"_target_": LIFT_TASK}
     for old, new in (*TASK_KEYS.items(), ("terminate_on_success", "terminate_on_success")):
         if old in env:
