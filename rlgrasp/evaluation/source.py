@@ -83,8 +83,12 @@ def load_checked_checkpoint(path: Path) -> dict[str, Any]:
     its config read as data), and that it holds what evaluation needs; each problem in one line."""
     try:
         ckpt = read_checkpoint(path)
-    except CheckpointError as exc:
-        raise EvaluationError(str(exc)) from None
+    except CheckpointError as exc:  # evaluation's own words for a file it cannot use at all
+        message = str(exc).replace("unreadable checkpoint: ", "corrupt checkpoint: ", 1)
+        if message.startswith("not an rlgrasp training checkpoint: "):
+            why = message.split(" (", 1)[-1]
+            message = f"corrupt checkpoint: {path} is not an rlgrasp training checkpoint ({why}"
+        raise EvaluationError(message) from None
     missing = [k for k in REQUIRED_KEYS if k not in ckpt]
     missing += [f"spec.{k}" for k in REQUIRED_SPEC if k not in (ckpt.get("spec") or {})]
     if missing:

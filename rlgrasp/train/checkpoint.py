@@ -122,7 +122,9 @@ def read_checkpoint(
             f"unreadable checkpoint: {path} ({type(exc).__name__}: {_first_line(exc)})"
         ) from exc
     if not isinstance(state, dict) or "actor" not in state or "config" not in state:
-        raise CheckpointError(f"not an rlgrasp training checkpoint: {path} (it has no actor and config)")
+        held = state if isinstance(state, dict) else {}
+        missing = ", ".join(k for k in ("actor", "config", "spec") if k not in held)
+        raise CheckpointError(f"not an rlgrasp training checkpoint: {path} (missing {missing})")
     if isinstance(state.get("format"), int) and state["format"] > FORMAT:
         raise CheckpointError(
             f"checkpoint of a newer rlgrasp: {path} has format {state['format']}, this version reads up to "
