@@ -243,7 +243,11 @@ def _upgrade(config: dict[str, Any], source: str) -> tuple[dict[str, Any], dict[
     a part stands for, by node path (turned into the registry's class by ``_class_for``). An old name
     that is not one of rlgrasp's parts is refused, never turned into a class."""
     for key in ("env", "collector", "algo", "logger"):
-        if key in config and config[key] is not None and not isinstance(config[key], Mapping):
+        if (
+            key in config
+            and not isinstance(config[key], Mapping)
+            and (key != "logger" or config[key] is not None)
+        ):
             raise ReceivedError(
                 f"{source}: refused: config.{key} is a {type(config[key]).__name__}, not a mapping"
             )

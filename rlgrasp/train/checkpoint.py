@@ -149,6 +149,9 @@ def check_state(state: dict[str, Any], source: str) -> None:
         isinstance(k, str) and isinstance(v, torch.Tensor) for k, v in state["actor"].items()
     ):
         raise ReceivedError(f"{source}: refused: its actor is not a mapping of names to tensors")
+    if not isinstance(state["config"].get("env"), Mapping):  # every reader builds or compares the env
+        env = state["config"].get("env")
+        raise ReceivedError(f"{source}: refused: config.env is {env!r:.40}, not the env's mapping")
     for key in _COUNTERS:
         value = state.get(key, 0)
         if not isinstance(value, int) or isinstance(value, bool) or value < 0:
