@@ -219,12 +219,38 @@ def _layout() -> dict:
             {"env": {"_target_": "rlgrasp.envs.PandaGraspEnv", "objects": "${oc.env:HOME}"}},
             "config.env.objects holds an interpolation",
         ),
+        (  # an older format is upgraded into a short name, never into a target (route 1 of #81)
+            {"env": {"gym_factory": "builtins:open", "kwargs": {"file": "x", "mode": "w"}}},
+            "config.env.gym_factory='builtins:open' is not an env rlgrasp builds",
+        ),
+        (
+            {"collector": {"backend": "shutil.copyfile"}},
+            "config.collector.backend='shutil.copyfile' is not a collector rlgrasp builds",
+        ),
+        (  # the trust is per kind: one of rlgrasp's loggers is nothing at env (route 4)
+            {"env": {"_target_": "rlgrasp.train.trackers.MlflowLogger", "tracking_uri": "file:///x"}},
+            "config.env._target_='rlgrasp.train.trackers.MlflowLogger' is not a part rlgrasp builds at env",
+        ),
+        (  # a dotted top-level key (route 8)
+            {"algo.terms.x": {"_target_": "builtins.open"}},
+            "config has the key 'algo.terms.x'; a saved config nests its keys",
+        ),
+        ({"env": "grasp"}, "config.env is a str, not a mapping"),
     ],
 )
 def test_a_received_config_names_the_key_and_the_target(config: dict, where: str) -> None:
     with pytest.raises(ReceivedError) as info:
         read_config(config, "f.pt")
     assert where in str(info.value) and "\n" not in str(info.value)
+
+
+def test_a_files_logger_is_only_named_and_never_built() -> None:
+    """Route 3 of #81: an MLflow tracking URI of the file's choosing; the node keeps only a name."""
+    endpoint = {"_target_": "rlgrasp.train.trackers.MlflowLogger", "tracking_uri": "http://203.0.113.1:5000"}
+    assert read_config({"logger": endpoint}, "f.pt")["logger"] == {"name": "mlflow"}
+    assert read_config({"logger": {"_target_": "os.remove", "path": "/x"}}, "f.pt")["logger"] == {
+        "name": "another"
+    }
 
 
 def test_rlgrasp_parts_and_a_users_own_class_from_their_own_config_pass() -> None:
