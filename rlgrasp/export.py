@@ -48,6 +48,7 @@ from rlgrasp.evaluation.source import (
 from rlgrasp.models.cnn import image_specs
 from rlgrasp.models.mlp import squashes
 from rlgrasp.overrides import entry_point, unwritable
+from rlgrasp.received import ReceivedError, check_inside
 from rlgrasp.train.checkpoint import package_versions
 
 log = logging.getLogger("rlgrasp.export")
@@ -375,9 +376,15 @@ def output_paths(fmt: str, out: str | None, ckpt_path: Path) -> dict[str, Path]:
         return {fmt: path}
     if out:
         folder = Path(out).expanduser()
-    else:  # <run>/checkpoints/x.pt -> <run>/export; a loose file -> export/ beside it
-        parent = ckpt_path.resolve().parent
-        folder = (parent.parent if parent.name == "checkpoints" else parent) / "export"
+    else:  # <run>/checkpoints/x.pt -> <run>/export; a loose file -> export/ beside it; never via a link
+        parent = ckpt_path.absolute().parent
+        base = parent.parent if parent.name == "checkpoints" else parent
+        folder = base / "export"
+        try:
+            for path in (ckpt_path, folder):
+                check_inside(base, path, f"ckpt={ckpt_path}")
+        except ReceivedError as exc:
+            raise ExportError(str(exc)) from None
     return {f: folder / f"policy{FORMATS[f]}" for f in formats}
 
 

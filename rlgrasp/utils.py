@@ -6,6 +6,7 @@ import contextlib
 import ctypes
 import logging
 import multiprocessing
+import multiprocessing.spawn
 import os
 import signal
 import sys
@@ -80,9 +81,57 @@ def pyplot() -> Any:
 
 
 _PR_SET_PDEATHSIG = 1  # linux/prctl.h
-#: How often a child's watchdog looks whether its parent is still there.
-PARENT_POLL_S = 0.5
+#: How often a child's watchdog looks whether its parent is still there (it ends within this of it).
+PARENT_POLL_S = 0.2
 _WATCHING = False  # die_with_parent ran in this process
+#: Python run first in every child this process spawns, before the child imports anything: its main
+#: module's imports (torch, PyBullet) take seconds, and a parent killed then would leave it running.
+#: The parent writes its own pid in, so a child whose parent died before this ran knows it
+#: (``os.getppid()`` would then name pid 1, or a subreaper, and the child would wait on that).
+_PARENT_GUARD = """import os, sys, threading, time
+def _rlgrasp_parent_guard(parent={pid}, poll={poll!r}):
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+            ctypes.CDLL(None).prctl({pdeathsig}, 9)
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent:
+        os._exit(1)
+    def watch():
+        while os.getppid() == parent:
+            time.sleep(poll)
+        os._exit(1)
+    threading.Thread(target=watch, name="rlgrasp-parent-watch", daemon=True).start()
+_rlgrasp_parent_guard()
+del _rlgrasp_parent_guard
+"""
+_SPAWN_COMMAND_LINE: Callable[..., list[str]] | None = None
+
+
+def guard_spawned_children() -> None:
+    """Have every process this one spawns (``multiprocessing``'s spawn: pools, TorchRL's collector
+    workers, the evaluation process) end within ``PARENT_POLL_S`` of this process's end, from its
+    first instruction (``_PARENT_GUARD``); idempotent.
+
+    multiprocessing offers no hook that runs in the child before it imports the parent's main module,
+    so its spawn command line (``python -c "<program>"``) is wrapped here to start with the guard.
+    The pid is this process's at each launch: a spawned child's parent is always the process that
+    launched it, so the guard is right for every spawned child, whoever asked for it."""
+    global _SPAWN_COMMAND_LINE
+    if _SPAWN_COMMAND_LINE is not None:
+        return
+    _SPAWN_COMMAND_LINE = original = multiprocessing.spawn.get_command_line
+
+    def guarded(**kwds: Any) -> list[str]:
+        cmd = list(original(**kwds))
+        if "-c" in cmd:
+            i = cmd.index("-c") + 1
+            guard = _PARENT_GUARD.format(pid=os.getpid(), poll=PARENT_POLL_S, pdeathsig=_PR_SET_PDEATHSIG)
+            cmd[i] = guard + cmd[i]
+        return cmd
+
+    multiprocessing.spawn.get_command_line = guarded
 
 
 def die_with_parent() -> None:
@@ -90,20 +139,27 @@ def die_with_parent() -> None:
     included); nothing in the main process of a command, which has no parent of ours.
 
     A spawned worker blocks on its task queue or steps envs; nothing it does notices the parent's
-    death, so a killed command left its workers running, orphaned, for good. Two means, as neither
-    covers every case alone: Linux's ``PR_SET_PDEATHSIG`` has the kernel send SIGKILL at once, even
-    to a child stuck in C code holding the GIL, but it comes too late if the parent died before this
-    call (the import of the main module takes seconds) and exists on Linux only; a daemon thread
-    that watches ``os.getppid()`` covers both. (The signal follows the parent *thread* that started
-    the child: every worker here is started from its parent's main thread.)
+    death, so a killed command left its workers running, orphaned, for good. The parent is the one
+    multiprocessing recorded when it created this process (``parent_process().pid``), known from
+    before this process started: ``os.getppid()`` read now would name pid 1 (or a subreaper) if the
+    parent had died while this one was still importing, and the watch would wait on that forever.
+    Two means, as neither covers every case alone: Linux's ``PR_SET_PDEATHSIG`` has the kernel send
+    SIGKILL at once, even to a child stuck in C code holding the GIL, but exists on Linux only; a
+    daemon thread that compares ``os.getppid()`` with the recorded parent covers the rest. (The signal
+    follows the parent *thread* that started the child: every worker here is started from its
+    parent's main thread.) A child spawned by a process that called ``guard_spawned_children`` is
+    watched from its first instruction already; this covers the others.
     """
     global _WATCHING
-    if multiprocessing.parent_process() is None or _WATCHING:
+    parent_process = multiprocessing.parent_process()
+    if parent_process is None or _WATCHING:
         return
-    _WATCHING, parent = True, os.getppid()
+    _WATCHING, parent = True, parent_process.pid
     if sys.platform.startswith("linux"):
         with contextlib.suppress(OSError, AttributeError):
             ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+    if os.getppid() != parent:  # it died before the signal was asked for
+        os._exit(1)
     threading.Thread(target=_exit_without, args=(parent,), name="rlgrasp-parent-watch", daemon=True).start()
 
 
@@ -163,6 +219,7 @@ class _SpawnIgnoringCtrlC(SpawnProcess):
 
     @staticmethod
     def _Popen(process_obj: Any) -> Any:  # noqa: N802 (multiprocessing's name)
+        guard_spawned_children()
         if threading.current_thread() is not threading.main_thread():  # the pool replacing a worker
             return SpawnProcess._Popen(process_obj)
         previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
@@ -211,6 +268,7 @@ class SpawnPool:
     """
 
     def __init__(self, workers: int, initializer: Callable[..., None], initargs: tuple[Any, ...]):
+        guard_spawned_children()
         context = SpawnContextIgnoringCtrlC()
         handoff = context.Queue()
         handoff.cancel_join_thread()  # a pool ended before its workers read their copies must not wait

@@ -5,8 +5,9 @@ the RNG states as numpy and Python objects, so resume and evaluation refuse them
 means unpickling arbitrary objects, which can run code: do it only for files you made yourself,
 hence ``--trust``. ``--policy-only`` keeps what evaluation and export read (actor with its
 normalizer, config, spec, counters, versions) and drops the optimizer, critic and RNG states: a
-small file to share or ship, which cannot be resumed. The config comes out in today's shape
-(``rlgrasp.train.legacy``: collector and logger as ``_target_`` nodes, ``algo``'s keys by role).
+small file to share or ship, which cannot be resumed. The config comes out in today's shape, read as
+data (``rlgrasp.received``: each part by rlgrasp's own class for its short name, ``algo``'s keys by
+role, the logger only named).
 
     python scripts/upgrade_checkpoint.py outputs/train/x/run/checkpoints/last.pt upgraded.pt --trust
     python scripts/upgrade_checkpoint.py <run>/checkpoints/best.pt policies/grasp_ppo.pt --policy-only
@@ -25,8 +26,8 @@ import torch
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a checkout, uninstalled
 
+from rlgrasp.received import ReceivedError, read_config  # noqa: E402
 from rlgrasp.train import checkpoint as ckpt_lib  # noqa: E402
-from rlgrasp.train.legacy import upgrade_config  # noqa: E402
 
 POLICY_KEYS = (
     "kind",
@@ -56,7 +57,10 @@ def load(path: Path, trust: bool) -> dict:
         torch.set_rng_state(state["rng"]["torch"])
         state["rng"] = ckpt_lib.rng_state()
     state.pop("obs_norm", None)  # format 1 kept a copy of the normalizer the actor already holds
-    state["config"] = upgrade_config(state["config"])
+    try:  # unpickled because you trust the file; its config is still read as data (rlgrasp.received)
+        state["config"] = read_config(state["config"], str(path))
+    except ReceivedError as exc:
+        raise SystemExit(f"upgrade_checkpoint: {exc}") from None
     state["format"] = ckpt_lib.FORMAT
     return state
 

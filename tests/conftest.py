@@ -11,11 +11,6 @@ import pytest
 # address for a cluster started on 127.0.0.1 and the driver never reaches it: the tests hang. The
 # tests only ever start Ray on loopback, so keep it there for the whole session.
 os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
-# The tests' own stand-in envs (tests/standins.py) are classes of this user's: checkpoints of runs
-# trained on them are read back (rlgrasp.targets refuses any class it was not told to trust).
-os.environ["RLGRASP_TRUSTED_TARGETS"] = ",".join(
-    f"tests.standins.{name}" for name in ("crashing_grasp_env", "pendulum", "unseeded_worker_grasp_env")
-)
 
 from rlgrasp.compose import compose_eval, compose_train  # noqa: E402
 from rlgrasp.envs import PandaGraspEnv

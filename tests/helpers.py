@@ -274,17 +274,19 @@ def tensorboard_scalars(run_dir: Path) -> EventAccumulator:
     return acc
 
 
-def run_record(run_dir: Path) -> dict[str, Any]:
+def run_record(run_dir: Path, user: dict[str, Any] | None = None) -> dict[str, Any]:
     """What a run's seed decides: every curve but the wall-clock ones, the checkpoints it wrote and
-    their frames, the final evaluation and the final weights. Floats as hex: equal means bit-identical."""
+    their frames, the final evaluation and the final weights. Floats as hex: equal means bit-identical.
+    ``user``: the config the run was trained with (its own env class is read back by naming it)."""
     acc = tensorboard_scalars(run_dir)
     curves = {
         tag: [(e.step, float(e.value).hex()) for e in acc.Scalars(tag)]
         for tag in acc.Tags()["scalars"]
         if not tag.startswith(WALL_CLOCK)
     }
-    ckpts = {p.name: read_checkpoint(p)["frames"] for p in sorted((run_dir / "checkpoints").glob("*.pt"))}
-    last = load_checkpoint(run_dir)
+    files = sorted((run_dir / "checkpoints").glob("*.pt"))
+    ckpts = {p.name: read_checkpoint(p, user=user)["frames"] for p in files}
+    last = load_checkpoint(run_dir, user=user)
     final_eval = {k: float(v).hex() for k, v in last["last_eval"].items()}
     weights = {k: v.numpy().tobytes() for k, v in last["actor"].items()}
     return {"curves": curves, "checkpoints": ckpts, "final_eval": final_eval, "weights": weights}
@@ -309,5 +311,5 @@ def train_twice(
         if env_target:
             cfg.env = OmegaConf.merge(OmegaConf.to_container(cfg.env), {"_target_": env_target})
         train(cfg)
-        records.append(run_record(tmp_path / name))
+        records.append(run_record(tmp_path / name, OmegaConf.to_container(cfg)))
     return records

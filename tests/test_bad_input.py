@@ -119,11 +119,33 @@ def _more_files(root: Path, run: Path, demos: Path) -> dict[str, str]:
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
     return {
+        **_received_files(root, run),
         "newer": str(newer),
         "frameless_demos": str(frameless),
         "flat": str(flat),
         "closed_port": str(port),
     }
+
+
+def _received_files(root: Path, run: Path) -> dict[str, str]:
+    """Checkpoints someone could send that used to end in a traceback: a dict that is no checkpoint,
+    NaN weights, an env that is a string, a config that is a list, a spec whose size is a string."""
+    state = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
+    name = next(k for k, v in state["actor"].items() if v.is_floating_point() and v.numel())
+    nan = {**state, "actor": {**state["actor"], name: state["actor"][name].flatten().clone()}}
+    nan["actor"][name][0] = float("nan")
+    nan["actor"][name] = nan["actor"][name].reshape(state["actor"][name].shape)
+    made = {
+        "not_ckpt": {"weights": torch.zeros(3)},
+        "nan_weights": nan,
+        "env_string": {**state, "config": {**state["config"], "env": "grasp"}},
+        "config_list": {**state, "config": [1]},
+        "obs_dim_str": {**state, "spec": {**state["spec"], "obs_dim": "49"}},
+    }
+    for key, value in made.items():
+        if not (root / f"{key}.pt").exists():
+            torch.save(value, root / f"{key}.pt")
+    return {key: str(root / f"{key}.pt") for key in made}
 
 
 #: A user's arm (the Panda's model) naming a joint its model does not have.
@@ -377,6 +399,9 @@ TRAIN = [
     ("resume a directory without checkpoints", ["resume={empty}"], "no checkpoints:"),
     ("resume a truncated checkpoint", ["resume={truncated}"], "unreadable checkpoint:"),
     ("resume a file that is not a checkpoint", ["resume={foreign}"], "unreadable checkpoint:"),
+    ("resume a dict that is no checkpoint", ["resume={not_ckpt}"], "(missing actor, config, spec)"),
+    ("resume NaN weights", ["resume={nan_weights}"], "holds 1 NaN or infinite value(s)"),
+    ("resume a config that is a list", ["resume={config_list}"], "its config is a list, not a mapping"),
     (
         "resume with another model",
         ["resume={run}", "model.hidden_sizes=[32]"],
@@ -484,6 +509,11 @@ TRAIN = [
     ),
 ]
 EVAL = [
+    ("a dict that is no checkpoint", ["ckpt={not_ckpt}"], "(missing actor, config, spec)"),
+    ("NaN weights", ["ckpt={nan_weights}"], "holds 1 NaN or infinite value(s)"),
+    ("an env that is a string", ["ckpt={env_string}"], "refused: config.env is a str, not a mapping"),
+    ("a config that is a list", ["ckpt={config_list}"], "its config is a list, not a mapping"),
+    ("spec.obs_dim a string", ["ckpt={obs_dim_str}"], "refused: spec.obs_dim='49' is not a whole number"),
     (
         "unknown objects option (a typo of random_urdfs_test)",
         ["objects=random_urdfs_tset"],

@@ -96,9 +96,16 @@ def test_foreign_missing_and_empty_files_are_refused(tmp_path: Path) -> None:
         load_demos(tmp_path / "nowhere", _layout())
     with pytest.raises(DemoError, match="not a demonstration directory"):
         load_demos(tmp_path, _layout())
-    failed = {"observation": torch.zeros(2, 1), "success": torch.zeros(2, dtype=torch.bool)}
+    layout = _layout()
+    failed = {  # every entry a learner reads, in its dtype and width: only the successes are missing
+        "observation": torch.zeros(2, layout["obs_dim"]),
+        "action": torch.zeros(2, layout["action_dim"]),
+        "reward": torch.zeros(2),
+        "done": torch.zeros(2, dtype=torch.bool),
+        "success": torch.zeros(2, dtype=torch.bool),
+    }
     failures = TensorDict(failed, [2])
-    write_demos(tmp_path / "failed", failures, {**_layout(), "summary": {"kept": 1}})
+    write_demos(tmp_path / "failed", failures, {**layout, "summary": {"kept": 1}})
     with pytest.raises(DemoError, match="none of its 1 episodes succeeded"):
         load_demos(tmp_path / "failed", _layout())
 

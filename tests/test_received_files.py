@@ -1,8 +1,8 @@
-"""A file someone sends cannot act on this machine (``rlgrasp.targets``): every reader refuses a
+"""A file someone sends cannot act on this machine (``rlgrasp.received``): every reader refuses a
 checkpoint whose config would make Hydra's ``instantiate`` call something of the sender's choosing,
 in one line, before anything is built; a demonstrations folder holding anything but plain tensors is
-refused before ``TensorDict.load_memmap`` could unpickle it. Each test proves the target never ran:
-the file it would have created does not exist afterwards."""
+refused before anything could unpickle it. Each test proves the target never ran: the file it would
+have created does not exist afterwards. (The randomized version of these: tests/test_fuzz_received.py.)"""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ from rlgrasp.compose import compose_config, compose_train
 from rlgrasp.config import ConfigError
 from rlgrasp.demos.dataset import DemoError, load_demos
 from rlgrasp.evaluation import EvaluationError
-from rlgrasp.targets import UntrustedConfigError, check_plain_memmap, check_received_config, trusted_targets
+from rlgrasp.received import PARTS, ReceivedError, memmap_entries, read_config
 from rlgrasp.train.checkpoint import CheckpointError
 from rlgrasp.train.loop import Trainer
 
@@ -157,7 +157,7 @@ def test_demonstrations_holding_anything_but_plain_tensors_are_refused(tmp_path:
     out = tmp_path / "cube"
     record_demos(compose_config("demos", ["episodes=1", f"out={out}", "workers=1", "keep=all"]))
     frames = out / "demos" / "frames"
-    check_plain_memmap(frames, "demos")  # what rlgrasp-demos writes passes
+    memmap_entries(frames, "demos")  # what rlgrasp-demos writes passes
     layout = _layout()
     (frames / "other.pickle").write_bytes(b"\x80\x04N.")
     with pytest.raises(DemoError, match="other.pickle in .* is not a tensor file"):
@@ -188,7 +188,7 @@ def _layout() -> dict:
     [
         (
             {"env": {"_target_": "builtins.open"}},
-            "config.env._target_='builtins.open' is not a class rlgrasp builds",
+            "config.env._target_='builtins.open' is not a part rlgrasp builds at env",
         ),
         (
             {"env": {"_target_": "rlgrasp.envs.PandaGraspEnv", "robot": [{"x": {"_target_": "os.getcwd"}}]}},
@@ -205,7 +205,7 @@ def _layout() -> dict:
         ),
         (
             {"algo": {"_target_": "rlgrasp.algos.ppo.PPO", "terms": {"x": {"_target_": "builtins.open"}}}},
-            "config.algo.terms.x._target_='builtins.open' is not a class rlgrasp builds",
+            "config.algo.terms.x._target_='builtins.open' is not a part rlgrasp builds",
         ),
         (
             {
@@ -219,28 +219,57 @@ def _layout() -> dict:
             {"env": {"_target_": "rlgrasp.envs.PandaGraspEnv", "objects": "${oc.env:HOME}"}},
             "config.env.objects holds an interpolation",
         ),
+        (  # an older format is upgraded into a short name, never into a target (route 1 of #81)
+            {"env": {"gym_factory": "builtins:open", "kwargs": {"file": "x", "mode": "w"}}},
+            "config.env.gym_factory='builtins:open' is not an env rlgrasp builds",
+        ),
+        (
+            {"collector": {"backend": "shutil.copyfile"}},
+            "config.collector.backend='shutil.copyfile' is not a collector rlgrasp builds",
+        ),
+        (  # the trust is per kind: one of rlgrasp's loggers is nothing at env (route 4)
+            {"env": {"_target_": "rlgrasp.train.trackers.MlflowLogger", "tracking_uri": "file:///x"}},
+            "config.env._target_='rlgrasp.train.trackers.MlflowLogger' is not a part rlgrasp builds at env",
+        ),
+        (  # a dotted top-level key (route 8)
+            {"algo.terms.x": {"_target_": "builtins.open"}},
+            "config has the key 'algo.terms.x'; a saved config nests its keys",
+        ),
+        ({"env": "grasp"}, "config.env is a str, not a mapping"),
     ],
 )
-def test_the_allow_list_names_the_key_and_the_target(config: dict, where: str) -> None:
-    with pytest.raises(UntrustedConfigError) as info:
-        check_received_config(config, "f.pt")
+def test_a_received_config_names_the_key_and_the_target(config: dict, where: str) -> None:
+    with pytest.raises(ReceivedError) as info:
+        read_config(config, "f.pt")
     assert where in str(info.value) and "\n" not in str(info.value)
 
 
-def test_rlgrasp_targets_and_a_users_own_class_from_their_command_line_pass() -> None:
-    shipped = torch.load(SHIPPED, weights_only=True)["config"]
-    check_received_config(shipped, "shipped")
+def test_a_files_logger_is_only_named_and_never_built() -> None:
+    """Route 3 of #81: an MLflow tracking URI of the file's choosing; the node keeps only a name."""
+    endpoint = {"_target_": "rlgrasp.train.trackers.MlflowLogger", "tracking_uri": "http://203.0.113.1:5000"}
+    assert read_config({"logger": endpoint}, "f.pt")["logger"] == {"name": "mlflow"}
+    assert read_config({"logger": {"_target_": "os.remove", "path": "/x"}}, "f.pt")["logger"] == {
+        "name": "another"
+    }
+
+
+def test_rlgrasp_parts_and_a_users_own_class_from_their_own_config_pass() -> None:
+    shipped = read_config(torch.load(SHIPPED, weights_only=True)["config"], "shipped")
+    assert shipped["env"]["_target_"] == PARTS["env"]["grasp"]
     mine = {"collector": {"_target_": "mypkg.MyCollector"}}
-    with pytest.raises(UntrustedConfigError):
-        check_received_config(mine, "f.pt")
-    check_received_config(mine, "f.pt", trusted={"mypkg.MyCollector"})
-    # an algorithm's terms: rlgrasp's own classes pass, a user's own when their command line names it
+    with pytest.raises(ReceivedError):
+        read_config(mine, "f.pt")
+    assert read_config(mine, "f.pt", user=mine)["collector"]["_target_"] == "mypkg.MyCollector"
+    # an algorithm's terms: rlgrasp's own classes pass, a user's own when their own config names it there
     terms = {"imitation": {"_target_": "rlgrasp.demos.bc.Imitation"}, "mine": {"_target_": "mypkg.Term"}}
-    with pytest.raises(UntrustedConfigError, match="config.algo.terms.mine._target_='mypkg.Term'"):
-        check_received_config({"algo": {"terms": terms}}, "f.pt")
-    check_received_config(
-        {"algo": {"terms": terms}}, "f.pt", trusted=trusted_targets({"algo": {"terms": terms}})
-    )
+    with pytest.raises(ReceivedError, match="config.algo.terms.mine._target_='mypkg.Term'"):
+        read_config({"algo": {"terms": terms}}, "f.pt")
+    read_config({"algo": {"terms": terms}}, "f.pt", user={"algo": {"terms": terms}})
+    # the trust is per node: the user's class at algo.terms.mine is nothing at env, nor at another term
+    with pytest.raises(ReceivedError, match="config.env._target_='mypkg.Term'"):
+        read_config({"env": {"_target_": "mypkg.Term"}}, "f.pt", user={"algo": {"terms": terms}})
+    with pytest.raises(ReceivedError, match="config.algo.terms.other._target_='mypkg.Term'"):
+        read_config({"algo": {"terms": {"other": terms["mine"]}}}, "f.pt", user={"algo": {"terms": terms}})
 
 
 def test_a_checkpoint_of_a_newer_format_is_refused_by_every_loader(tmp_path: Path) -> None:

@@ -14,7 +14,8 @@ from rlgrasp.compose import compose_train
 from rlgrasp.envs import GraspEnv
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.envs.tasks import TASKS, RewardConfigError, RewardTerms, goal_distance, task_name
-from rlgrasp.train.legacy import nest_task, upgrade_config
+from rlgrasp.received import read_config
+from rlgrasp.train.legacy import nest_task
 
 USER_CONFIGS = Path(__file__).resolve().parent / "user_configs"
 GOAL_TASKS = ("pick_place", "push", "stack")
@@ -163,7 +164,7 @@ def test_a_users_task_and_term_from_outside_the_package() -> None:
 def test_old_flat_reward_keys_are_read_into_the_task() -> None:
     old = {"_target_": "rlgrasp.envs.PandaGraspEnv", "reward": "sparse", "reward_weights": None,
            "success_height": 0.07, "terminate_on_success": True, "objects": "cube"}  # fmt: skip
-    env_cfg = upgrade_config({"env": old})["env"]
+    env_cfg = read_config({"env": old}, "old.pt")["env"]
     assert env_cfg["task"] == {
         "_target_": "rlgrasp.envs.tasks.LiftTask",
         "reward": "sparse",

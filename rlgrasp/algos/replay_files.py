@@ -15,10 +15,15 @@ A checkpoint names the sequence number of the newest file it goes with, and that
 before the checkpoint: a run killed between the two resumes from the checkpoint before, whose files
 are all there, and the newer file (transitions that checkpoint never saw) is removed, as is a
 ``.tmp`` left by a write cut short.
+
+The folder may have come with a run someone sent: nothing in it is read, written or removed through
+a symlink (the folder itself a link would move the removals above outside the run), and a file cut
+short or holding NaN is refused in one line (``ReplayError``) before the buffer is filled.
 """
 
 from __future__ import annotations
 
+import pickle
 import re
 from collections.abc import Iterator
 from pathlib import Path
@@ -26,21 +31,39 @@ from pathlib import Path
 import torch
 from tensordict import TensorDict, TensorDictBase
 
+from rlgrasp.config import ConfigError
+from rlgrasp.received import ReceivedError, check_finite, check_inside, check_tree
+
 REPLAY_DIR = "replay"
 #: The whole buffer in one file, as runs wrote it before ``REPLAY_DIR``: still read.
 LEGACY_FILE = "replay.pt"
 _CHUNK = re.compile(r"^(\d+)_(\d+)\.pt$")
 
 
+class ReplayError(ConfigError):
+    """A replay folder or file that cannot be used; the message is one line and names it."""
+
+
 class ReplayFiles:
     """The replay files of one run directory."""
 
     def __init__(self, run_dir: str | Path) -> None:
-        self.folder = Path(run_dir) / REPLAY_DIR
-        self.legacy = Path(run_dir) / LEGACY_FILE
+        self.run_dir = Path(run_dir)
+        self.folder = self.run_dir / REPLAY_DIR
+        self.legacy = self.run_dir / LEGACY_FILE
+
+    def _check_links(self) -> None:
+        """No link on the way: a removal or a write here must stay inside the run directory."""
+        try:
+            for path in (self.folder, self.legacy):
+                check_inside(self.run_dir, path, f"replay of {self.run_dir}")
+            check_tree(self.folder, f"replay of {self.run_dir}")
+        except ReceivedError as exc:
+            raise ReplayError(str(exc)) from None
 
     def chunks(self) -> list[tuple[int, int, Path]]:
         """``(sequence, frames, path)`` of each file, oldest first; other names are not ours."""
+        self._check_links()
         if not self.folder.is_dir():
             return []
         found = [(_CHUNK.match(p.name), p) for p in self.folder.iterdir()]
@@ -48,6 +71,7 @@ class ReplayFiles:
 
     def exist(self) -> bool:
         """Whether the run has any replay file to read."""
+        self._check_links()
         return self.legacy.is_file() or bool(self.chunks())
 
     def write(self, transitions: TensorDictBase) -> int:
@@ -93,11 +117,27 @@ class ReplayFiles:
 
     def _temporary(self) -> list[Path]:
         """Files a write cut short left (``write`` names them ``.<name>.tmp``)."""
+        self._check_links()
         return list(self.folder.glob(".*.tmp")) if self.folder.is_dir() else []
 
     def read(self) -> Iterator[TensorDict]:
         """Each file's transitions, oldest first (a legacy ``replay.pt`` before them)."""
         paths = [self.legacy] if self.legacy.is_file() else []
         for path in [*paths, *(p for _, _, p in self.chunks())]:
-            saved = torch.load(path, map_location="cpu", weights_only=True)
-            yield TensorDict(saved["data"], batch_size=[saved["frames"]])
+            yield _read(path)
+
+
+def _read(path: Path) -> TensorDict:
+    """One file's transitions; a file cut short, of another shape, or holding NaN in one line."""
+    try:
+        saved = torch.load(path, map_location="cpu", weights_only=True)
+        data = TensorDict(saved["data"], batch_size=[saved["frames"]])
+    except (OSError, RuntimeError, EOFError, ValueError, KeyError, TypeError, pickle.UnpicklingError) as exc:
+        reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:200]
+        raise ReplayError(f"unreadable replay file {path} ({type(exc).__name__}: {reason})") from None
+    try:
+        for key, tensor in data.items(True, True):
+            check_finite(tensor, f"{path.name}: {key}", "replay")
+    except ReceivedError as exc:
+        raise ReplayError(str(exc)) from None
+    return data

@@ -22,7 +22,7 @@ from rlgrasp.envs.cameras import GROUND_MASK_KEY, CameraSpec
 from rlgrasp.envs.tasks import task_name
 from rlgrasp.models.cnn import IMAGE_KEYS
 from rlgrasp.models.spec import PRIVILEGED_KEY
-from rlgrasp.targets import UntrustedConfigError, check_plain_memmap
+from rlgrasp.received import ReceivedError, check_tree, read_memmap
 from rlgrasp.train.legacy import nest_task
 
 FORMAT = 1
@@ -153,31 +153,60 @@ def load_demos(path: str | Path, layout: dict[str, Any]) -> Demos:
         )
     if not meta.get("summary", {}).get("kept"):
         raise DemoError(f"algo.demos={path}: holds no demonstrations (0 episodes kept)")
-    frames = _frames(path, Path(meta["dir"]) / FRAMES)
+    try:  # a received folder: read where it lies, never through a link (rlgrasp.received)
+        check_tree(meta["dir"], f"algo.demos={path}")
+    except ReceivedError as exc:
+        raise DemoError(str(exc)) from None
+    frames = _frames(path, Path(meta["dir"]) / FRAMES, layout)
     if not bool(frames["success"].any()):  # learning imitates successes only
         raise DemoError(f"algo.demos={path}: none of its {meta['summary']['kept']} episodes succeeded")
     return Demos(frames, meta)
 
 
-def _frames(path: Path, folder: Path) -> TensorDict:
-    """The transitions of ``folder``; a folder copied without them (only ``demos.json``), or cut short,
-    is refused naming it, not with TensorDict's traceback from inside the learner."""
+def _frames(path: Path, folder: Path, layout: dict[str, Any]) -> TensorDict:
+    """The transitions of ``folder``, read as data (``rlgrasp.received.read_memmap``: no link followed,
+    each file's size checked, nothing written, NaN refused), each entry in the dtype and width this run
+    reads; a folder copied without them (only ``demos.json``), or cut short, is refused naming it."""
+    source = f"algo.demos={path}"
     if not (folder / "meta.json").is_file():
         raise DemoError(
-            f"algo.demos={path}: {folder} is missing (its {META} came without the "
+            f"{source}: {folder} is missing (its {META} came without the "
             "transitions; copy the whole demos folder, or record it again with rlgrasp-demos)"
         )
-    try:  # load_memmap unpickles what is not a plain tensor: check the folder first
-        check_plain_memmap(folder, f"algo.demos={path}")
-    except UntrustedConfigError as exc:
-        raise DemoError(str(exc)) from None
     try:
-        return TensorDict.load_memmap(folder).to_tensordict()
-    except (OSError, ValueError, RuntimeError, KeyError) as exc:
-        raise DemoError(
-            f"algo.demos={path}: unreadable {folder} ({type(exc).__name__}: "
-            f"{str(exc).splitlines()[0][:200] if str(exc) else ''})"
-        ) from None
+        frames = read_memmap(folder, source)
+    except ReceivedError as exc:
+        raise DemoError(str(exc)) from None
+    widths = {"observation": layout.get("obs_dim"), "action": layout.get("action_dim")}
+    widths["next_observation"] = widths["observation"]
+    for key, dtype in ENTRY_DTYPES.items():
+        if key not in frames.keys():
+            if key in REQUIRED_ENTRIES:
+                raise DemoError(f"{source}: {folder} has no {key} entry")
+            continue
+        tensor = frames[key]
+        if tensor.dtype != dtype:
+            raise DemoError(f"{source}: refused: {key} is {tensor.dtype}, this run reads {dtype}")
+        want = (frames.batch_size[0], widths[key]) if widths.get(key) else (frames.batch_size[0],)
+        if tuple(tensor.shape) != want:
+            raise DemoError(
+                f"{source}: refused: {key} has the shape {list(tensor.shape)}, this run reads {list(want)}"
+            )
+    return frames
+
+
+#: The dtype of each entry a learner reads (others, a camera's images, are checked finite only).
+ENTRY_DTYPES = {
+    "observation": torch.float32,
+    "next_observation": torch.float32,
+    "action": torch.float32,
+    "reward": torch.float32,
+    "done": torch.bool,
+    "terminated": torch.bool,
+    "success": torch.bool,
+    "episode": torch.int64,
+}
+REQUIRED_ENTRIES = ("observation", "action", "reward", "done", "success")
 
 
 def summary(episodes: list[dict[str, Any]], kept: int) -> dict[str, Any]:

@@ -36,6 +36,7 @@ from rlgrasp.evaluation.tb_log import log_to_tensorboard
 from rlgrasp.evaluation.teacher import prepare_teacher
 from rlgrasp.evaluation.video import video_format, write_video
 from rlgrasp.overrides import entry_point, unwritable
+from rlgrasp.received import ReceivedError, check_inside
 from rlgrasp.rundir import name_problem
 from rlgrasp.utils import Progress, WorkerDiedError, plain, sigterm_as_interrupt
 
@@ -49,8 +50,15 @@ def output_dir(cfg: DictConfig, source: Any) -> Path:
     name = cfg.name or datetime.now().strftime("%Y-%m-%d_%H-%M-%S")
     if cfg.out_dir:
         return Path(cfg.out_dir)
-    if source.run_dir:
-        return Path(source.run_dir) / "eval" / name
+    if source.run_dir:  # inside the run as given: never through a link in it (rlgrasp.received)
+        out = Path(source.run_dir) / "eval" / name
+        try:
+            check_inside(source.run_dir, out, f"ckpt={cfg.ckpt}")
+            if cfg.tensorboard:
+                check_inside(source.run_dir, Path(source.run_dir) / "tensorboard", f"ckpt={cfg.ckpt}")
+        except ReceivedError as exc:
+            raise EvaluationError(str(exc)) from None
+        return out
     what = source.kind if source.kind != "checkpoint" else Path(source.ckpt_path).stem
     return Path(cfg.outputs_root) / "eval" / what / name
 

@@ -22,9 +22,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from omegaconf import OmegaConf
+import yaml
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
+from rlgrasp.received import ReceivedError, check_tree
 from rlgrasp.rundir import CHECKPOINTS
 from rlgrasp.stats import iqm, stratified_bootstrap_ci, wilson_interval
 from rlgrasp.train.checkpoint import CheckpointError, read_checkpoint
@@ -62,7 +63,12 @@ def expand_runs(patterns: Sequence[str]) -> list[Path]:
             if is_run_dir(m):
                 found.append(m)
             elif m.is_dir():
-                found += [c for c in sorted(m.iterdir()) if is_run_dir(c)]
+                for child in sorted(m.iterdir()):  # a folder of runs someone sent: no link followed
+                    if child.is_symlink():
+                        raise ReceivedError(
+                            f"{m}: refused: {child.name} is a symlink; runs are read where they lie"
+                        )
+                    found += [child] if is_run_dir(child) else []
     unique = list(dict.fromkeys(p.resolve() for p in found))
     if not unique:
         raise FileNotFoundError(
@@ -113,14 +119,20 @@ def training_evaluation(run: Path) -> dict[str, Any] | None:
 
 
 def _run_identity(run: Path, evaluation: dict[str, Any] | None) -> tuple[str, Any]:
-    """experiment_name and seed: from the evaluation, else the run's saved Hydra config."""
+    """experiment_name and seed: from the evaluation, else the run's saved Hydra config, read as plain
+    YAML: nothing of a received file is resolved (an ``${oc.env:...}`` would print the environment)."""
     train = ((evaluation or {}).get("config") or {}).get("train")
     if train:
         return str(train.get("experiment_name", run.parent.name)), train.get("seed")
     hydra_cfg = run / ".hydra" / "config.yaml"
     if hydra_cfg.is_file():
-        cfg = OmegaConf.load(hydra_cfg)
-        return str(cfg.get("experiment_name", run.parent.name)), cfg.get("seed")
+        try:
+            cfg = yaml.safe_load(hydra_cfg.read_text())
+        except (yaml.YAMLError, UnicodeDecodeError) as exc:
+            raise ReceivedError(f"{hydra_cfg}: unreadable YAML ({type(exc).__name__})") from None
+        cfg = cfg if isinstance(cfg, dict) else {}
+        seed = cfg.get("seed")
+        return str(cfg.get("experiment_name", run.parent.name)), seed if isinstance(seed, int) else None
     return run.parent.name, None
 
 
@@ -146,6 +158,7 @@ def load_runs(patterns: Sequence[str], eval_name: str | None = None) -> list[Run
     (not when ``eval_name`` asks for a named one: that compares like with like)."""
     records = []
     for run in expand_runs(patterns):
+        check_tree(run, f"run {run}")  # read where it lies: no link leads a read out of it
         evaluation, eval_dir = final_evaluation(run, eval_name)
         source = FROM_EVAL if evaluation else None
         if evaluation is None and eval_name is None:
@@ -370,7 +383,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     out = args.out or Path("outputs/report") / datetime.now().strftime("%Y-%m-%d_%H-%M-%S")
     try:
         result = build_report(args.runs, out, args.eval_name, args.group_by, args.reps)
-    except FileNotFoundError as exc:
+    except (FileNotFoundError, ReceivedError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     print(result["text"])

@@ -8,15 +8,12 @@ env being built each raise ``EvaluationError`` with a message saying which.
 from __future__ import annotations
 
 import os
-import pickle
-import zipfile
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
-import torch
 from hydra.errors import InstantiationException
 from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
@@ -26,10 +23,8 @@ from rlgrasp.envs.robot import robot_label
 from rlgrasp.evaluation.policies import POLICIES, PolicySource, build_policy
 from rlgrasp.models.cnn import image_specs
 from rlgrasp.overrides import explain
-from rlgrasp.targets import UntrustedConfigError, check_received_config
-from rlgrasp.train.checkpoint import FORMAT as CHECKPOINT_FORMAT
-from rlgrasp.train.checkpoint import unpickler_reason
-from rlgrasp.train.legacy import nest_task, upgrade_config
+from rlgrasp.received import ReceivedError, check_inside
+from rlgrasp.train.checkpoint import CheckpointError, read_checkpoint
 
 CKPT_KINDS = ("best", "last")
 # What a checkpoint must hold for evaluation (see rlgrasp.train.checkpoint's docstring).
@@ -69,37 +64,31 @@ def resolve_checkpoint_path(ckpt: str | os.PathLike, kind: str = "best") -> Path
     return path
 
 
-def load_checked_checkpoint(path: Path) -> dict[str, Any]:
-    """Load and check the structure; a truncated or foreign file gets a message, not a traceback."""
+def run_of(path: Path) -> Path | None:
+    """The run a checkpoint belongs to (``<run dir>/checkpoints/<file>.pt``), where the evaluation
+    writes by default; refused when a link is on the way: a link would move that output (and the
+    file read) to wherever it points, so the run is the folder as given, never a link's target."""
+    if path.parent.name != "checkpoints":
+        return None
+    run_dir = path.absolute().parent.parent
     try:
-        # weights_only: a checkpoint someone sent cannot run code when it is loaded.
-        ckpt = torch.load(path, map_location="cpu", weights_only=True)
-    except pickle.UnpicklingError as exc:
-        if "Unsupported global" not in str(exc):
-            raise EvaluationError(
-                f"corrupt checkpoint: {path} could not be loaded ({unpickler_reason(exc)})"
-            ) from exc
-        raise EvaluationError(
-            f"refused checkpoint: {path} needs to unpickle arbitrary Python objects; only tensors and "
-            f"plain containers are loaded ({unpickler_reason(exc)})"
-        ) from exc
-    except (RuntimeError, EOFError, zipfile.BadZipFile, ValueError, OSError) as exc:
-        raise EvaluationError(
-            f"corrupt checkpoint: {path} could not be loaded ({type(exc).__name__}: {exc})"
-        ) from exc
-    if not isinstance(ckpt, dict):
-        raise EvaluationError(
-            f"corrupt checkpoint: {path} holds a {type(ckpt).__name__}, not a checkpoint dict"
-        )
-    if isinstance(ckpt.get("format"), int) and ckpt["format"] > CHECKPOINT_FORMAT:
-        raise EvaluationError(
-            f"checkpoint of a newer rlgrasp: {path} has format {ckpt['format']}, this version reads up to "
-            f"format {CHECKPOINT_FORMAT} (upgrade rlgrasp)"
-        )
-    try:  # data until checked: the env is built from its config with Hydra's instantiate
-        check_received_config(upgrade_config(ckpt.get("config") or {}), str(path))
-    except UntrustedConfigError as exc:
+        check_inside(run_dir, path, f"checkpoint {path}")
+    except ReceivedError as exc:
         raise EvaluationError(str(exc)) from None
+    return run_dir
+
+
+def load_checked_checkpoint(path: Path) -> dict[str, Any]:
+    """Load and check the checkpoint as every reader does (``rlgrasp.train.checkpoint.read_checkpoint``:
+    its config read as data), and that it holds what evaluation needs; each problem in one line."""
+    try:
+        ckpt = read_checkpoint(path)
+    except CheckpointError as exc:  # evaluation's own words for a file it cannot use at all
+        message = str(exc).replace("unreadable checkpoint: ", "corrupt checkpoint: ", 1)
+        if message.startswith("not an rlgrasp training checkpoint: "):
+            why = message.split(" (", 1)[-1]
+            message = f"corrupt checkpoint: {path} is not an rlgrasp training checkpoint ({why}"
+        raise EvaluationError(message) from None
     missing = [k for k in REQUIRED_KEYS if k not in ckpt]
     missing += [f"spec.{k}" for k in REQUIRED_SPEC if k not in (ckpt.get("spec") or {})]
     if missing:
@@ -114,7 +103,9 @@ def build_env_cfg(
 ) -> dict[str, Any]:
     """The env's ``_target_`` node: a training ``env`` config (``None``: the env's defaults), with
     evaluation's overrides on top and rendering on. Keys of the grasp env are type-checked."""
-    cfg = nest_task(_upgrade_env_cfg(dict(env_cfg or asdict(EnvConfig()))))
+    # A checkpoint's env node was read as data (rlgrasp.received): its _target_ is rlgrasp's own,
+    # and an env of before the task part has its reward keys under env.task.
+    cfg = dict(env_cfg or asdict(EnvConfig()))
     overrides = dict(overrides or {})
     camera = overrides.get("camera")
     if isinstance(camera, dict) and isinstance(cfg.get("camera"), dict):
@@ -130,17 +121,6 @@ def build_env_cfg(
         except OmegaConfBaseException as exc:
             raise EvaluationError(f"env.{explain(exc, root='env')}") from exc
     return cfg
-
-
-def _upgrade_env_cfg(cfg: dict[str, Any]) -> dict[str, Any]:
-    """Checkpoints written before the env config was a ``_target_`` node: ``gym_factory`` named the
-    env, ``kwargs`` held further keywords and ``factory`` the TorchRL wrapper."""
-    if "_target_" in cfg:
-        return cfg
-    module, _, name = str(cfg.pop("gym_factory", "rlgrasp.envs:PandaGraspEnv")).partition(":")
-    cfg.pop("factory", None)
-    extra = cfg.pop("kwargs", None) or {}
-    return {"_target_": f"{module}.{name}", **cfg, **extra}
 
 
 def describe_policy(spec: dict[str, Any]) -> str:
@@ -255,8 +235,7 @@ def prepare(
         if randomization is None:  # what the run's own evaluations played, if it chose (eval.randomization)
             randomization = (full["config"].get("eval") or {}).get("randomization")
         info = _checkpoint_info(full, path, ckpt_kind if Path(ckpt).is_dir() else "file")
-        # The run this checkpoint belongs to: checkpoints/<file>.pt sits in <run dir>/checkpoints.
-        run_dir = path.resolve().parent.parent if path.parent.name == "checkpoints" else None
+        run_dir = run_of(path)
     else:
         if ckpt:
             raise EvaluationError(
@@ -268,7 +247,7 @@ def prepare(
         kind=policy,
         env_cfg=build_env_cfg(env_cfg, randomization, env_overrides),
         ckpt=trimmed,
-        ckpt_path=str(path.resolve()) if path else None,
+        ckpt_path=str(path.absolute()) if path else None,
         run_dir=str(run_dir) if run_dir else None,
         info=info,
     )

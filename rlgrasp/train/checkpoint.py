@@ -32,13 +32,14 @@ other object is refused (``CheckpointError``).
 from __future__ import annotations
 
 import logging
+import math
 import os
 import pickle
 import random
 import re
 import sys
 import zipfile
-from collections.abc import Iterable
+from collections.abc import Iterator, Mapping
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -51,9 +52,8 @@ from tensordict.nn import TensorDictModuleBase
 from rlgrasp.config import CONFIG_DIR
 from rlgrasp.models.cnn import vision_policy
 from rlgrasp.models.mlp import OBS_KEY, RunningNorm, build_actor
+from rlgrasp.received import ReceivedError, check_finite, check_inside, check_tree, read_config
 from rlgrasp.rundir import CHECKPOINTS
-from rlgrasp.targets import UntrustedConfigError, check_received_config
-from rlgrasp.train.legacy import upgrade_config
 
 FORMAT = 2
 _NUMBERED = re.compile(r"ckpt_(\d+)\.pt$")
@@ -99,9 +99,11 @@ def _fsync_dir(folder: Path) -> None:
 
 
 def read_checkpoint(
-    path: str | os.PathLike, map_location: str | torch.device = "cpu", trusted: Iterable[str] = ()
+    path: str | os.PathLike, map_location: str | torch.device = "cpu", user: Mapping[str, Any] | None = None
 ) -> dict[str, Any]:
-    """Load one checkpoint file with ``weights_only=True``; ``CheckpointError`` says what is wrong."""
+    """Load one checkpoint file with ``weights_only=True`` and read its config as data
+    (``rlgrasp.received.read_config``; ``user``: the user's own config, whose classes the file may
+    name at the same nodes); ``CheckpointError`` says in one line what is wrong."""
     path = Path(path)
     if not path.is_file():
         raise CheckpointError(f"missing checkpoint: {path} does not exist")
@@ -120,18 +122,79 @@ def read_checkpoint(
             f"unreadable checkpoint: {path} ({type(exc).__name__}: {_first_line(exc)})"
         ) from exc
     if not isinstance(state, dict) or "actor" not in state or "config" not in state:
-        raise CheckpointError(f"not an rlgrasp training checkpoint: {path}")
+        held = state if isinstance(state, dict) else {}
+        missing = ", ".join(k for k in ("actor", "config", "spec") if k not in held)
+        raise CheckpointError(f"not an rlgrasp training checkpoint: {path} (missing {missing})")
     if isinstance(state.get("format"), int) and state["format"] > FORMAT:
         raise CheckpointError(
             f"checkpoint of a newer rlgrasp: {path} has format {state['format']}, this version reads up to "
             f"format {FORMAT} (upgrade rlgrasp)"
         )
-    state["config"] = upgrade_config(state["config"])  # older checkpoints: rlgrasp.train.legacy
-    try:  # data until checked: its config is built with Hydra's instantiate (rlgrasp.targets)
-        check_received_config(state["config"], str(path), trusted)
-    except UntrustedConfigError as exc:
+    try:  # data until read: its config is rebuilt by rlgrasp's own code (rlgrasp.received)
+        state["config"] = read_config(state["config"], str(path), user)
+        check_state(state, str(path))
+    except ReceivedError as exc:
         raise CheckpointError(str(exc)) from None
     return state
+
+
+#: The counters a checkpoint may hold, each a whole number.
+_COUNTERS = ("format", "frames", "updates", "generation")
+
+
+def check_state(state: dict[str, Any], source: str) -> None:
+    """The parts of a checkpoint that readers index into, in the types they expect, and every
+    floating tensor finite (a diverged run's NaN weights would fail in the first step of a worker)."""
+    if not isinstance(state["actor"], Mapping) or not all(
+        isinstance(k, str) and isinstance(v, torch.Tensor) for k, v in state["actor"].items()
+    ):
+        raise ReceivedError(f"{source}: refused: its actor is not a mapping of names to tensors")
+    if not isinstance(state["config"].get("env"), Mapping):  # every reader builds or compares the env
+        env = state["config"].get("env")
+        raise ReceivedError(f"{source}: refused: config.env is {env!r:.40}, not the env's mapping")
+    for key in _COUNTERS:
+        value = state.get(key, 0)
+        if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+            raise ReceivedError(f"{source}: refused: {key}={state[key]!r} is not a whole number >= 0")
+    spec = state.get("spec")
+    if spec is not None:
+        check_spec(spec, source)
+    for key, tensor in _tensors(state, ""):
+        if not key.startswith("rng"):
+            check_finite(tensor, key, source)
+
+
+def check_spec(spec: Any, source: str) -> None:
+    """``spec``'s sizes are whole numbers and its bounds one number per action."""
+    if not isinstance(spec, Mapping):
+        raise ReceivedError(f"{source}: refused: spec is a {type(spec).__name__}, not a mapping")
+    for key in ("obs_dim", "action_dim"):
+        value = spec.get(key)
+        if key in spec and (not isinstance(value, int) or isinstance(value, bool) or value < 1):
+            raise ReceivedError(f"{source}: refused: spec.{key}={value!r} is not a whole number >= 1")
+    for key in ("action_low", "action_high"):
+        if key not in spec:
+            continue
+        value = spec[key]
+        values = value.tolist() if isinstance(value, torch.Tensor) else value
+        numbers = isinstance(values, list) and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in values
+        )
+        if not numbers or len(values) != spec.get("action_dim", len(values)):
+            raise ReceivedError(
+                f"{source}: refused: spec.{key} holds not {spec.get('action_dim')} finite numbers"
+            )
+
+
+def _tensors(node: Any, path: str) -> Iterator[tuple[str, torch.Tensor]]:
+    if isinstance(node, torch.Tensor):
+        yield path, node
+    elif isinstance(node, Mapping):
+        for key, value in node.items():
+            yield from _tensors(value, f"{path}.{key}" if path else str(key))
+    elif isinstance(node, (list, tuple)):
+        for i, value in enumerate(node):
+            yield from _tensors(value, f"{path}[{i}]")
 
 
 def unpickler_reason(exc: BaseException) -> str:
@@ -155,18 +218,25 @@ def checkpoint_files(ckpt_dir: str | os.PathLike) -> list[Path]:
 
 
 def newest_readable(
-    run_dir: str | os.PathLike, map_location: str | torch.device = "cpu", trusted: Iterable[str] = ()
+    run_dir: str | os.PathLike,
+    map_location: str | torch.device = "cpu",
+    user: Mapping[str, Any] | None = None,
 ) -> tuple[Path, dict[str, Any]]:
     """``(path, state)`` of the newest checkpoint of a run that loads; a bad ``last.pt`` (say,
     truncated by a full disk) is skipped with a warning naming it."""
     ckpt_dir = Path(run_dir) / CHECKPOINTS
+    try:  # a link would read (and a resume write) wherever it points (rlgrasp.received)
+        check_inside(run_dir, ckpt_dir, f"run directory {run_dir}")
+        check_tree(ckpt_dir, f"run directory {run_dir}")
+    except ReceivedError as exc:
+        raise CheckpointError(str(exc)) from None
     files = checkpoint_files(ckpt_dir)
     if not files:
         raise CheckpointError(f"no checkpoints: {ckpt_dir} holds no last.pt or ckpt_*.pt")
     errors = []
     for path in files:
         try:
-            state = read_checkpoint(path, map_location, trusted)
+            state = read_checkpoint(path, map_location, user)
         except CheckpointError as exc:
             errors.append(str(exc))
             log.warning("skipping %s", exc)
@@ -188,12 +258,15 @@ def resolve_policy_path(path: str) -> str:
     return str(candidate)
 
 
-def load_checkpoint(path: str | os.PathLike, map_location: str | torch.device = "cpu") -> dict[str, Any]:
-    """Load a checkpoint file, or a run directory's newest readable one (normally ``last.pt``)."""
+def load_checkpoint(
+    path: str | os.PathLike, map_location: str | torch.device = "cpu", user: Mapping[str, Any] | None = None
+) -> dict[str, Any]:
+    """Load a checkpoint file, or a run directory's newest readable one (normally ``last.pt``);
+    ``user``: the user's own config (``read_checkpoint``)."""
     path = Path(path)
     if path.is_dir():
-        return newest_readable(path, map_location)[1]
-    return read_checkpoint(path, map_location)
+        return newest_readable(path, map_location, user)[1]
+    return read_checkpoint(path, map_location, user)
 
 
 def rng_state() -> dict[str, Any]:

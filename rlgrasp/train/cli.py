@@ -17,6 +17,7 @@ from omegaconf import DictConfig
 
 from rlgrasp.config import CONFIG_DIR, ConfigError, register_configs
 from rlgrasp.overrides import entry_point
+from rlgrasp.received import ReceivedError
 from rlgrasp.rundir import remove_refused_start
 from rlgrasp.train.checkpoint import CheckpointError
 from rlgrasp.train.loop import TrainingError, train
@@ -36,7 +37,7 @@ def run(cfg: DictConfig) -> float:
     """
     try:
         return train(cfg, changed=_command_line_keys(cfg))
-    except (ConfigError, CheckpointError) as exc:
+    except (ConfigError, CheckpointError, ReceivedError) as exc:
         # As every entry point refuses bad input: one line on stderr (the run's log goes with its dir)
         print(f"error: {exc}", file=sys.stderr)
         remove_refused_start(Path(cfg.paths.output_dir))

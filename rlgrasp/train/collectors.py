@@ -22,6 +22,7 @@ from torchrl.collectors import BaseCollector, Collector
 
 from rlgrasp.config import RayConfig
 from rlgrasp.train.collect import EnvFactory, make_batched_env, worker_seed
+from rlgrasp.utils import guard_spawned_children
 
 log = logging.getLogger("rlgrasp.train")
 
@@ -115,6 +116,7 @@ class ProcessCollector(CollectorBackend):
         # Inside a joblib (loky) multirun job the start method is not spawn; the workers need it: a
         # forked child would inherit the parent's PyBullet and torch thread state.
         multiprocessing.set_start_method("spawn", force=True)
+        guard_spawned_children()  # the workers end with this process, even mid-import (rlgrasp.utils)
         # num_threads: TorchRL would set this process's torch threads to the cores left after one a
         # worker (with 2 workers on 2 cores: one), and the learner's updates would run on one thread
         # whatever algo.learner_threads says; the learner's own count is kept instead.

@@ -1,37 +1,16 @@
-"""Checkpoint configs of an older shape: backends named by strings, and ``algo``'s keys in one bag.
+"""Checkpoint configs of an older shape: ``algo``'s keys in one bag.
 
-A checkpoint stores the resolved training config it was trained with. Older ones name the backends
-with strings (``collector.backend: process|ray|single``, ``logger.backend: tensorboard|none``,
-``logger.tracker: wandb|mlflow``), as ``policies/*.pt`` do, and keep ``algo``'s keys flat
-(``algo.lr``, where today's config has ``algo.optim.lr``: ``rlgrasp.config.ALGO_KEYS``).
-``upgrade_config`` maps such a config to today's shape, here and nowhere else:
-``rlgrasp.train.checkpoint.read_checkpoint`` applies it to every checkpoint it reads (resume,
-evaluation, export), and ``scripts/upgrade_checkpoint.py`` writes the result back.
+Older checkpoints keep ``algo``'s keys flat (``algo.lr``, where today's config has ``algo.optim.lr``:
+``rlgrasp.config.ALGO_KEYS``), as ``policies/*.pt`` do. ``nest_algo`` maps such a node to today's
+shape; ``rlgrasp.received.read_config`` applies it to every config read from a file (with the other
+older formats: a ``gym_factory`` env, string-named backends), as data.
 """
 
 from __future__ import annotations
 
-import copy
 from typing import Any
 
 from rlgrasp.config import PPOTermsConfig, moved_algo_key
-
-COLLECTORS = {
-    "process": "rlgrasp.train.collectors.ProcessCollector",
-    "ray": "rlgrasp.train.collectors.RayCollector",
-    "single": "rlgrasp.train.collectors.SingleCollector",
-}
-LOGGERS = {
-    "tensorboard": "rlgrasp.train.logger.TensorBoardLogger",
-    "none": "rlgrasp.train.logger.ConsoleLogger",
-    "wandb": "rlgrasp.train.trackers.WandbLogger",
-    "mlflow": "rlgrasp.train.trackers.MlflowLogger",
-}
-#: The keys each tracker's logger takes besides ``console_interval_s`` (the old schema had both's).
-TRACKER_KEYS = {
-    "wandb": ("project", "tags", "run_name", "entity", "mode"),
-    "mlflow": ("project", "tags", "run_name", "tracking_uri"),
-}
 
 
 def nest_algo(algo: dict[str, Any]) -> dict[str, Any]:
@@ -74,28 +53,3 @@ def nest_task(env: dict[str, Any]) -> dict[str, Any]:
                 task[new] = value
     env["task"] = task
     return env
-
-
-def upgrade_config(config: dict[str, Any]) -> dict[str, Any]:
-    """``config`` with string-named backends turned into ``_target_`` nodes (a copy; a config of
-    today's shape comes back unchanged)."""
-    config = copy.deepcopy(config)
-    collector = config.get("collector")
-    if isinstance(collector, dict) and "backend" in collector:
-        backend = collector.pop("backend")
-        collector["_target_"] = COLLECTORS.get(backend, backend)
-        if backend != "ray":
-            collector.pop("ray", None)
-        config["collector"] = {"_target_": collector.pop("_target_"), **collector}
-    logger = config.get("logger")
-    if isinstance(logger, dict) and "backend" in logger:
-        tracker = logger.get("tracker")
-        kind = tracker if tracker in TRACKER_KEYS else logger["backend"]
-        keep = ("console_interval_s", *TRACKER_KEYS.get(kind, ()))
-        kept = {k: logger[k] for k in keep if k in logger}
-        config["logger"] = {"_target_": LOGGERS.get(kind, kind), **kept}
-    if isinstance(config.get("algo"), dict):
-        config["algo"] = nest_algo(config["algo"])
-    if isinstance(config.get("env"), dict):
-        config["env"] = nest_task(config["env"])
-    return config

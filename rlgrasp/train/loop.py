@@ -178,7 +178,10 @@ class Trainer:
             raise ConfigError(
                 f"checkpoint does not fit the model: {str(exc).splitlines()[-1].strip()[:200]}"
             ) from exc
-        ckpt_lib.set_rng_state(state["rng"])
+        try:
+            ckpt_lib.set_rng_state(state["rng"])
+        except (KeyError, TypeError, ValueError, AttributeError, RuntimeError) as exc:
+            raise ConfigError(f"checkpoint's rng state is unreadable ({type(exc).__name__}: {exc})") from None
         self.frames = state["frames"]
         self.generation = state.get("generation", 0) + 1
         self.best_success = state.get("best_eval_success", -math.inf)
@@ -535,7 +538,7 @@ class Trainer:
             self.save(is_best)
         elif (
             not (self.ckpt_dir / "last.pt").exists()
-            or ckpt_lib.load_checkpoint(self.run_dir)["frames"] != self.frames
+            or ckpt_lib.load_checkpoint(self.run_dir, user=self.config)["frames"] != self.frames
         ):
             self.save()
         result = self.last_eval or {}

@@ -26,8 +26,8 @@ from omegaconf import DictConfig, OmegaConf
 
 from rlgrasp.compose import compose_train
 from rlgrasp.config import CONFIG_DIR, ConfigError, validate_train
+from rlgrasp.received import logger_name
 from rlgrasp.rundir import CHECKPOINTS
-from rlgrasp.targets import trusted_targets
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.utils import flatten
 
@@ -90,18 +90,24 @@ def prepare_run(cfg: DictConfig, changed: Iterable[str] | None = None) -> tuple[
     if source is None:
         validate_train(cfg)
         return cfg, None
-    # The classes this command line's own config names are trusted in the file's (rlgrasp.targets).
-    trusted = trusted_targets(OmegaConf.to_container(cfg, resolve=False))
+    # The file's config is data; a class of the user's own is one their own config names at that node.
+    user = OmegaConf.to_container(cfg, resolve=False)
     if source.is_dir():
-        path, state = ckpt_lib.newest_readable(source, trusted=trusted)
+        path, state = ckpt_lib.newest_readable(source, user=user)
     else:
-        path, state = source, ckpt_lib.read_checkpoint(source, trusted=trusted)
-    if "rng" not in state or "optimizer" not in state and "sac" not in state:
+        path, state = source, ckpt_lib.read_checkpoint(source, user=user)
+    if "rng" not in state or "frames" not in state or "optimizer" not in state and "sac" not in state:
         raise ConfigError(
             f"resume={resume}: {path} is a policy file (no training state to continue); resume takes a "
             f"run directory or its checkpoint; to start a new run from this policy: algo.init_from={path}"
         )
     merged = merged_config(cfg, state["config"], changed)
+    merged.logger = cfg.logger  # never a file's: where the curves go is the user's to say
+    theirs, ours = logger_name(state["config"]), logger_name({"logger": user.get("logger")})
+    if theirs and theirs != ours:
+        log.info(
+            "resume: logging with this command line's logger (%s), not the checkpoint's (%s)", ours, theirs
+        )
     merged.resume = resume  # what it resumed with, also when a requeue chose it
     validate_train(merged)
     log.info("resuming from %s (%s frames)", path, f"{state['frames']:,}")
