@@ -85,7 +85,8 @@ def check_received_config(config: Any, source: str, trusted: Iterable[str] = ())
         if key in INSTANTIATE_KEYS and not (_builds(path) and key == "_target_"):
             raise UntrustedConfigError(
                 f"{source}: refused: {_where(path, key)} would be called when the config is built "
-                "(a file's config may name a class only at env, env.task, collector, logger, algo or algo.terms.*)"
+                "(a file's config may name a class only at env, env.task, collector, logger, algo or "
+                "algo.terms.*)"
             )
 
 

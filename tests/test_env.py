@@ -207,7 +207,9 @@ def test_reward_is_dense_staged_and_at_most_one(make_env):
 
 
 def test_sparse_reward_and_terminate_on_success(make_env):
-    env = make_env(randomization="none", task={"name": "lift", "reward": "sparse", "terminate_on_success": True})
+    env = make_env(
+        randomization="none", task={"name": "lift", "reward": "sparse", "terminate_on_success": True}
+    )
     expert = ScriptedExpert(env.obs_slices)
     obs, _ = env.reset(seed=2)
     steps = 0

@@ -173,7 +173,10 @@ def test_demonstrations_become_transitions_with_their_successors(recorded_demos:
 
 def test_demonstrations_of_another_reward_are_refused(recorded_demos: Path) -> None:
     demos = load_demos(recorded_demos, _layout_of_env(ee_yaw=False))
-    with pytest.raises(DemoError, match="recorded with task=lift env.task.reward=dense, this run has task=lift env.task.reward=sparse"):
+    with pytest.raises(
+        DemoError,
+        match="recorded with task=lift env.task.reward=dense, this run has task=lift env.task.reward=sparse",
+    ):
         demo_transitions(demos, {"reward": "sparse"})
 
 
