@@ -2,8 +2,8 @@
 default randomization, reads the Dict and the flat observation alike, and is the evaluation's
 ``policy=scripted`` for its task.
 
-Rates over a few seeds, not one episode: benchmarks/bench_expert.py --task <t> measures them over
-200 (pick_place 99%, push 96%, stack 82% on default; docs in the experts' package docstring).
+Rates over a few seeds, not one episode. benchmarks/bench_expert.py --task <t> --episodes 200
+--presets default (seeds 0-199, ee_yaw): pick_place 199/200, push 193/200, stack 162/200.
 """
 
 from __future__ import annotations
