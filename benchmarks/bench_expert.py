@@ -8,6 +8,11 @@ Each failure gets one reason, read from the episode's info by the rules the eval
 
     python benchmarks/bench_expert.py [--episodes 100] [--presets none default wide] [--objects cube]
         [--robot panda kuka_iiwa xarm6 configs/robot/my_arm.yaml] [--collision-model mesh|primitive]
+        [--task lift|pick_place|push|stack]
+
+``--task`` measures that task's expert (``rlgrasp.envs.experts``); a goal task's failures are
+``goal not reached`` (the object's centre farther than the task's threshold at the end), ``held at
+the end`` (stack: placed but not let go) or ``base moved``.
 
 ``--robot`` takes built-in arms by name and arm descriptions by file (a ``robot`` config group
 file, e.g. a copy of ``rlgrasp/envs/robots/xarm6.yaml`` with one key changed: the guide "When your
@@ -38,8 +43,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # results_file, also w
 import numpy as np
 import results_file
 
-from rlgrasp.envs import PandaGraspEnv, ScriptedExpert
+from rlgrasp.envs import PandaGraspEnv, ScriptedExpert, expert_for
+from rlgrasp.envs.experts import flat_observation
 from rlgrasp.envs.robot_spec import spec_from_file
+from rlgrasp.envs.tasks import TASKS
 from rlgrasp.evaluation.outcomes import failure_reason as classify
 from rlgrasp.stats import wilson_interval
 
@@ -56,13 +63,22 @@ class OffCentreExpert(ScriptedExpert):
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         if self.offset:
-            obs = obs.copy()  # the fingers close along (-sin t, cos t) at hand yaw t; the pads run across it
+            # the fingers close along (-sin t, cos t) at hand yaw t; the pads run across it
+            obs = flat_observation(obs).copy()
             along_pads = self.offset * np.array([math.cos(self._yaw), math.sin(self._yaw), 0.0])
             obs[self.s["object_minus_grasp"]] += along_pads.astype(obs.dtype)
         return super().__call__(obs)
 
 
-def failure_reason(infos: list[dict]) -> str:
+def failure_reason(infos: list[dict], env=None) -> str:
+    last = infos[-1]
+    if "goal_distance" in last:  # a goal task
+        task = env.unwrapped.task
+        if float(last["goal_distance"]) >= task.distance_threshold:
+            return "goal not reached"
+        if bool(last["grasped"]):
+            return "held at the end"
+        return "base moved"
     return classify(
         [bool(i["grasped"]) for i in infos],
         [float(i["object_tilt"]) for i in infos],
@@ -79,12 +95,18 @@ def run(
     first_seed: int = 0,
     collision_model: str = "mesh",
     offset: float = 0.0,
+    task: str = "lift",
 ) -> dict:
     arm = spec_from_file(robot) if robot.endswith((".yaml", ".yml")) else robot
     env = PandaGraspEnv(
-        randomization=preset, objects=objects, ee_yaw=ee_yaw, robot=arm, collision_model=collision_model
+        randomization=preset,
+        objects=objects,
+        ee_yaw=ee_yaw,
+        robot=arm,
+        collision_model=collision_model,
+        task=task,
     )
-    expert = OffCentreExpert.for_env(env, offset=offset)
+    expert = OffCentreExpert.for_env(env, offset=offset) if task == "lift" else expert_for(env)
     successes, steps_to_success, reasons, failed = 0, [], collections.Counter(), []
     for seed in range(first_seed, first_seed + episodes):
         obs, info = env.reset(seed=seed)
@@ -98,7 +120,7 @@ def run(
         if info["is_success"]:
             successes += 1
         else:
-            reason = failure_reason(infos)
+            reason = failure_reason(infos, env)
             reasons[reason] += 1
             failed.append(f"{seed}:{info['object']}:{reason}")
         if first is not None:
@@ -139,10 +161,14 @@ def main() -> None:
         default=0.0,
         help="metres off the object's centre along the pads that the expert grasps (0: at the centre)",
     )
+    parser.add_argument("--task", default="lift", choices=list(TASKS), help="whose expert to measure")
     results_file.add_options(parser)
     parser.add_argument("--target", type=float, help="with --record: the success rate every row must reach")
     args = parser.parse_args()
+    if args.offset and args.task != "lift":
+        parser.error("--offset measures the lift expert's grasp: use it with --task lift")
     cases = []
+    print(f"task {args.task}")
     print(
         f"{'robot':<11}{'objects':<20}{'preset':<9}{'success at end':>16}{'95% Wilson':>16}"
         f"{'steps to success':>18}  failure reasons"
@@ -157,6 +183,7 @@ def main() -> None:
             args.first_seed,
             args.collision_model,
             args.offset,
+            args.task,
         )
         low, high = wilson_interval(r["successes"], args.episodes)
         reasons = ", ".join(f"{k} {v}" for k, v in r["reasons"].most_common()) or "-"

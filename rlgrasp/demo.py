@@ -1,6 +1,9 @@
 """Watch the scripted expert: a few seeded episodes rendered offscreen to a GIF and a contact sheet.
 
-rlgrasp-demo [--episodes 3] [--randomization default] [--objects cube] [--out outputs/demo]
+rlgrasp-demo [--episodes 3] [--task lift|pick_place|push|stack] [--randomization default]
+    [--objects cube] [--out outputs/demo] [--size 320x240] [--camera DISTANCE YAW PITCH]
+
+The expert is the task's (``rlgrasp.envs.experts``); a goal task's renders show its goal marker.
 """
 
 from __future__ import annotations
@@ -12,30 +15,62 @@ from pathlib import Path
 import numpy as np
 from matplotlib.animation import FuncAnimation, PillowWriter
 
-from rlgrasp.envs import PandaGraspEnv, Randomizer, ScriptedExpert
+from rlgrasp.envs import PandaGraspEnv, Randomizer, expert_for
+from rlgrasp.envs.tasks import TASKS
 from rlgrasp.evaluation.source import ENV_ERRORS
 from rlgrasp.overrides import OneLineParser, unwritable
 from rlgrasp.utils import pyplot
 
+#: The viewer's camera (distance m, yaw and pitch degrees) unless ``--camera`` gives one.
+CAMERA = (1.1, 60.0, -25.0)
 
-def make_env(randomization: str, objects: str) -> PandaGraspEnv:
+
+def make_env(
+    randomization: str,
+    objects: str,
+    task: str = "lift",
+    size: tuple[int, int] = (320, 240),
+    camera: tuple[float, float, float] = CAMERA,
+) -> PandaGraspEnv:
     """The demo's env; a bad preset or object set is a ``ValueError`` naming the flag."""
     try:
         Randomizer(randomization)
     except ValueError as exc:
         raise ValueError(f"--randomization {randomization}: {exc}") from None
+    if task not in TASKS:
+        raise ValueError(f"--task {task}: unknown task; tasks: {', '.join(TASKS)}")
+    distance, yaw, pitch = camera
     try:
         return PandaGraspEnv(
-            randomization=randomization, render_mode="rgb_array", objects=objects, ee_yaw=True
+            randomization=randomization,
+            render_mode="rgb_array",
+            objects=objects,
+            ee_yaw=True,
+            task=task,
+            render_width=size[0],
+            render_height=size[1],
+            camera_distance=distance,
+            camera_yaw=yaw,
+            camera_pitch=pitch,
         )
     except ENV_ERRORS as exc:
         raise ValueError(f"--objects {objects}: {exc}") from None
 
 
-def run(episodes: int, randomization: str, out: Path, seed: int = 0, objects: str = "cube") -> float:
-    """Play and render ``episodes`` episodes, then write ``expert.gif`` and ``expert.png`` into ``out``."""
-    env = make_env(randomization, objects)
-    expert = ScriptedExpert.for_env(env)
+def run(
+    episodes: int,
+    randomization: str,
+    out: Path,
+    seed: int = 0,
+    objects: str = "cube",
+    task: str = "lift",
+    size: tuple[int, int] = (320, 240),
+    camera: tuple[float, float, float] = CAMERA,
+    name: str = "expert",
+) -> float:
+    """Play and render ``episodes`` episodes, then write ``<name>.gif`` and ``<name>.png`` into ``out``."""
+    env = make_env(randomization, objects, task, size, camera)
+    expert = expert_for(env)
     frames, successes = [], []
     for episode in range(episodes):
         obs, _ = env.reset(seed=seed + episode)
@@ -47,22 +82,28 @@ def run(episodes: int, randomization: str, out: Path, seed: int = 0, objects: st
             frames.append(env.render())
             done = terminated or truncated
         successes.append(bool(info["is_success"]))
-        print(
-            f"episode {episode} (seed {seed + episode}, {info['object']}): success={successes[-1]} "
-            f"lift={float(info['lift_height']) * 100:.1f} cm"
+        measure = (
+            f"goal distance={float(info['goal_distance']) * 100:.1f} cm"
+            if "goal_distance" in info
+            else f"lift={float(info['lift_height']) * 100:.1f} cm"
         )
+        where = f"seed {seed + episode}, {info['object']}"
+        print(f"episode {episode} ({where}): success={successes[-1]} {measure}")
     env.close()
 
     plt = pyplot()
     out.mkdir(parents=True, exist_ok=True)
-    fig, ax = plt.subplots(figsize=(4, 3), dpi=80)
+    fig = plt.figure(figsize=(size[0] / 80, size[1] / 80), dpi=80)
+    ax = fig.add_axes((0, 0, 1, 1))
     ax.axis("off")
     image = ax.imshow(frames[0])
     animation = FuncAnimation(fig, lambda i: image.set_data(frames[i]), frames=len(frames))
-    animation.save(out / "expert.gif", writer=PillowWriter(fps=env.metadata["render_fps"]))
+    gif, png = out / f"{name}.gif", out / f"{name}.png"
+    animation.save(gif, writer=PillowWriter(fps=env.metadata["render_fps"]))
+    plt.close(fig)
     sheet = np.concatenate([np.concatenate(frames[i : i + 10 : 2], axis=1) for i in (0, 10, 20)], axis=0)
-    plt.imsave(out / "expert.png", sheet)
-    print(f"success {sum(successes)}/{episodes}; wrote {out / 'expert.gif'} and {out / 'expert.png'}")
+    plt.imsave(png, sheet)
+    print(f"success {sum(successes)}/{episodes}; wrote {gif} and {png}")
     return sum(successes) / episodes
 
 
@@ -73,8 +114,21 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--randomization", default="default", help="preset: none, default or wide")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--objects", default="cube", help="object set, e.g. primitives or random_urdfs_test")
+    parser.add_argument("--task", default="lift", help=f"the task: {', '.join(TASKS)}")
     parser.add_argument("--out", type=Path, default=Path("outputs/demo"))
+    parser.add_argument("--name", default="expert", help="file names in --out: <name>.gif, <name>.png")
+    parser.add_argument("--size", default="320x240", help="frame WIDTHxHEIGHT in pixels")
+    parser.add_argument(
+        "--camera", type=float, nargs=3, default=list(CAMERA), metavar=("DISTANCE", "YAW", "PITCH")
+    )
     args = parser.parse_args(argv)
+    try:
+        args.size = tuple(int(v) for v in args.size.lower().split("x"))
+        if len(args.size) != 2 or min(args.size) < 16:
+            raise ValueError
+    except ValueError:
+        parser.error(f"--size {args.size}: must be WIDTHxHEIGHT, each at least 16 pixels")
+    args.camera = tuple(args.camera)
     if args.episodes < 1:
         parser.error(f"--episodes {args.episodes}: must be at least 1")
     if args.seed < 0:
@@ -83,7 +137,7 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     if problem:
         parser.error(f"--out {args.out}: cannot write there: {problem}")
     try:
-        make_env(args.randomization, args.objects).close()
+        make_env(args.randomization, args.objects, args.task).close()
     except ValueError as exc:
         parser.error(str(exc))
     return args
@@ -92,7 +146,17 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> None:
     """Console entry point ``rlgrasp-demo``."""
     args = parse(argv if argv is not None else sys.argv[1:])
-    run(args.episodes, args.randomization, args.out, args.seed, args.objects)
+    run(
+        args.episodes,
+        args.randomization,
+        args.out,
+        args.seed,
+        args.objects,
+        args.task,
+        args.size,
+        args.camera,
+        args.name,
+    )
 
 
 if __name__ == "__main__":

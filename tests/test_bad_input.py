@@ -736,6 +736,8 @@ DEMO = [
     ),
     ("an unwritable output directory", ["--out", "{unwritable}"], "cannot write there"),
     ("negative seed", ["--seed", "-1"], "--seed -1: must be at least 0"),
+    ("unknown task", ["--task", "pick"], "--task pick: unknown task; tasks: lift, pick_place, push, stack"),
+    ("a frame size that is not WxH", ["--size", "big"], "--size big: must be WIDTHxHEIGHT, each at least 16"),
     ("unknown flag", ["--bogus"], "unrecognized arguments: --bogus"),
 ]
 DEMOS = [

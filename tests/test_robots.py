@@ -17,7 +17,7 @@ from gymnasium.utils.env_checker import check_env
 from omegaconf import OmegaConf
 
 from rlgrasp.envs import PandaGraspEnv, ScriptedExpert, grasp_env
-from rlgrasp.envs import expert as expert_module
+from rlgrasp.envs.experts import lift as expert_module
 from rlgrasp.envs.render_model import mesh_bounds
 from rlgrasp.envs.robot import ROBOTS, robot_label
 from rlgrasp.envs.robot_spec import BUILTIN_DIR, BUILTIN_ROBOTS, builtin_spec, spec_from_file

@@ -61,11 +61,15 @@ class Demos:
 
 def layout_of(env: Any, env_cfg: dict[str, Any]) -> dict[str, Any]:
     """What an observation and an action mean in ``env``: part slices, sizes, control keys, and a
-    camera's images (``images``: key -> shape; none without a camera)."""
+    camera's images (``images``: key -> shape; none without a camera). A goal task's Dict is recorded
+    entry by entry (``observation``: the flat vector without its goal, ``achieved_goal``,
+    ``desired_goal``); ``obs_dim`` is its ``observation``'s."""
     space = env.observation_space
-    camera = isinstance(space, gym.spaces.Dict)
+    camera = isinstance(space, gym.spaces.Dict) and "state" in space.spaces
+    goal = isinstance(space, gym.spaces.Dict) and not camera
+    vector = space["state"] if camera else space["observation"] if goal else space
     return {
-        "obs_dim": int((space["state"] if camera else space).shape[-1]),
+        "obs_dim": int(vector.shape[-1]),
         "action_dim": int(env.action_space.shape[0]),
         "obs_slices": {k: [s.start, s.stop] for k, s in env.unwrapped.obs_slices.items()},
         "images": {k: list(space[k].shape) for k in IMAGE_KEYS if camera and k in space.spaces},

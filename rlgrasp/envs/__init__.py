@@ -27,7 +27,7 @@ def _import_pybullet_quietly() -> None:
 _import_pybullet_quietly()
 
 from rlgrasp.envs.control import CONTROL_MODES  # noqa: E402
-from rlgrasp.envs.expert import ScriptedExpert  # noqa: E402
+from rlgrasp.envs.experts import ScriptedExpert, expert_for  # noqa: E402
 from rlgrasp.envs.grasp_env import GraspEnv  # noqa: E402
 from rlgrasp.envs.randomization import PARAMS, PRESETS, Randomizer, Range  # noqa: E402
 
@@ -43,4 +43,5 @@ __all__ = [
     "Randomizer",
     "Range",
     "ScriptedExpert",
+    "expert_for",
 ]

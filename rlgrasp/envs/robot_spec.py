@@ -79,7 +79,7 @@ class RobotSpec:
     #: Whether joint torques are a meaningful action: false for a model whose masses and inertias
     #: are placeholders (control_mode=joint_torque is then refused).
     torque_control: bool = True
-    #: The scripted expert's grasp for this gripper (``rlgrasp.envs.expert.EXPERT_KEYS``): where the
+    #: The scripted expert's grasp for this gripper (``rlgrasp.envs.robot_spec.EXPERT_KEYS``): where the
     #: grasp point goes on the object, e.g. ``{finger_reach: 0.055, floor_clearance: 0.006}`` for
     #: fingertips that end at the grasp point; empty: the defaults, tuned on the Panda.
     expert: Mapping[str, float] = field(default_factory=dict)

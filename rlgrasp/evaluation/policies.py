@@ -18,7 +18,7 @@ import torch
 from tensordict import TensorDict
 from torchrl.envs import ExplorationType, set_exploration_type
 
-from rlgrasp.envs import ScriptedExpert
+from rlgrasp.envs import expert_for
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.models.cnn import IMAGE_KEYS
 from rlgrasp.train.checkpoint import policy_from_checkpoint
@@ -90,17 +90,17 @@ class CheckpointActor(Actor):
 
 
 class ScriptedActor(Actor):
-    """The env package's scripted expert (deterministic)."""
+    """The scripted expert of the env's task (deterministic); it reads the flat vector, a goal task's
+    Dict or a camera env's ``privileged`` entry (the object's pose)."""
 
     def __init__(self, env: Any) -> None:
-        self.expert = ScriptedExpert.for_env(env)
+        self.expert = expert_for(env)
 
     def reset(self, seed: int) -> None:
         self.expert.reset()
 
     def __call__(self, obs: Any) -> np.ndarray:
-        flat = obs["privileged"] if isinstance(obs, Mapping) else obs  # it reads the object's pose
-        return np.asarray(self.expert(flat), dtype=np.float32)
+        return np.asarray(self.expert(obs), dtype=np.float32)
 
 
 class RandomActor(Actor):

@@ -1,10 +1,14 @@
-"""A scripted grasp that acts only through ``ee_delta`` actions and the observation vector.
+"""The lift expert: a scripted grasp that acts only through ``ee_delta`` actions and the observation.
 
 It proves the task solvable for each object set and randomization preset and is the baseline a
 learned policy is compared with. It grasps top-down across the object's narrowest horizontal
 extent; with ``ee_yaw`` (action_dim 5) it turns the hand to that direction, without it the hand
 keeps yaw 0. Where the grasp point goes on the object is the gripper's: an arm's description may
 set ``expert: {finger_reach, floor_clearance, hover}`` (``ScriptedExpert.for_env`` reads it).
+
+Its grasp phases (approach, descend, close) are the goal experts' first phases too
+(``rlgrasp.envs.experts``): a subclass names the phase that follows the close (``HOLD``) and says
+what it does then (``hold_step``).
 """
 
 from __future__ import annotations
@@ -14,6 +18,8 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+
+from rlgrasp.envs.experts.observation import flat_observation
 
 FINGER_REACH = 0.035  # m below the object's top at which the fingertips close on a tall object
 FLOOR_CLEARANCE = 0.012  # m above the object's bottom: the lowest grasp height
@@ -32,6 +38,11 @@ def quat_matrix(quat: np.ndarray) -> np.ndarray:
             [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
         ]
     )
+
+
+def half_height(quat: np.ndarray, extents: np.ndarray) -> float:
+    """Half the vertical extent of a box of ``extents`` at ``quat``."""
+    return 0.5 * float(np.abs(quat_matrix(quat)[2]) @ extents)
 
 
 def _wrap_half_turn(angle: float) -> float:
@@ -56,7 +67,7 @@ def grasp_plan(
     """
     rotation = quat_matrix(quat)
     vertical = int(np.argmax(np.abs(rotation[2])))
-    half_height = 0.5 * float(np.abs(rotation[2]) @ extents)
+    half = 0.5 * float(np.abs(rotation[2]) @ extents)
     horizontal = [i for i in range(3) if i != vertical]
     candidates = []
     for i in horizontal:
@@ -66,12 +77,19 @@ def grasp_plan(
     narrowest = min(width for width, _ in candidates)
     ties = [(abs(yaw - current_yaw), yaw, w) for w, yaw in candidates if w <= narrowest + WIDTH_TIE]
     _, yaw, width = min(ties)
-    bottom, top = centre_z - half_height, centre_z + half_height
+    bottom, top = centre_z - half, centre_z + half
     return yaw, max(bottom + floor_clearance, top - finger_reach), width
+
+
+#: The phases in which an expert grasps the object (``ScriptedExpert.grasp_step``).
+GRASP_PHASES = ("approach", "descend", "close")
 
 
 class ScriptedExpert:
     """Approach above the object, turn, descend, close, lift; start over if the object is lost."""
+
+    #: The phase after the fingers closed.
+    HOLD = "lift"
 
     def __init__(
         self,
@@ -111,16 +129,34 @@ class ScriptedExpert:
         self._lost = 0
         self._yaw = 0.0  # the yaw this expert has commanded: the env starts each episode at 0
 
-    def _move(self, grasp: np.ndarray, target: np.ndarray, yaw: float, open_fingers: bool) -> np.ndarray:
+    def _move(
+        self,
+        grasp: np.ndarray,
+        target: np.ndarray,
+        yaw: float,
+        open_fingers: bool,
+        gain: float | None = None,
+    ) -> np.ndarray:
+        """The action taking the grasp point ``gain`` (default: the expert's) of the way to ``target``
+        and the hand towards ``yaw``, the fingers open or closed."""
         action = np.zeros(self.action_dim, np.float32)
-        action[:3] = np.clip(self.gain * (target - grasp) / self.ee_step, -1.0, 1.0)
+        gain = self.gain if gain is None else gain
+        action[:3] = np.clip(gain * (target - grasp) / self.ee_step, -1.0, 1.0)
         if self.use_yaw:
             action[3] = np.clip((yaw - self._yaw) / self.yaw_step, -1.0, 1.0)
             self._yaw = float(np.clip(self._yaw + action[3] * self.yaw_step, -math.pi / 2, math.pi / 2))
         action[-1] = 1.0 if open_fingers else -1.0
         return action
 
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
+    def __call__(self, obs: Any) -> np.ndarray:
+        """The action for ``obs``: the flat vector, a goal task's Dict or a camera env's Dict."""
+        obs = flat_observation(obs)
+        if self.phase in GRASP_PHASES:
+            return self.grasp_step(obs)
+        return self.hold_step(obs)
+
+    def grasp_step(self, obs: np.ndarray) -> np.ndarray:
+        """Approach above the object, turn, descend, close; then the phase ``HOLD``."""
         s = self.s
         grasp = obs[s["grasp_pos"]].astype(float)
         centre = grasp + obs[s["object_minus_grasp"]]
@@ -147,13 +183,21 @@ class ScriptedExpert:
             if flat > 0.02:  # the object moved: go back up
                 self.phase = "approach"
             return self._move(grasp, target, self._yaw, open_fingers=True)
-        if self.phase == "close":
-            self._closing += 1
-            if self._closing >= self.close_steps:
-                self.phase, self._closing, self._lost = "lift", 0, 0
-            return self._move(grasp, target, self._yaw, open_fingers=False)
-        # lift: an object out of the fingers for a few steps means try again
-        self._lost = 0 if obs[s["grasped"]][0] > 0.5 else self._lost + 1
-        if self._lost >= 3:
+        self._closing += 1
+        if self._closing >= self.close_steps:
+            self.phase, self._closing, self._lost = self.HOLD, 0, 0
+        return self._move(grasp, target, self._yaw, open_fingers=False)
+
+    def lost_grip(self, obs: np.ndarray, steps: int = 3) -> bool:
+        """The object out of the fingers for ``steps`` steps running (then the phase is ``approach``)."""
+        self._lost = 0 if obs[self.s["grasped"]][0] > 0.5 else self._lost + 1
+        if self._lost >= steps:
             self.phase = "approach"
+            return True
+        return False
+
+    def hold_step(self, obs: np.ndarray) -> np.ndarray:
+        """Lift: an object out of the fingers for a few steps means try again."""
+        grasp = obs[self.s["grasp_pos"]].astype(float)
+        self.lost_grip(obs)
         return self._move(grasp, np.array([grasp[0], grasp[1], self.lift_to]), self._yaw, open_fingers=False)
