@@ -175,3 +175,16 @@ def test_old_flat_reward_keys_are_read_into_the_task() -> None:
     env = env_factory(env_cfg)()
     assert env.task.reward_name == "sparse" and env.task.terminate_on_success
     env.close()
+
+
+def test_demonstrations_are_matched_on_the_task_and_its_reward() -> None:
+    from rlgrasp.demos.dataset import task_reward
+
+    assert task_reward(compose_train(["experiment=pick_place_sac_demos"]).env) == (
+        "task=pick_place env.task.reward=dense"
+    )
+    assert (
+        task_reward({"task": {"_target_": "rlgrasp.envs.tasks.PushTask"}})
+        == "task=push env.task.reward=sparse"
+    )
+    assert task_reward({"reward": "sparse"}) == "task=lift env.task.reward=sparse"  # a recording of before

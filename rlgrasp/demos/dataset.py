@@ -9,12 +9,14 @@ observes or acts otherwise is refused in one line: the numbers would load and me
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import torch
+from omegaconf import OmegaConf
 from tensordict import TensorDict
 
 from rlgrasp.config import ConfigError
@@ -237,9 +239,11 @@ def summary(episodes: list[dict[str, Any]], kept: int) -> dict[str, Any]:
 def task_reward(env_cfg: Any) -> str:
     """``task=lift env.task.reward=dense``: which task paid which reward (an env config of before the
     task part counts as lift's)."""
+    if OmegaConf.is_config(env_cfg):  # a run's own composed config
+        env_cfg = OmegaConf.to_container(env_cfg)
     task = nest_task(dict(env_cfg or {})).get("task") or "lift"
     name = task_name(task)
-    reward = task.get("reward") if isinstance(task, dict) else None
+    reward = task.get("reward") if isinstance(task, Mapping) else None
     reward = reward or ("dense" if name == "lift" else "sparse")
     reward = reward if isinstance(reward, str) else "custom terms"
     return f"task={name} env.task.reward={reward}"
