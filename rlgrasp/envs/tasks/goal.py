@@ -201,6 +201,9 @@ class StackTask(GoalTask):
     The base is placed at a drawn spot at least ``min_goal_distance`` from the object; the goal is
     the top cube's centre resting on the base. Success: the top cube within ``distance_threshold``
     of that spot, the fingers off it, and the base where it was put (within ``base_tolerance``).
+    3 cm, not 2: a cube resting on the base at its height is stacked when it sits up to about half
+    a cube's width off the centre, and the base may have shifted by up to ``base_tolerance``
+    (docs/tasks.md#the-scripted-experts; panda-gym's stack takes 5 cm).
     """
 
     TERMS = {**GoalTask.TERMS, "release": release}
@@ -222,7 +225,7 @@ class StackTask(GoalTask):
         self,
         scene: Any,
         objects: Any = "cube",
-        distance_threshold: float = 0.02,
+        distance_threshold: float = 0.03,
         base_tolerance: float = 0.02,
         **task: Any,
     ):
