@@ -188,3 +188,22 @@ def test_demonstrations_are_matched_on_the_task_and_its_reward() -> None:
         == "task=push env.task.reward=sparse"
     )
     assert task_reward({"reward": "sparse"}) == "task=lift env.task.reward=sparse"  # a recording of before
+
+
+def test_a_camera_policy_reads_the_goal_beside_its_image_and_never_sees_the_marker() -> None:
+    camera = {"mount": "wrist", "modality": "depth", "width": 32, "height": 32}
+    env = GraspEnv(task="pick_place", camera=camera, render_mode="rgb_array", randomization="none")
+    marker_in_view = 0
+    for seed in range(5):
+        obs, _ = env.reset(seed=seed)
+        goal = obs["privileged"][env.obs_slices["desired_goal"]]
+        np.testing.assert_array_equal(obs["state"][-3:], goal)  # proprioception, then the goal
+        mount = env.robot.camera_mount()
+        seen = env.camera.render(mount)["depth"]  # the marker drawn, as people's renders have it
+        env.scene.set_marker_alpha(0.0)
+        hidden = env.camera.render(mount)["depth"]
+        env.scene.set_marker_alpha(1.0)
+        np.testing.assert_array_equal(obs["depth"][-1], hidden[-1])  # the policy's image: no marker
+        marker_in_view += int((seen != hidden).any())
+    assert marker_in_view > 0  # the check above compared images that the marker would change
+    env.close()
