@@ -8,7 +8,7 @@ fingers hold it and, where they let go before the end, at which step, how high a
 object's tilt had changed since the first grasp. Episodes are the evaluation's seeded ones
 (episode i reset with ``seed`` + i, 0-99 by default) and each gets the evaluation's outcome
 (``success`` or a failure reason, ``rlgrasp.evaluation.outcomes``), so grasps that held and that
-``slipped`` compare directly. docs/robots.md ("Where a learned grasp closes", "How a learned grasp
+``slipped`` compare directly. docs/history/robots.md ("Where a learned grasp closes", "How a learned grasp
 lets go") was measured with it. The arguments are ``rlgrasp-eval``'s keys:
 
     python benchmarks/bench_grasp_depth.py ckpt=policies/grasp_ppo_xarm6.pt episodes=100

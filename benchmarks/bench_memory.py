@@ -10,7 +10,7 @@ through ``SAC.store``, as training does, until the buffer is full. The learner's
 read from ``/proc`` before and after (the storage's pages count once written). Then the run's
 collector starts its workers and steps a few batches, and the workers' resident memory is added: the
 total is what the run's processes hold at the end of a run, the figure set against the 8 GiB target
-of docs/algorithms.md. Linux only (``/proc``).
+of docs/history/algorithms.md. Linux only (``/proc``).
 """
 
 from __future__ import annotations

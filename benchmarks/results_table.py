@@ -13,12 +13,19 @@ file (with the command that produced it, and the section of the page that tells 
 `--write`; tests/test_results_table.py fails while the two disagree. Each row has an `id`; a
 benchmark script given `--record PAGE/ID` writes its own row (benchmarks/results_file.py), and
 `--ids` lists them.
+
+The same file's `summaries` are the figures the README, docs/index.md and the guides quote: each a
+label and a row (`PAGE/ID`), rendered between `<!-- results-summary: NAME -->` and
+`<!-- /results-summary -->` in the files of `SUMMARY_FILES`, so that a figure is typed once. No cell
+holds more than `MAX_CELL` characters: a row's long command list goes below its page's table, and a
+row's earlier figures (`earlier`) with it.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import re
 import sys
 from pathlib import Path
@@ -30,15 +37,28 @@ COLUMNS = ("target", "measured", "date", "machine", "command", "met")
 BLOCK = re.compile(
     r"(<!-- results-table: (?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- /results-table -->)", re.S
 )
+SUMMARY = re.compile(
+    r"(<!-- results-summary: (?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- /results-summary -->)", re.S
+)
+#: Where each summary is rendered (paths from the repository root).
+SUMMARY_FILES = {"readme": ("README.md", "docs/index.md"), "algorithms": ("docs/algorithms.md",)}
+#: The most characters a table cell may hold; longer text goes below the table.
+MAX_CELL = 300
 
 
 def load(path: Path = RESULTS) -> dict[str, list[dict]]:
     return json.loads(path.read_text())["pages"]
 
 
-def _cell(text: str) -> str:
+def load_summaries(path: Path = RESULTS) -> dict[str, list[dict]]:
+    return {k: v for k, v in json.loads(path.read_text()).get("summaries", {}).items() if k != "_about"}
+
+
+def _cell(text: str, limit: int | None = None) -> str:
     if "|" in text or "\n" in text:
         raise ValueError(f"a table cell cannot hold '|' or a line break: {text!r}")
+    if limit is not None and len(text) > limit:
+        raise ValueError(f"a table cell holds {len(text)} characters, more than {limit}: {text[:80]!r}...")
     return text
 
 
@@ -53,13 +73,83 @@ def _command(row: dict) -> str:
 
 
 def render(rows: list[dict]) -> str:
-    """The Markdown table of one page: one line per row, the target linked to the page's section."""
+    """The Markdown table of one page: one line per row, the target linked to the page's section.
+    A command list longer than a cell may hold, and a row's earlier figures, follow the table."""
     lines = ["| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
+    below = []
     for row in rows:
+        for key in ("target", "measured", "date", "machine", "met"):
+            _cell(row[key], MAX_CELL)
         target = f"[{row['target']}]({row['section']})" if row.get("section") else row["target"]
-        cells = (target, row["measured"], row["date"], row["machine"], _command(row), row["met"])
+        command = _command(row)
+        if len(command) > MAX_CELL:
+            n = len(row["command"])
+            command = f"{n} commands, below the table ({row['id']})"
+            below.append(f"- **{row['id']}**, the commands: {_command(row)}")
+        if row.get("earlier"):
+            below.append(f"- **{row['id']}**, the figures before and beside it: {_cell(row['earlier'])}")
+        cells = (target, row["measured"], row["date"], row["machine"], command, row["met"])
         lines.append("| " + " | ".join(_cell(c) for c in cells) + " |")
+    text = "\n".join(lines) + "\n"
+    if below:
+        text += "\nThe rows' long text:\n\n" + "\n".join(below) + "\n"
+    return text
+
+
+def _link(section: str, page: str, into: Path) -> str:
+    """A row's section (relative to docs/benchmarks/) as a link from the file ``into``."""
+    path, _, anchor = section.partition("#")
+    dest = os.path.normpath(PAGES / (path or f"{page}.md"))
+    rel = os.path.relpath(dest, into.parent)
+    return f"{rel}#{anchor}" if anchor else rel
+
+
+def render_summary(items: list[dict], pages: dict[str, list[dict]], into: Path) -> str:
+    """A summary's table for the file ``into``: each item's label, then its row's figure (linked to
+    the row's section), date and whether the target is met."""
+    lines = ["| | figure | date | target |", "|---|---|---|---|"]
+    for item in items:
+        page, _, row_id = item["row"].partition("/")
+        row = next((r for r in pages.get(page, []) if r.get("id") == row_id), None)
+        if row is None:
+            raise ValueError(f"summary item {item['label']!r}: no row {item['row']!r} in {RESULTS.name}")
+        figure = _cell(row["measured"], MAX_CELL)
+        if row.get("section"):
+            figure = f"[{figure}]({_link(row['section'], page, into)})"
+        lines.append(f"| {_cell(item['label'])} | {figure} | {row['date']} | {_cell(row['met'])} |")
     return "\n".join(lines) + "\n"
+
+
+def compare_summaries(pages: dict[str, list[dict]], summaries: dict[str, list[dict]]) -> list[str]:
+    """What differs between the summaries in the file and their copies: one line per problem."""
+    problems = []
+    for name, files in SUMMARY_FILES.items():
+        for rel in files:
+            path = ROOT / rel
+            blocks = {m["name"]: m["body"] for m in SUMMARY.finditer(path.read_text())}
+            if name not in summaries:
+                problems.append(f"{RESULTS.name}: no summary '{name}'")
+            elif name not in blocks:
+                problems.append(f"{rel}: no '<!-- results-summary: {name} -->' block")
+            elif blocks[name] != render_summary(summaries[name], pages, path):
+                problems.append(f"{rel}: the '{name}' figures differ from {RESULTS.relative_to(ROOT)}")
+    return problems
+
+
+def write_summaries(pages: dict[str, list[dict]], summaries: dict[str, list[dict]]) -> None:
+    for name, files in SUMMARY_FILES.items():
+        for rel in files:
+            path = ROOT / rel
+            text = path.read_text()
+            table = render_summary(summaries[name], pages, path)
+
+            def fill(m: re.Match, name: str = name, table: str = table) -> str:
+                return m[1] + table + m[4] if m["name"] == name else m[0]
+
+            new = SUMMARY.sub(fill, text)
+            if new != text:
+                path.write_text(new)
+                print(f"wrote {rel}")
 
 
 def page_path(name: str, folder: Path = PAGES) -> Path:
@@ -117,9 +207,10 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if args.write:
         write(pages)
+        write_summaries(pages, load_summaries())
         return 0
     if args.check:
-        problems = compare(pages)
+        problems = compare(pages) + compare_summaries(pages, load_summaries())
         for p in problems:
             print(p, file=sys.stderr)
         return 1 if problems else 0

@@ -181,7 +181,7 @@ def keep_freed_memory(trim_threshold: int = 256 << 20) -> bool:
     A camera learner allocates and frees tens of megabytes of image tensors every gradient step
     (augmented copies, float conversions, activations); left to its defaults, glibc maps many of them
     anew each time, and each fresh mapping is paid again in page faults (what that costs an RGB
-    step: docs/algorithms.md). Set at run time through ``mallopt`` so that no environment
+    step: docs/history/algorithms.md). Set at run time through ``mallopt`` so that no environment
     variable is needed before the interpreter starts. False (and nothing changed) where the C library
     is not glibc."""
     try:

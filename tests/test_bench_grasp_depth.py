@@ -1,4 +1,4 @@
-"""benchmarks/bench_grasp_depth.py: the depth and offset docs/robots.md compares are read at the
+"""benchmarks/bench_grasp_depth.py: the depth and offset docs/history/robots.md compares are read at the
 first grasped step, the hold is counted to its end, and episodes are grouped by the evaluation's
 outcome."""
 

@@ -270,3 +270,46 @@ def test_bench_core_expert_env_scale_soak_compose_their_rows():
         (3, "25.0", 12288, 8192, 4096, "lost 4096 frames"),
     ]
     assert bench("soak_resume")["soak_text"](rows) == "2 of 3 cycles ok, at most 4,096 frames lost per kill"
+
+
+# --- one source: the README's, docs/index.md's and the guides' figures are rows of results.json -----
+def test_summaries_match_the_file(table):
+    """README.md, docs/index.md and docs/algorithms.md quote figures rendered from results.json's
+    rows (``summaries``): a figure typed into one copy, or a row changed without `--write`, fails."""
+    pages, summaries = table["load"](), table["load_summaries"]()
+    assert set(summaries) == set(table["SUMMARY_FILES"])
+    assert table["compare_summaries"](pages, summaries) == []
+
+
+def test_a_changed_summary_figure_is_caught(table):
+    pages, summaries = table["load"](), table["load_summaries"]()
+    pages["learning"] = [dict(r, measured="0.99 / 0.99 / 0.99") for r in pages["learning"]]
+    problems = table["compare_summaries"](pages, summaries)
+    assert any("README.md" in p and "differ" in p for p in problems)
+    assert any("docs/index.md" in p and "differ" in p for p in problems)
+
+
+def test_a_summary_names_only_rows_that_exist(table):
+    with pytest.raises(ValueError, match="no row 'learning/nope'"):
+        table["render_summary"]([{"label": "x", "row": "learning/nope"}], table["load"](), ROOT / "README.md")
+
+
+def test_no_cell_over_the_limit(table):
+    """No cell of a results table or a summary holds more than MAX_CELL characters (a linked figure:
+    its text): long command lists and earlier figures are rendered below the table."""
+    limit = table["MAX_CELL"]
+    pages, summaries = table["load"](), table["load_summaries"]()
+    rendered = [table["render"](rows) for rows in pages.values()]
+    rendered += [table["render_summary"](items, pages, ROOT / "README.md") for items in summaries.values()]
+    for text in rendered:
+        for line in text.splitlines():
+            if line.startswith("|"):
+                for cell in line.strip("| ").split(" | "):
+                    shown = re.sub(r"\]\([^)\s]+\)$", "", cell).lstrip("[")
+                    assert len(shown) <= limit, f"a cell of {len(shown)} characters: {shown[:80]}..."
+    row = {"target": "t", "measured": "x" * (limit + 1), "date": "2026-01-01", "machine": "m", "met": "met"}
+    with pytest.raises(ValueError, match="more than"):
+        table["render"]([row])
+    long = dict(row, measured="1", id="r", command=["python a.py " + "x" * limit])
+    rendered = table["render"]([long])
+    assert "1 commands, below the table (r)" in rendered and "- **r**, the commands:" in rendered

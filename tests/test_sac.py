@@ -540,7 +540,7 @@ _RGB_CUBE_AS_MEASURED = [
 
 
 def test_the_rgb_experiment_is_the_measured_overrides_of_the_camera_one() -> None:
-    """docs/algorithms.md measured the RGB learner on the cube as grasp_vision_sac_demos plus these
+    """docs/history/algorithms.md measured the RGB learner on the cube as grasp_vision_sac_demos plus these
     overrides (2026-12-06, seeds 0-2: the camera behind the hand and recoloured replays of
     2026-12-03, then the objects' recipe: the keypoint encoder, the object-cells head and other
     grounds behind half the replayed images, for 61,440 frames); grasp_vision_sac_rgb_demos must
@@ -552,7 +552,7 @@ def test_the_rgb_experiment_is_the_measured_overrides_of_the_camera_one() -> Non
 
 
 def test_the_rgb_objects_experiment_is_the_measured_overrides_of_the_rgb_one() -> None:
-    """docs/algorithms.md measured the RGB learner on many objects as the RGB cube learner of
+    """docs/history/algorithms.md measured the RGB learner on many objects as the RGB cube learner of
     2026-12-03 plus these overrides (the runs of 2026-12-05: the keypoint encoder and the object-cells
     head on top of the utd-0.25 run, then a gradient step every eight frames, and bench_learning's
     time budget; then other grounds behind half the replayed images, on demonstrations recorded with
@@ -577,7 +577,7 @@ def test_the_rgb_objects_experiment_is_the_measured_overrides_of_the_rgb_one() -
 
 
 def test_the_state_objects_experiment_with_demonstrations_is_the_measured_run() -> None:
-    """docs/algorithms.md measured grasp_objects_sac with 20 demonstrations as these overrides (and
+    """docs/history/algorithms.md measured grasp_objects_sac with 20 demonstrations as these overrides (and
     bench_learning's time budget), the RGB objects learner's objects and replay size without its
     camera; its gradient steps a frame are its own (a step every four frames, as measured)."""
     shipped = _shipped_as_measured(

@@ -63,7 +63,7 @@ def recolour(
     n = x.shape[0]
     # Each image's recolouring is affine, x' = s M x + (1 - s) mean(M x), with M a permutation times
     # the brightness gain and s the contrast: three multiply-adds over the pixels do all of it (a
-    # batched product of 3x3 matrices, torch.bmm, is slow on a CPU: docs/algorithms.md).
+    # batched product of 3x3 matrices, torch.bmm, is slow on a CPU: docs/history/algorithms.md).
     # The draws are made on the CPU, where ``generator`` lives, and moved to the images' device.
     mix = torch.eye(3)[PERMUTATIONS[torch.randint(len(PERMUTATIONS), (n,), generator=generator)]]
     greyed = torch.rand(n, generator=generator) < grey

@@ -3,7 +3,7 @@
 The keypoint encoder (``model.pooling=keypoints``) ends each image in a spatial softmax: every channel
 of its last feature map becomes the expected (x, y) of that channel's activity, and which channel
 tracks what is left to the losses. The RGB learner finds a small object on a patterned ground poorly,
-on the training textures too (docs/algorithms.md, "One keypoint made the object's, and what the
+on the training textures too (docs/history/algorithms.md, "One keypoint made the object's, and what the
 encoder can locate"). This term names one channel, the first, the object's: its map, under a softmax
 over its cells, is trained by cross-entropy onto where the object's pixels are (the camera's
 ``object_cells``, a training label from the simulator's segmentation, resampled onto the cells'
