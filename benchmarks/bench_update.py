@@ -11,15 +11,15 @@ stop off so that every update runs all its epochs (training stops some updates e
 ``--compile`` adds a row per setting with the loss under ``torch.compile`` (TorchRL's sota PPO
 compiles its update; training here does not): its first update, which compiles, is timed apart.
 
-SAC (an experiment whose ``algo.name`` is ``sac``): fills the replay buffer with frames collected
-in-process, times one gradient step (``SAC._step``) for each torch thread count, and sets the
-learner's cost per env frame (a step's time x ``algo.optim.utd_ratio``) against the env's (one env stepped
-in this process with random actions, divided by the workers that step envs in parallel): the larger
-of the two bounds a run in which learner and workers overlap. The env figure leaves out the actor's
-and TorchRL's share of a worker's time, so the ceiling it implies is optimistic. ``--profile`` adds,
-on the last thread count, where a step goes: its parts timed one by one (sampling, a camera's
-augmenting and encoding, each loss, the optimizers) and the ops that take the most time
-(``torch.profiler``). Like training's learner, it keeps glibc's freed memory
+SAC (an experiment whose algorithm is SAC or a subclass of it, ``algo=tqc``): fills the replay
+buffer with frames collected in-process, times one gradient step (``SAC._step``) for each torch thread
+count, and sets the learner's cost per env frame (a step's time x ``algo.optim.utd_ratio``) against the
+env's (one env stepped in this process with random actions, divided by the workers that step envs in
+parallel): the larger of the two bounds a run in which learner and workers overlap. The env figure
+leaves out the actor's and TorchRL's share of a worker's time, so the ceiling it implies is
+optimistic. ``--profile`` adds, on the last thread count, where a step goes: its parts timed one by
+one (sampling, a camera's augmenting and encoding, each loss, the optimizers) and the ops that take
+the most time (``torch.profiler``). Like training's learner, it keeps glibc's freed memory
 (``rlgrasp.utils.keep_freed_memory``); ``--malloc-defaults`` times it with the allocator as it starts:
 
     python benchmarks/bench_update.py --threads 2 --steps 20 --profile experiment=grasp_vision_sac_rgb_demos
@@ -37,10 +37,11 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout, uninstalled
 import torch
 
+from rlgrasp.algos.ppo.learner import PPOLearner
 from rlgrasp.compose import compose_train
+from rlgrasp.train.algorithm import algorithm_class
 from rlgrasp.train.collectors import collector_backend
 from rlgrasp.train.parts import build_parts
-from rlgrasp.train.ppo import PPOLearner
 from rlgrasp.utils import keep_freed_memory
 
 
@@ -103,13 +104,11 @@ def ppo_table(cfg: Any, batch: Any, args: argparse.Namespace) -> None:
 
 
 def warm_sac(cfg: Any, batch: Any, threads: int) -> Any:
-    """A fresh ``SAC`` on ``threads`` torch threads whose replay holds ``batch`` (and whose
-    normalizer has seen it), after a few untimed steps."""
-    from rlgrasp.algos.sac import SAC
-
+    """A fresh ``SAC`` (or the subclass ``algo._target_`` names: TQC) on ``threads`` torch threads whose
+    replay holds ``batch`` (and whose normalizer has seen it), after a few untimed steps."""
     torch.set_num_threads(threads)
     torch.manual_seed(0)
-    algo = SAC(cfg, build_parts(cfg), torch.device("cpu"))
+    algo = algorithm_class(cfg.algo)(cfg, build_parts(cfg), torch.device("cpu"))
     algo.store(batch.reshape(-1))  # a camera's images too
     for _ in range(3):  # warm-up: the optimizers' state, the allocator
         algo._step()
@@ -270,12 +269,19 @@ def main() -> None:
 
     overrides = args.overrides or ["experiment=grasp_ppo"]
     cfg = compose_train(overrides)
-    if cfg.algo.name == "sac":
+    if _replays(cfg):
         # a replay of a few minibatches (training's batch is small: 128 frames for grasp_sac)
         frames = max(collector_backend(cfg.collector).frames_per_batch, 4 * cfg.algo.optim.batch_size)
         sac_table(*collect(overrides, frames), args)
     else:  # one in-process worker collects the batch training would get from all of them
         ppo_table(*collect(overrides, collector_backend(cfg.collector).frames_per_batch), args)
+
+
+def _replays(cfg: Any) -> bool:
+    """Whether the experiment's algorithm is SAC or one of its subclasses (TQC): timed by its step."""
+    from rlgrasp.algos.sac import SAC
+
+    return issubclass(algorithm_class(cfg.algo), SAC)
 
 
 if __name__ == "__main__":

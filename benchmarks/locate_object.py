@@ -29,7 +29,7 @@ import torch
 from omegaconf import OmegaConf
 from tensordict import TensorDict
 
-from rlgrasp.algos.replay_files import ReplayFiles
+from rlgrasp.algos.sac.replay_files import ReplayFiles
 from rlgrasp.compose import compose_train
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.models.cnn import build_vision_actor, vision_net

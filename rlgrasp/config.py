@@ -1,4 +1,5 @@
-"""Every config schema, in one place, and the validation of a training config.
+"""Every config schema but the algorithms' (each is its package's: ``rlgrasp.algos.registry``), and the
+validation of a training config.
 
 The YAML files under ``configs/`` name these schemas in their defaults lists, so a typo, a wrong
 type or an unknown key fails at start with Hydra's message naming the key, instead of deep inside a
@@ -11,7 +12,6 @@ command line.
 from __future__ import annotations
 
 import logging
-import math
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -23,6 +23,8 @@ from hydra.core.config_store import ConfigStore
 from hydra.utils import instantiate
 from omegaconf import MISSING, OmegaConf
 
+from rlgrasp.algos.common import positive
+from rlgrasp.algos.registry import algorithms, entry, unknown_name
 from rlgrasp.envs.randomization import Randomizer
 from rlgrasp.rundir import register_resolvers
 from rlgrasp.utils import plain
@@ -80,283 +82,12 @@ class EnvConfig:
     collision_model: str = "mesh"
 
 
-# --- algorithms: each one's keys grouped by role, as TorchRL's sota configs do -----------------
-# loss: the objective's keywords (TorchRL's loss and value-estimator names); optim: the optimizer and
-# how many gradient steps it takes on how much data; schedule: how a rate changes over the run;
-# replay: what is kept between batches; pretrain: behaviour cloning before the first frame; terms:
-# auxiliary losses beside the algorithm's own. The flat keys of before (algo.lr, ...) are mapped by
-# ALGO_KEYS below: old checkpoints load (rlgrasp.train.legacy) and an old override names its new key.
-@dataclass
-class PPOLossConfig:
-    """``ClipPPOLoss`` and ``GAE`` keywords."""
-
-    gamma: float = 0.9
-    gae_lambda: float = 0.9
-    # Recompute advantages with the current critic each epoch (TorchRL's sota PPO); false: once per
-    # update (CleanRL), cheaper.
-    gae_every_epoch: bool = True
-    clip_epsilon: float = 0.2
-    entropy_coeff: float = 0.0
-    critic_coeff: float = 0.5
-    loss_critic_type: str = "l2"
-    normalize_advantage: bool = True
-
-
-@dataclass
-class PPOOptimConfig:
-    """Adam, and the epochs of minibatches over each batch."""
-
-    lr: float = 3e-4
-    adam_eps: float = 1e-5
-    max_grad_norm: float = 0.5
-    epochs: int = 10
-    minibatch_size: int = 512
-
-
-@dataclass
-class PPOScheduleConfig:
-    """The learning rate over the run, and when an update's epochs stop early."""
-
-    anneal_lr: bool = True  # linearly to min_lr_frac x optim.lr at total_frames
-    min_lr_frac: float = 0.0
-    # The schedule's length in frames; null: total_frames. A sweep trial sets the experiment's, so that
-    # it stops part-way along the real run's schedule (sweep.trial.lr_schedule=experiment).
-    anneal_lr_frames: int | None = None
-    # Stop the epochs of one update once the approximate KL exceeds this (null disables).
-    target_kl: float | None = 0.05
-    # KL-adaptive learning rate (rsl_rl's "adaptive" schedule): after each minibatch the rate is divided
-    # by 1.5 when the KL estimate is above 2 x desired_kl and multiplied by 1.5 below desired_kl / 2,
-    # within [1e-5, 1e-2]. It starts at optim.lr and replaces the linear annealing. null: off.
-    desired_kl: float | None = None
-    # The first frames train the critic alone, the actor held still: a fresh critic's first advantages
-    # are noise, and would pull a trained actor away from what it does well.
-    critic_warmup_frames: int = 0
-
-
-@dataclass
-class PretrainConfig:
-    """Behaviour cloning on ``algo.demos`` before a fresh run's first frame (PPO also fits its critic
-    to the demonstrations' returns); ``epochs: 0``: none. ``only``: pre-train, evaluate, stop (the
-    BC baseline; PPO)."""
-
-    epochs: int = 0
-    lr: float = 1e-3
-    minibatch_size: int = 64
-    only: bool = False
-
-
-@dataclass
-class ImitationTermConfig:
-    """DAPG (``rlgrasp.demos.bc.Imitation``): each minibatch's loss gains coeff x decay**k x a
-    behaviour-cloning loss on minibatch_size demonstrated steps at update k; on when ``algo.demos``
-    is set and coeff > 0."""
-
-    _target_: str = "rlgrasp.demos.bc.Imitation"
-    coeff: float = 0.1
-    decay: float = 0.95
-    minibatch_size: int = 256
-
-
-@dataclass
-class TeacherTermConfig:
-    """A camera run's state teacher (``rlgrasp.vision.teacher_term``; a checkpoint or run): each
-    minibatch's loss gains coeff x decay**k x the squared error between the actor's action and the
-    teacher's on the same states (their privileged entry) at update k; during the critic's warm-up
-    too, so there the actor goes on imitating while the critic learns. checkpoint null: off."""
-
-    _target_: str = "rlgrasp.vision.teacher_term.TeacherImitation"
-    checkpoint: str | None = None
-    coeff: float = 1.0
-    decay: float = 1.0
-
-
-@dataclass
-class RNDTermConfig:
-    """Random Network Distillation (``rlgrasp.train.rnd``): coeff x the intrinsic advantage joins
-    PPO's (0: off)."""
-
-    _target_: str = "rlgrasp.train.rnd.RND"
-    coeff: float = 0.0
-    gamma: float = 0.99  # intrinsic returns are non-episodic
-    features: int = 64
-    update_fraction: float = 0.25  # of each minibatch trains the predictor
-
-
-@dataclass
-class PPOTermsConfig:
-    """PPO's auxiliary terms: each node's ``_target_`` is the class that builds it (a class of your
-    own with ``from_config(node, algorithm)`` may join them under a new name)."""
-
-    imitation: ImitationTermConfig = field(default_factory=ImitationTermConfig)
-    teacher: TeacherTermConfig = field(default_factory=TeacherTermConfig)
-    rnd: RNDTermConfig = field(default_factory=RNDTermConfig)
-
-
-@dataclass
-class PPOConfig:
-    """Clipped PPO with GAE (``rlgrasp.algos.ppo``)."""
-
-    _target_: str = "rlgrasp.algos.ppo.PPO"  # the Algorithm class (rlgrasp.train.algorithm)
-    name: str = "ppo"
-    loss: PPOLossConfig = field(default_factory=PPOLossConfig)
-    optim: PPOOptimConfig = field(default_factory=PPOOptimConfig)
-    schedule: PPOScheduleConfig = field(default_factory=PPOScheduleConfig)
-    # A demonstration directory (rlgrasp-demos; referenced, not copied) for pretrain and
-    # terms.imitation (docs/sparse.md). null: none.
-    demos: str | None = None
-    pretrain: PretrainConfig = field(default_factory=PretrainConfig)
-    terms: PPOTermsConfig = field(default_factory=PPOTermsConfig)
-    # Fine-tuning (rlgrasp/train/warm_start.py): a fresh run's actor starts from this checkpoint's policy
-    # (a distilled camera student, or any policy of this run's model and env), its std from
-    # model.init_log_std. null: a fresh actor.
-    init_from: str | None = None
-
-
-@dataclass
-class SACLossConfig:
-    """``SACLoss`` keywords, and the target critics' soft update."""
-
-    gamma: float = 0.95
-    num_critics: int = 2  # the target is the minimum over them (RLPD: an ensemble, e.g. 10)
-    alpha_init: float = 0.1  # the entropy temperature's start (rewards here are at most 1 a step)
-    target_entropy: float | None = None  # null: -(action size)
-    tau: float = 0.005  # the target critics' soft-update rate
-
-
-@dataclass
-class SACOptimConfig:
-    """Adam for each part, and how many gradient steps the learner takes on how much data."""
-
-    actor_lr: float = 3e-4
-    critic_lr: float = 3e-4
-    alpha_lr: float = 3e-4
-    batch_size: int = 256
-    # Gradient steps per env frame, kept across batches (0.25: one step per four frames).
-    utd_ratio: float = 0.25
-    actor_every: int = 1  # the actor and temperature step every this many critic steps
-
-
-@dataclass
-class ReplayConfig:
-    """The replay buffer."""
-
-    buffer_frames: int = 300_000  # transitions kept (the oldest go first)
-    learning_starts: int = 5_000  # frames in the buffer before the first gradient step
-    # With algo.demos: this share of each minibatch is drawn from them (RLPD's symmetric sampling).
-    demo_ratio: float = 0.5
-    # The buffer is written beside the checkpoints (<run>/replay/, each checkpoint the transitions
-    # stored since the last), so a resumed run continues with it; false: it starts with an empty one.
-    save: bool = True
-
-
-@dataclass
-class SACCriticConfig:
-    """The Q-networks (the actor is ``model``'s)."""
-
-    hidden_sizes: list[int] = field(default_factory=lambda: [256, 256])
-    activation: str = "relu"  # tanh | relu | elu
-    layer_norm: bool = True  # LayerNorm after each hidden layer (RLPD)
-    # With a camera: the critics also read the privileged state beside the images' features (never
-    # deployed; an asymmetric actor-critic).
-    privileged: bool = True
-
-
-@dataclass
-class SACPretrainConfig:
-    """With ``algo.demos``: this many epochs of behaviour cloning on them (at ``lr``) before the first
-    frame (0: none)."""
-
-    epochs: int = 0
-    lr: float = 1e-3
-
-
-@dataclass
-class SACImitationConfig:
-    """With ``algo.demos``: the actor's loss also pulls its deterministic action towards the
-    demonstrated one on the demonstrations' rows of each minibatch, weighted coeff (0: RLPD alone)."""
-
-    coeff: float = 0.0
-
-
-@dataclass
-class AuxTermConfig:
-    """A camera learner's image features also predict these parts of the privileged state, weighted coeff
-    (0: off; rlgrasp/vision/auxiliary.py). Training only; nothing is deployed."""
-
-    coeff: float = 0.0
-    parts: list[str] = field(default_factory=lambda: ["object_minus_grasp", "grasped"])
-
-
-@dataclass
-class ObjectMapTermConfig:
-    """With the keypoint encoder and the camera's object cells: the encoder's first keypoint map trained
-    onto the object's pixels, weighted coeff (0: off; rlgrasp/vision/object_map.py). Training only."""
-
-    coeff: float = 0.0
-
-
-@dataclass
-class SACTermsConfig:
-    imitation: SACImitationConfig = field(default_factory=SACImitationConfig)
-    aux: AuxTermConfig = field(default_factory=AuxTermConfig)  # with a camera
-    object_map: ObjectMapTermConfig = field(default_factory=ObjectMapTermConfig)  # with a camera
-
-
-@dataclass
-class ReplayAugmentConfig:
-    """Replayed images moved by up to ``shift`` pixels each way (DrQ-v2; 0: not moved) and, with
-    ``kind=colour``, RGB images recoloured as a DAgger student's are (rlgrasp/vision/augment.py)."""
-
-    shift: int = 4
-    kind: str = "none"  # none | colour (RGB only: channels permuted, brightness and contrast scaled)
-    grey: float = 0.0  # with kind=colour: the share of replayed images made grey
-    # RGB: each replayed image blended with a training-texture pattern at a weight drawn in [0, overlay]
-    # (not the next images, the targets'); 0: none
-    overlay: float = 0.0
-    # RGB, with the camera's ground mask (env.camera.ground_mask): the share of replayed images whose
-    # ground pixels take a training-texture pattern (not the next images, the targets'); 0: none
-    ground_swap: float = 0.0
-
-
-#: The losses that may train a camera SAC's image encoders (``algo.encoder.trained_by``).
-ENCODER_TRAINERS = ("critic", "actor", "both")
-
-
-@dataclass
-class SACEncoderConfig:
-    """With a camera: which losses train the image encoders. ``critic``: the critics' (DrQ-v2; the
-    actor reads the features detached). ``actor``: the actor's, through the features it reads (the
-    asymmetric actor-critic's way, Pinto et al. 2018, for critics that read the privileged state and
-    need little from the images; the critics read the features detached). ``both``: the two summed."""
-
-    trained_by: str = "critic"
-
-
-@dataclass
-class SACConfig:
-    """Soft actor-critic (``rlgrasp.algos.sac``), and with ``demos`` RLPD: demonstrations sampled
-    beside online data in every minibatch."""
-
-    _target_: str = "rlgrasp.algos.sac.SAC"  # the Algorithm class (rlgrasp.train.algorithm)
-    name: str = "sac"
-    loss: SACLossConfig = field(default_factory=SACLossConfig)
-    optim: SACOptimConfig = field(default_factory=SACOptimConfig)
-    replay: ReplayConfig = field(default_factory=ReplayConfig)
-    critic: SACCriticConfig = field(default_factory=SACCriticConfig)
-    demos: str | None = None  # a demonstrations directory (rlgrasp-demos)
-    pretrain: SACPretrainConfig = field(default_factory=SACPretrainConfig)
-    terms: SACTermsConfig = field(default_factory=SACTermsConfig)
-    augment: ReplayAugmentConfig = field(default_factory=ReplayAugmentConfig)
-    encoder: SACEncoderConfig = field(default_factory=SACEncoderConfig)  # with a camera
-    init_from: str | None = None  # a checkpoint of this env and model whose actor starts this run
-    # Torch threads for the updates (null: every core). A camera learner's run is bound by its
-    # updates while the workers mostly wait, so it takes every core (grasp_vision_sac); 1 keeps a
-    # state learner's runs as they were measured.
-    learner_threads: int | None = 1
-
-
+# --- algorithms: each one's schema and checks are its package's (rlgrasp.algos.<name>.schema),
+# found through rlgrasp.algos.registry. The flat keys of before (algo.lr, ...) are mapped by ALGO_KEYS
+# below: old checkpoints load (rlgrasp.train.legacy) and an old override names its new key.
 #: Where each flat ``algo`` key of before lives now (``algo.<key>`` -> ``algo.<path>``), for every
-#: algorithm; ``teacher`` is the PPO term's checkpoint (DAgger's ``algo.teacher`` did not move).
+#: algorithm of then; a key moves only where the algorithm's schema has the path (``teacher`` is PPO's
+#: ``terms.teacher.checkpoint``; DAgger's own ``algo.teacher`` did not move).
 ALGO_KEYS = {
     **{k: f"loss.{k}" for k in ("gamma", "gae_lambda", "gae_every_epoch", "clip_epsilon", "entropy_coeff")},
     **{k: f"loss.{k}" for k in ("critic_coeff", "loss_critic_type", "normalize_advantage")},
@@ -389,10 +120,15 @@ ALGO_KEYS = {
 
 def moved_algo_key(key: str, algo_name: str | None = None) -> str | None:
     """Today's path of a flat ``algo`` key of before (``lr`` -> ``optim.lr``); None for a key that
-    did not move (``demos``, ``init_from``, DAgger's ``teacher``) or never existed."""
-    if key == "teacher" and algo_name == "distill":
-        return None
-    return ALGO_KEYS.get(key)
+    did not move (``demos``, ``init_from``, DAgger's ``teacher``: the algorithm ``algo_name``'s schema
+    has no such path) or never existed."""
+    from rlgrasp.algos.registry import entry, has_key
+
+    path = ALGO_KEYS.get(key)
+    found = entry(algo_name)
+    if path is None or found is None:
+        return path
+    return path if has_key(found.schema_class(), path) else None
 
 
 @dataclass
@@ -433,65 +169,6 @@ class CollectorConfig:
     # A batch not delivered within this many seconds ends the run (a worker that hangs, not dies: a
     # checkpoint is saved and the run stops in one line, instead of waiting for ever).
     worker_timeout_s: float = 600.0
-
-
-@dataclass
-class DistillOptimConfig:
-    """Adam on the student; gradient samples per batch = epochs x the batch's frames, drawn from every
-    labelled frame so far."""
-
-    lr: float = 1e-3
-    epochs: int = 16
-    minibatch_size: int = 512
-    # The deployed student (what acts, is evaluated and exported) is an exponential moving average of
-    # the trained weights with this decay per update; 0: the trained weights themselves.
-    ema_decay: float = 0.0
-
-
-@dataclass
-class DistillScheduleConfig:
-    """Who acts, and the learning rate, over the run."""
-
-    beta0: float = 1.0  # probability that the teacher acts, in the first batch
-    beta_decay: float = 0.8  # ... times this per batch: soon the student acts, the teacher labels
-    min_lr_frac: float = 0.1  # the learning rate anneals linearly to this fraction at total_frames
-
-
-@dataclass
-class DistillReplayConfig:
-    buffer_frames: int = 60_000  # labelled frames kept (the oldest go first); 64x64 depth: 16 kB each
-
-
-@dataclass
-class DistillTermsConfig:
-    aux: AuxTermConfig = field(default_factory=AuxTermConfig)
-
-
-@dataclass
-class ImageAugmentConfig:
-    """Training images changed per sample (rlgrasp/vision/augment.py)."""
-
-    kind: str = "none"  # none | colour (RGB only: channels permuted, brightness and contrast scaled)
-    grey: float = 0.0  # with kind=colour: the share of training images made grey
-    shift: int = 0  # each training image moved by up to this many pixels (0: not moved)
-    overlay: float = 0.0  # RGB: each blended with a training-texture pattern, weight drawn in [0, overlay]
-
-
-@dataclass
-class DistillConfig:
-    """DAgger distillation of a state teacher into a camera student (``rlgrasp.vision.distill``)."""
-
-    _target_: str = "rlgrasp.vision.distill.DAgger"  # the Algorithm class (rlgrasp.train.algorithm)
-    name: str = "distill"
-    # A state policy's checkpoint or run directory (its last.pt); relative paths are tried from the
-    # working directory, then from the repository root (policies/grasp_ppo.pt).
-    teacher: str = MISSING
-    optim: DistillOptimConfig = field(default_factory=DistillOptimConfig)
-    schedule: DistillScheduleConfig = field(default_factory=DistillScheduleConfig)
-    replay: DistillReplayConfig = field(default_factory=DistillReplayConfig)
-    terms: DistillTermsConfig = field(default_factory=DistillTermsConfig)
-    augment: ImageAugmentConfig = field(default_factory=ImageAugmentConfig)
-    learner_threads: int | None = None  # null: every core (the learner, not the workers, is the bound)
 
 
 POOLINGS = ("flat", "keypoints")  # how a CNN's last feature maps become features (CNNConfig.pooling)
@@ -767,11 +444,6 @@ def _sum(*values: int) -> int:
     return sum(values)
 
 
-#: The colour augmentations a camera student can train with (``algo.augment.kind``), named here so that the
-#: schema needs no import of ``rlgrasp.vision.augment``, which implements them.
-AUGMENTATIONS = ("none", "colour")
-
-
 class ConfigError(ValueError):
     """A bad training input; the message is one line naming the key, its value and what is allowed."""
 
@@ -786,9 +458,8 @@ def register_configs() -> None:
     cs = ConfigStore.instance()
     cs.store(name="train_schema", node=TrainConfig)
     cs.store(group="env", name="env_schema", node=EnvConfig)
-    cs.store(group="algo", name="ppo_schema", node=PPOConfig)
-    cs.store(group="algo", name="distill_schema", node=DistillConfig)
-    cs.store(group="algo", name="sac_schema", node=SACConfig)
+    for algo in algorithms().values():  # each algorithm's package holds its schema
+        cs.store(group="algo", name=f"{algo.name}_schema", node=algo.schema_class())
     cs.store(group="model", name="mlp_schema", node=MLPConfig)
     cs.store(group="model", name="cnn_schema", node=CNNConfig)
     cs.store(group="collector", name="collector_schema", node=CollectorConfig)
@@ -804,19 +475,15 @@ def register_configs() -> None:
 
 
 # --- validation of a training config (before any worker starts) -------------------------------
-def _positive(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0
-
-
 def _train_problems(cfg: Any, batch: int) -> list[str]:
     """Each bad value of a composed training config as ``key=value: what is allowed``; ``batch``: the
     collector's frames per batch."""
     checks = [
         *_run_checks(cfg),
         *_collector_checks(cfg.collector),
-        *_algo_checks(cfg.algo, batch, cfg.env.get("camera")),
+        *_algo_checks(cfg, batch, cfg.env.get("camera")),
         *_model_checks(cfg.model),
-        *_model_camera_checks(cfg.model, cfg.env.get("camera"), cfg.algo.name),
+        *_model_camera_checks(cfg.model, cfg.env.get("camera")),
         *_eval_checkpoint_checks(cfg.eval, cfg.checkpoint),
     ]
     return (
@@ -855,7 +522,7 @@ def _collector_checks(c: Any) -> list[tuple[str, Any, bool, str]]:
         (
             "collector.worker_timeout_s",
             c.worker_timeout_s,
-            _positive(c.worker_timeout_s),
+            positive(c.worker_timeout_s),
             "must be > 0 (seconds a batch may take)",
         ),
     ]
@@ -868,7 +535,7 @@ def _model_checks(m: Any) -> list[tuple[str, Any, bool, str]]:
         (
             "model.hidden_sizes",
             list(m.hidden_sizes),
-            len(m.hidden_sizes) > 0 and all(_positive(h) for h in m.hidden_sizes),
+            len(m.hidden_sizes) > 0 and all(positive(h) for h in m.hidden_sizes),
             "must be a non-empty list of positive sizes",
         ),
         (
@@ -924,17 +591,15 @@ def _one_path_component(name: Any) -> bool:
     return bool(text) and text not in (".", "..") and "/" not in text and "\\" not in text
 
 
-def _model_camera_checks(m: Any, camera: Any, algo: str) -> list[tuple[str, Any, bool, str]]:
-    """A camera env needs a camera policy (model=cnn), a state env a state one (model=mlp); distill
-    refuses a camera-less env itself, naming its student."""
-    if camera:
-        return [
-            ("model", m.name, m.name == "cnn", "must be cnn with a camera (or cameras=none for mlp)"),
-            *(_cnn_checks(m) if m.name == "cnn" else []),
-        ]
-    if algo == "ppo":
-        return [("model", m.name, m.name != "cnn", "needs a camera (e.g. cameras=wrist_depth) or model=mlp")]
-    return []
+def _model_camera_checks(m: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
+    """A camera env needs a camera policy (model=cnn); what a camera-less one needs is the algorithm's
+    to say (PPO: a state model; DAgger refuses the env itself, naming its student)."""
+    if not camera:
+        return []
+    return [
+        ("model", m.name, m.name == "cnn", "must be cnn with a camera (or cameras=none for mlp)"),
+        *(_cnn_checks(m) if m.name == "cnn" else []),
+    ]
 
 
 def _cnn_checks(m: Any) -> list[tuple[str, Any, bool, str]]:
@@ -946,282 +611,11 @@ def _cnn_checks(m: Any) -> list[tuple[str, Any, bool, str]]:
     ]
 
 
-def _algo_checks(a: Any, batch: int, camera: Any) -> list[tuple[str, Any, bool, str]]:
-    """The checks of ``algo``'s own keys: each algorithm has its own (an unknown one is refused)."""
-    if a.name == "ppo":
-        return [*_ppo_checks(a, batch), *_ppo_term_checks(a, camera)]
-    if a.name == "distill":
-        return _distill_checks(a, camera)
-    if a.name == "sac":
-        return [*_sac_checks(a, camera), *_sac_demo_checks(a)]
-    return [
-        ("algo.name", a.name, False, "must be ppo, sac or distill (the algo group: algo=ppo|sac|distill)")
-    ]
-
-
-def _rate_checks(key: str, value: Any) -> list[tuple[str, Any, bool, str]]:
-    return [(key, value, _positive(value) and math.isfinite(value), "must be finite and > 0")]
-
-
-def _learner_threads_check(a: Any) -> tuple[str, Any, bool, str]:
-    threads = a.learner_threads
-    return (
-        "algo.learner_threads",
-        threads,
-        threads is None or threads >= 1,
-        "must be >= 1 or null (every core)",
-    )
-
-
-def _sac_checks(a: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
-    """SAC's keys: a ratio > 0, a buffer that holds a minibatch, rates > 0."""
-    o, r, c = a.optim, a.replay, a.critic
-    rates = [("optim", "actor_lr"), ("optim", "critic_lr"), ("optim", "alpha_lr"), ("loss", "alpha_init")]
-    return [
-        (
-            "algo.optim.utd_ratio",
-            o.utd_ratio,
-            _positive(o.utd_ratio),
-            "must be > 0 (gradient steps per env frame)",
-        ),
-        ("algo.optim.batch_size", o.batch_size, o.batch_size >= 1, "must be >= 1"),
-        ("algo.optim.actor_every", o.actor_every, o.actor_every >= 1, "must be >= 1"),
-        (
-            "algo.replay.buffer_frames",
-            r.buffer_frames,
-            r.buffer_frames >= o.batch_size,
-            f"must be >= algo.optim.batch_size ({o.batch_size}): the buffer must hold a minibatch",
-        ),
-        (
-            "algo.replay.learning_starts",
-            r.learning_starts,
-            0 <= r.learning_starts <= r.buffer_frames,
-            "must be between 0 and algo.replay.buffer_frames",
-        ),
-        ("algo.loss.gamma", a.loss.gamma, 0 < a.loss.gamma <= 1, "must be in (0, 1]"),
-        ("algo.loss.tau", a.loss.tau, 0 < a.loss.tau <= 1, "must be in (0, 1]"),
-        ("algo.loss.num_critics", a.loss.num_critics, a.loss.num_critics >= 1, "must be >= 1"),
-        (
-            "algo.critic.hidden_sizes",
-            list(c.hidden_sizes),
-            len(c.hidden_sizes) > 0 and all(_positive(h) for h in c.hidden_sizes),
-            "must be a non-empty list of positive sizes",
-        ),
-        (
-            "algo.critic.activation",
-            c.activation,
-            c.activation in ("tanh", "relu", "elu"),
-            "must be tanh, relu or elu",
-        ),
-        ("algo.augment.shift", a.augment.shift, a.augment.shift >= 0, "must be >= 0 (pixels)"),
-        *_colour_checks(a.augment, camera),
-        *_ground_swap_checks(a.augment, camera),
-        (
-            "algo.encoder.trained_by",
-            a.encoder.trained_by,
-            a.encoder.trained_by in ENCODER_TRAINERS,
-            "must be " + ", ".join(ENCODER_TRAINERS[:-1]) + " or " + ENCODER_TRAINERS[-1],
-        ),
-        ("algo.terms.aux.coeff", a.terms.aux.coeff, a.terms.aux.coeff >= 0, "must be >= 0 (0: off)"),
-        (
-            "algo.terms.object_map.coeff",
-            a.terms.object_map.coeff,
-            a.terms.object_map.coeff >= 0,
-            "must be >= 0 (0: off)",
-        ),
-        _learner_threads_check(a),
-        *[check for group, key in rates for check in _rate_checks(f"algo.{group}.{key}", a[group][key])],
-    ]
-
-
-def _sac_demo_checks(a: Any) -> list[tuple[str, Any, bool, str]]:
-    """What SAC does with demonstrations: their share of a minibatch, cloning first, the BC term."""
-    p, coeff, needs = a.pretrain, a.terms.imitation.coeff, "needs algo.demos=<demonstrations>"
-    return [
-        ("algo.replay.demo_ratio", a.replay.demo_ratio, 0 < a.replay.demo_ratio < 1, "must be in (0, 1)"),
-        ("algo.terms.imitation.coeff", coeff, coeff >= 0 and math.isfinite(coeff), "must be finite and >= 0"),
-        ("algo.terms.imitation.coeff", coeff, not coeff or a.demos, needs),
-        ("algo.pretrain.epochs", p.epochs, p.epochs >= 0, "must be >= 0 (0: no pre-training)"),
-        ("algo.pretrain.epochs", p.epochs, not p.epochs or a.demos, needs),
-        *_rate_checks("algo.pretrain.lr", p.lr),
-    ]
-
-
-def _ppo_checks(a: Any, batch: int) -> list[tuple[str, Any, bool, str]]:
-    """PPO's loss, optimizer and schedule."""
-    loss, o, s = a.loss, a.optim, a.schedule
-    return [
-        ("algo.optim.epochs", o.epochs, o.epochs >= 1, "must be >= 1"),
-        *_rate_checks("algo.optim.lr", o.lr),
-        ("algo.optim.max_grad_norm", o.max_grad_norm, o.max_grad_norm > 0, "must be > 0"),
-        (
-            "algo.optim.minibatch_size",
-            o.minibatch_size,
-            1 <= o.minibatch_size <= max(batch, 1),
-            f"must be between 1 and the batch size ({batch:,} frames = workers x envs_per_worker x "
-            "steps_per_env)",
-        ),
-        ("algo.loss.gamma", loss.gamma, 0 < loss.gamma <= 1, "must be in (0, 1]"),
-        ("algo.loss.gae_lambda", loss.gae_lambda, 0 <= loss.gae_lambda <= 1, "must be in [0, 1]"),
-        ("algo.loss.clip_epsilon", loss.clip_epsilon, 0 < loss.clip_epsilon < 1, "must be in (0, 1)"),
-        (
-            "algo.loss.loss_critic_type",
-            loss.loss_critic_type,
-            loss.loss_critic_type in ("l1", "l2", "smooth_l1"),
-            "must be l1, l2 or smooth_l1",
-        ),
-        ("algo.schedule.min_lr_frac", s.min_lr_frac, 0 <= s.min_lr_frac <= 1, "must be in [0, 1]"),
-        (
-            "algo.schedule.target_kl",
-            s.target_kl,
-            s.target_kl is None or s.target_kl > 0,
-            "must be > 0 or null",
-        ),
-        (
-            "algo.schedule.desired_kl",
-            s.desired_kl,
-            s.desired_kl is None or s.desired_kl > 0,
-            "must be > 0 or null (null: the learning rate anneals linearly)",
-        ),
-        (
-            "algo.schedule.anneal_lr_frames",
-            s.anneal_lr_frames,
-            s.anneal_lr_frames is None or s.anneal_lr_frames > 0,
-            "must be > 0 or null (null: total_frames)",
-        ),
-        (
-            "algo.schedule.critic_warmup_frames",
-            s.critic_warmup_frames,
-            s.critic_warmup_frames >= 0,
-            "must be >= 0 (0: the actor learns from the first update)",
-        ),
-    ]
-
-
-def _ppo_term_checks(a: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
-    """PPO's pre-training and auxiliary terms: demonstrations and curiosity (``rlgrasp.demos``,
-    ``rlgrasp.train.rnd``) for state policies only, a teacher for camera policies only."""
-    state, p, t = not camera, a.pretrain, a.terms
-    imitation, teacher, rnd = t.get("imitation"), t.get("teacher"), t.get("rnd")
-    checks = [
-        ("algo.pretrain.epochs", p.epochs, p.epochs >= 0, "must be >= 0 (0: no pre-training)"),
-        *_rate_checks("algo.pretrain.lr", p.lr),
-        ("algo.pretrain.minibatch_size", p.minibatch_size, p.minibatch_size >= 1, "must be >= 1"),
-        ("algo.pretrain.epochs", p.epochs, not p.epochs or a.demos, "needs algo.demos=<demonstrations>"),
-        ("algo.pretrain.only", p.only, not p.only or p.epochs > 0, "needs algo.pretrain.epochs > 0"),
-        ("algo.demos", a.demos, not a.demos or state, "needs a state policy (cameras=none)"),
-    ]
-    if imitation is not None:
-        checks += _decaying_term_checks("imitation", imitation)
-        checks.append(
-            (
-                "algo.terms.imitation.minibatch_size",
-                imitation.minibatch_size,
-                imitation.minibatch_size >= 1,
-                "must be >= 1",
-            )
-        )
-    if teacher is not None:
-        checks += _decaying_term_checks("teacher", teacher)
-        checks.append(
-            (
-                "algo.terms.teacher.checkpoint",
-                teacher.checkpoint,
-                not teacher.checkpoint or not state,
-                "labels a camera run's privileged state: needs a camera (e.g. cameras=wrist_depth)",
-            )
-        )
-    return checks + (_rnd_checks(rnd, state) if rnd is not None else [])
-
-
-def _decaying_term_checks(name: str, term: Any) -> list[tuple[str, Any, bool, str]]:
-    return [
-        (f"algo.terms.{name}.coeff", term.coeff, term.coeff >= 0, "must be >= 0 (0: no such term)"),
-        (f"algo.terms.{name}.decay", term.decay, 0 < term.decay <= 1, "must be in (0, 1]"),
-    ]
-
-
-def _rnd_checks(rnd: Any, state: bool) -> list[tuple[str, Any, bool, str]]:
-    return [
-        ("algo.terms.rnd.coeff", rnd.coeff, rnd.coeff >= 0, "must be >= 0 (0: no curiosity)"),
-        ("algo.terms.rnd.coeff", rnd.coeff, not rnd.coeff or state, "needs a state policy (cameras=none)"),
-        ("algo.terms.rnd.gamma", rnd.gamma, 0 < rnd.gamma <= 1, "must be in (0, 1]"),
-        ("algo.terms.rnd.features", rnd.features, rnd.features >= 1, "must be >= 1"),
-        (
-            "algo.terms.rnd.update_fraction",
-            rnd.update_fraction,
-            0 < rnd.update_fraction <= 1,
-            "must be in (0, 1]",
-        ),
-    ]
-
-
-def _distill_checks(a: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
-    o, s, aug = a.optim, a.schedule, a.augment
-    return [
-        ("algo.optim.epochs", o.epochs, o.epochs >= 1, "must be >= 1"),
-        *_rate_checks("algo.optim.lr", o.lr),
-        ("algo.optim.minibatch_size", o.minibatch_size, o.minibatch_size >= 1, "must be >= 1"),
-        ("algo.optim.ema_decay", o.ema_decay, 0 <= o.ema_decay < 1, "must be in [0, 1) (0: no averaging)"),
-        ("algo.schedule.min_lr_frac", s.min_lr_frac, 0 <= s.min_lr_frac <= 1, "must be in [0, 1]"),
-        ("algo.schedule.beta0", s.beta0, 0 <= s.beta0 <= 1, "must be in [0, 1]"),
-        ("algo.schedule.beta_decay", s.beta_decay, 0 < s.beta_decay <= 1, "must be in (0, 1]"),
-        (
-            "algo.replay.buffer_frames",
-            a.replay.buffer_frames,
-            a.replay.buffer_frames >= o.minibatch_size,
-            f"must be >= algo.optim.minibatch_size ({o.minibatch_size})",
-        ),
-        _learner_threads_check(a),
-        (
-            "algo.terms.aux.coeff",
-            a.terms.aux.coeff,
-            a.terms.aux.coeff >= 0,
-            "must be >= 0 (0: no auxiliary task)",
-        ),
-        *_colour_checks(aug, camera),
-        ("algo.augment.shift", aug.shift, 0 <= aug.shift <= 16, "must be in [0, 16] pixels"),
-    ]
-
-
-def _colour_checks(aug: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
-    """``algo.augment.kind``, ``grey`` and ``overlay``, the same for a DAgger student and a camera SAC:
-    the colour augmentations and the overlay change RGB images only, so a camera without RGB refuses
-    them rather than train without them."""
-    rgb = bool(camera) and camera.get("modality", "depth") in ("rgb", "rgbd")
-    needs_rgb = "needs a camera with RGB (e.g. cameras=wrist_rgb)"
-    return [
-        (
-            "algo.augment.kind",
-            aug.kind,
-            aug.kind in AUGMENTATIONS,
-            f"must be one of {', '.join(AUGMENTATIONS)}",
-        ),
-        ("algo.augment.kind", aug.kind, aug.kind == "none" or rgb, f"recolours RGB images; {needs_rgb}"),
-        (
-            "algo.augment.grey",
-            aug.grey,
-            0 <= aug.grey <= 1 and (aug.grey == 0 or aug.kind == "colour"),
-            "must be in [0, 1], and 0 unless algo.augment.kind=colour",
-        ),
-        ("algo.augment.overlay", aug.overlay, 0 <= aug.overlay <= 1, "must be in [0, 1] (0: no overlay)"),
-        ("algo.augment.overlay", aug.overlay, aug.overlay == 0 or rgb, f"overlays RGB images; {needs_rgb}"),
-    ]
-
-
-def _ground_swap_checks(aug: Any, camera: Any) -> list[tuple[str, Any, bool, str]]:
-    """``algo.augment.ground_swap`` reads the camera's ground mask, which only an RGB camera draws."""
-    masked = bool(camera) and bool(camera.get("ground_mask", False))
-    share = aug.ground_swap
-    return [
-        ("algo.augment.ground_swap", share, 0 <= share <= 1, "must be in [0, 1] (0: none)"),
-        (
-            "algo.augment.ground_swap",
-            share,
-            share == 0 or masked,
-            "needs the camera's ground mask: an RGB camera and +env.camera.ground_mask=true",
-        ),
-    ]
+def _algo_checks(cfg: Any, batch: int, camera: Any) -> list[tuple[str, Any, bool, str]]:
+    """The checks of ``algo``'s own keys, each algorithm's from its package (an unknown name is refused,
+    naming the registered ones)."""
+    found = entry(cfg.algo.name)
+    return found.check(cfg, batch, camera) if found is not None else [unknown_name(cfg.algo.name)]
 
 
 def _device_problems(device: str) -> list[str]:

@@ -24,7 +24,7 @@ and ``read_memmap`` checks every tensor file's size against its declared shape b
 into memory itself (TensorDict's ``load_memmap`` opens files writable and grows them).
 
 Every refusal is a ``ReceivedError`` whose message is one line. This module imports nothing of
-rlgrasp's at import time, so every reader can use it.
+rlgrasp's at import time but the algorithms' registry (strings, no torch), so every reader can use it.
 """
 
 from __future__ import annotations
@@ -35,6 +35,8 @@ import os
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
+
+from rlgrasp.algos.registry import alias_paths, class_paths
 
 #: rlgrasp's own parts, by kind: the short name a file may choose -> the class rlgrasp builds it with.
 #: Adding a kind or a part is one entry here (and its node path in ``NODES``).
@@ -55,11 +57,8 @@ PARTS: dict[str, dict[str, str]] = {
         "single": "rlgrasp.train.collectors.SingleCollector",
         "ray": "rlgrasp.train.collectors.RayCollector",
     },
-    "algo": {
-        "ppo": "rlgrasp.algos.ppo.PPO",
-        "sac": "rlgrasp.algos.sac.SAC",
-        "distill": "rlgrasp.vision.distill.DAgger",
-    },
+    # Each algorithm package's class (rlgrasp.algos.registry: a registry of strings, no torch).
+    "algo": class_paths(),
     "algo_term": {
         "imitation": "rlgrasp.demos.bc.Imitation",
         "teacher": "rlgrasp.vision.teacher_term.TeacherImitation",
@@ -82,6 +81,7 @@ ALIASES: dict[str, dict[str, str]] = {
         "rlgrasp.envs.tasks.goal.PushTask": "push",
         "rlgrasp.envs.tasks.goal.StackTask": "stack",
     },
+    "algo": alias_paths(),  # e.g. DAgger's class before its package (rlgrasp.vision.distill.DAgger)
 }
 #: Where each kind is built, by node path (``*``: any one key). Only here may a file's ``_target_`` stand.
 NODES: dict[str, str] = {
@@ -280,14 +280,12 @@ def _upgrade(config: dict[str, Any], source: str) -> tuple[dict[str, Any], dict[
         name = tracker if tracker in ("wandb", "mlflow") else logger["backend"]
         shorts["logger"] = name if name in PARTS["logger"] else "another"
     if isinstance(config.get("algo"), dict):
+        # A flat algo nested by role; the terms an algorithm builds by class get its schema's class
+        # (legacy.nest_algo), which _class_for then reads back into the registry's like any other.
         config["algo"] = _old_algo(config["algo"])
-        terms = config["algo"].get("terms")
-        if config["algo"].get("name") == "ppo" and isinstance(terms, dict):
-            # PPO's terms that name no class are the term of their own name (a flat config could not
-            # name one, and a resume builds them from the checkpoint's config).
-            for name, term in terms.items():
-                if isinstance(term, dict) and "_target_" not in term and name in PARTS["algo_term"]:
-                    shorts[f"algo.terms.{name}"] = name
+        name = config["algo"].get("name")
+        if "_target_" not in config["algo"] and isinstance(name, str) and name in PARTS["algo"]:
+            shorts["algo"] = name  # written before algo._target_: the algorithm its name registers
     return config, shorts
 
 

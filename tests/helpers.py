@@ -24,8 +24,9 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 from tensordict import TensorDict
 
 from rlgrasp import demo
+from rlgrasp.algos.ppo.schema import PPOConfig
 from rlgrasp.compose import compose_train
-from rlgrasp.config import EnvConfig, PPOConfig
+from rlgrasp.config import EnvConfig
 from rlgrasp.demos.dataset import layout_of, write_demos
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.models.cnn import actor_norm, build_vision_actor

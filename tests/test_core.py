@@ -1,6 +1,6 @@
 """The training core is the same for every algorithm: a fault after the first batch keeps the work and
 says where to resume; a non-finite network never reaches a checkpoint; a stop signal saves. Each
-case runs for PPO and SAC (DAgger is the same loop: ``rlgrasp.vision.distill.DAgger``)."""
+case runs for PPO and SAC (DAgger is the same loop: ``rlgrasp.algos.dagger.DAgger``)."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
+from rlgrasp.algos.ppo.schema import PPOConfig
 from rlgrasp.compose import compose_train
-from rlgrasp.config import PPOConfig
 from rlgrasp.train.algorithm import algorithm_class
 from rlgrasp.train.checkpoint import read_checkpoint
 from rlgrasp.train.legacy import nest_algo
@@ -162,7 +162,7 @@ def test_ppos_terms_are_the_parts_its_config_names(tmp_path: Path) -> None:
     assert trainer.algo.terms["mine"].calls > 0
     assert (trainer.actor.state_dict()["module.0.module.scale.state_independent_scale"] < before).all()
     saved = torch.load(tmp_path / "b" / "checkpoints" / "last.pt", weights_only=True)
-    assert "rnd" in saved and "mine" not in saved  # a term with weights is saved under its name
+    assert "rnd" in saved["ppo"] and "mine" not in saved["ppo"]  # a term with weights: under its name
 
 
 def test_a_flat_algo_config_of_before_loads_in_todays_shape() -> None:

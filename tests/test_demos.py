@@ -12,8 +12,9 @@ import torch
 from omegaconf import OmegaConf
 from tensordict import TensorDict
 
+from rlgrasp.algos.ppo.schema import ImitationTermConfig
 from rlgrasp.compose import compose_config, compose_train
-from rlgrasp.config import ImitationTermConfig, MLPConfig
+from rlgrasp.config import MLPConfig
 from rlgrasp.demos.bc import Imitation, decayed_weight, pretrain
 from rlgrasp.demos.cli import _objects_line, record_demos
 from rlgrasp.demos.dataset import DemoError, demos_for, layout_of, load_demos, write_demos

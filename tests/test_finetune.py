@@ -59,8 +59,12 @@ def test_during_the_critic_warm_up_only_the_critic_learns(tmp_path: Path, train_
     assert _params(after["actor"], actor).keys() == _params(before["actor"], actor).keys() != set()
     for key, value in _params(before["actor"], actor).items():
         assert torch.equal(after["actor"][key], value), f"{key} moved during the warm-up"
-    critic = before["critic"]
-    moved = [k for k, v in critic.items() if v.is_floating_point() and not torch.equal(after["critic"][k], v)]
+    critic = before["ppo"]["critic"]
+    moved = [
+        k
+        for k, v in critic.items()
+        if v.is_floating_point() and not torch.equal(after["ppo"]["critic"][k], v)
+    ]
     assert any(k.endswith("weight") for k in moved), "the critic did not learn"
 
 

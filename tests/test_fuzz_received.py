@@ -33,7 +33,7 @@ from hypothesis import strategies as st
 from omegaconf import OmegaConf
 from tensordict import TensorDict
 
-from rlgrasp.algos.replay_files import ReplayFiles
+from rlgrasp.algos.sac.replay_files import ReplayFiles
 from rlgrasp.compose import compose_config, compose_train
 from rlgrasp.config import ConfigError
 from rlgrasp.demos.dataset import load_demos

@@ -155,6 +155,34 @@ def test_a_checkpoint_with_string_backends_resumes(tmp_path: Path, run: Path) ->
         assert config["logger"] == {"name": "tensorboard"}  # what it used, as a name; nothing to build
 
 
+def test_a_checkpoint_with_the_algorithm_state_at_the_top_level_resumes(tmp_path: Path, run: Path) -> None:
+    """PPO's (and DAgger's) state sat beside the core's entries before each algorithm had its own key:
+    such a checkpoint resumes with the same critic and optimizer, and today's writes it under ``ppo``."""
+    state = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
+    assert set(state["ppo"]) >= {"critic", "optimizer"} and "critic" not in state
+    old_state = {k: v for k, v in state.items() if k != "ppo"} | state["ppo"]
+    old = tmp_path / "old" / "checkpoints" / "last.pt"
+    ckpt_lib.save_checkpoint(old, old_state)
+    cfg, resumed = prepare_run(compose_train([*SMOKE, f"paths.output_dir={old.parents[1]}", f"resume={old}"]))
+    trainer = Trainer(cfg, resumed=resumed)
+    critic = trainer.algo.critic.state_dict()
+    assert all(torch.equal(critic[k], v) for k, v in state["ppo"]["critic"].items())
+    assert "critic" in trainer.state_dict()["ppo"] and "critic" not in trainer.state_dict()
+    trainer.logger.close()
+
+
+def test_a_checkpoint_naming_an_algorithm_by_an_older_class_path_reads_as_todays(run: Path) -> None:
+    """DAgger's class moved into its package (rlgrasp.algos.dagger); a file naming the old path, and one
+    naming no class (only ``algo.name``), are read back into the registry's class."""
+    from rlgrasp.received import read_config
+
+    config = torch.load(run / "checkpoints" / "last.pt", weights_only=True)["config"]
+    old = {**config, "algo": {"_target_": "rlgrasp.vision.distill.DAgger", "name": "distill"}}
+    assert read_config(old, "old.pt")["algo"]["_target_"] == "rlgrasp.algos.dagger.DAgger"
+    unnamed = {**config, "algo": {k: v for k, v in config["algo"].items() if k != "_target_"}}
+    assert read_config(unnamed, "old.pt")["algo"]["_target_"] == "rlgrasp.algos.ppo.PPO"
+
+
 def test_a_requeued_slurm_job_resumes_its_run_dir_without_resume_given(run: Path, monkeypatch) -> None:
     """The requeued job runs its first command line again (no resume=) in a run dir with checkpoints."""
     cfg = compose_train([*SMOKE, f"paths.output_dir={run}"])

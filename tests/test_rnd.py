@@ -8,11 +8,11 @@ import torch
 from omegaconf import OmegaConf
 from tensordict import TensorDict
 
+from rlgrasp.algos.ppo.learner import PPOLearner
 from rlgrasp.compose import compose_train
 from rlgrasp.config import MLPConfig
 from rlgrasp.models.mlp import RunningNorm, build_models
 from rlgrasp.train.loop import Trainer
-from rlgrasp.train.ppo import PPOLearner
 from rlgrasp.train.resume import prepare_run
 from rlgrasp.train.rnd import INTRINSIC_REWARD, RND
 from tests.helpers import SMOKE_IN_PROCESS, logged_scalars, ppo_algo
@@ -123,13 +123,15 @@ def test_a_run_with_rnd_logs_it_checkpoints_its_networks_and_resumes(tmp_path) -
     trainer.run()
     assert len(seen["charts/intrinsic_reward"]) == 2 and len(seen["losses/rnd_loss"]) == 2
     state = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
-    assert torch.equal(state["rnd"]["obs_rms.mean"], trainer.algo.terms["rnd"].obs_rms.mean)
+    assert torch.equal(state["ppo"]["rnd"]["obs_rms.mean"], trainer.algo.terms["rnd"].obs_rms.mean)
     cfg, resumed = prepare_run(
         compose_train([*args, f"resume={run}", "total_frames=384"]), {"resume", "total_frames"}
     )
     again = Trainer(cfg, resumed=resumed)
-    predictor = {k: v for k, v in state["rnd"].items() if k.startswith("predictor.")}
+    predictor = {k: v for k, v in state["ppo"]["rnd"].items() if k.startswith("predictor.")}
     assert all(torch.equal(again.algo.terms["rnd"].state_dict()[k], v) for k, v in predictor.items())
-    assert float(again.algo.terms["rnd"].reward_rms.count) == float(state["rnd"]["reward_rms.count"]) > 1
+    assert (
+        float(again.algo.terms["rnd"].reward_rms.count) == float(state["ppo"]["rnd"]["reward_rms.count"]) > 1
+    )
     again.run()
     assert again.updates == 3

@@ -14,8 +14,8 @@ import torch
 from tensordict import TensorDict
 from torchrl.envs import ExplorationType, set_exploration_type
 
-from rlgrasp.algos.replay_files import LEGACY_FILE, REPLAY_DIR, ReplayFiles
 from rlgrasp.algos.sac import SAC
+from rlgrasp.algos.sac.replay_files import LEGACY_FILE, REPLAY_DIR, ReplayFiles
 from rlgrasp.compose import compose_config, compose_train
 from rlgrasp.config import ConfigError, validate_train
 from rlgrasp.demos.cli import record_demos
@@ -617,7 +617,7 @@ def test_the_auxiliary_head_keeps_its_targets_learns_without_a_privileged_critic
     assert metrics["loss_aux"] > 0
     assert any(not torch.equal(a, b) for a, b in zip(head, sac.aux.parameters()))  # the head learned
     assert not vision_net(sac.actor).encoders["depth"]._forward_hooks  # SAC encodes itself: no taps
-    assert "aux" in sac.state_dict()["sac"]
+    assert "aux" in sac.state_dict()
     with pytest.raises(ConfigError, match=r"^algo.terms.aux.coeff=1.0: .* needs a camera"):
         _sac(tmp_path, "algo.terms.aux.coeff=1")
 

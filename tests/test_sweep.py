@@ -17,15 +17,16 @@ import optuna
 import pytest
 from omegaconf import OmegaConf
 
+from rlgrasp.algos.ppo.learner import PPOLearner
+from rlgrasp.algos.ppo.schema import PPOConfig
 from rlgrasp.compose import compose_train
-from rlgrasp.config import PPOConfig, SweepObjective
+from rlgrasp.config import SweepObjective
 from rlgrasp.sweep.cli import is_sweep_override, main
 from rlgrasp.sweep.objective import schedule_overrides
 from rlgrasp.sweep.runner import compose, run_sweep
 from rlgrasp.sweep.score import RunScore
 from rlgrasp.sweep.space import parse_space, to_overrides
 from rlgrasp.sweep.study import ATTR_INTERRUPTED, ATTR_RETRY_OF
-from rlgrasp.train.ppo import PPOLearner
 from rlgrasp.utils import flatten
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -14,6 +14,7 @@ from hydra.errors import ConfigCompositionException
 from omegaconf import OmegaConf
 from omegaconf.errors import ConfigKeyError, ValidationError
 
+from rlgrasp.algos.registry import algorithms
 from rlgrasp.config import CONFIG_DIR, ConfigError, EnvConfig, validate_train
 from rlgrasp.envs import PandaGraspEnv
 from rlgrasp.envs.factory import env_factory
@@ -27,9 +28,10 @@ EXPERIMENTS = sorted(p.stem for p in (Path(CONFIG_DIR) / "experiment").glob("*.y
 def test_experiment_composes(experiment: str, train_cfg) -> None:
     cfg = train_cfg(f"experiment={experiment}")
     assert cfg.experiment_name == experiment
-    expected = "distill" if "vision_distill" in experiment else "sac" if "_sac" in experiment else "ppo"
+    # An experiment's name says its algorithm (grasp_sac_demos, grasp_vision_distill); PPO's say none.
+    expected = next((name for name in algorithms() if f"_{name}" in experiment), "ppo")
     assert cfg.algo.name == expected
-    assert cfg.algo._target_.rsplit(".", 1)[-1] == {"ppo": "PPO", "sac": "SAC", "distill": "DAgger"}[expected]
+    assert cfg.algo._target_ == algorithms()[expected].target
     assert (cfg.env.camera is not None) == ("vision" in experiment)
     assert cfg.env._target_ == "rlgrasp.envs.PandaGraspEnv"
     OmegaConf.to_container(cfg, resolve=True)  # every interpolation resolves
@@ -95,6 +97,28 @@ def test_a_bad_backend_is_refused_in_one_line(override: str, message: str, train
     with pytest.raises(ConfigError) as info:
         validate_train(train_cfg(override))
     assert message in str(info.value) and "\n" not in str(info.value)
+
+
+def test_an_unknown_algorithm_is_one_line_listing_the_registered_ones(train_cfg) -> None:
+    names = sorted(algorithms())
+    with pytest.raises(ConfigError) as refused:
+        validate_train(train_cfg("algo.name=mine"))
+    listed = ", ".join(names[:-1]) + " or " + names[-1]
+    assert (
+        str(refused.value) == f"algo.name='mine': must be {listed} (the algo group: algo={'|'.join(names)})"
+    )
+
+
+def test_the_core_names_no_algorithm() -> None:
+    """Config validation, resume, the legacy loader, the reader of received files and the loop read the
+    registry (rlgrasp.algos.registry): none of them names an algorithm."""
+    root = Path(__file__).resolve().parents[1] / "rlgrasp"
+    core = ["config.py", "received.py", "overrides.py", *(f"train/{m}" for m in ("resume.py", "legacy.py"))]
+    core += [f"train/{m}" for m in ("algorithm.py", "loop.py", "parts.py", "checkpoint.py")]
+    for path in core:
+        text = (root / path).read_text()
+        for name in algorithms():
+            assert f'"{name}"' not in text and f"'{name}'" not in text, f"{path} names {name}"
 
 
 def test_grasp_ppo_defaults(train_cfg) -> None:

@@ -368,8 +368,8 @@ SMALL_DISTILL = (
 
 @pytest.mark.full  # camera distillation on workers, resumed
 def test_distillation_trains_checkpoints_resumes_and_evaluates(tmp_path, train_cfg):
+    from rlgrasp.algos.dagger.algorithm import distill
     from rlgrasp.train.checkpoint import load_checkpoint, policy_from_checkpoint
-    from rlgrasp.vision.distill import distill
 
     run = tmp_path / "run"
     with_aux = (
@@ -410,8 +410,8 @@ def test_distillation_trains_checkpoints_resumes_and_evaluates(tmp_path, train_c
     ],
 )
 def test_bad_distillation_input_is_one_line_before_any_worker(override, match, tmp_path, train_cfg):
+    from rlgrasp.algos.dagger.algorithm import distill
     from rlgrasp.config import ConfigError
-    from rlgrasp.vision.distill import distill
 
     with pytest.raises((ConfigError, CheckpointError, FileNotFoundError)) as info:
         distill(train_cfg(*SMALL_DISTILL, override))

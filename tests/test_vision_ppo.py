@@ -64,7 +64,7 @@ def test_vision_ppo_checkpoints_a_camera_policy_and_resumes(tmp_path: Path, trai
     assert ckpt["spec"]["privileged_dim"] > ckpt["spec"]["obs_dim"]
     # Both normalizers learned from every trained frame: the actor's from the proprioception, the
     # critic's from the privileged state.
-    assert _norm_count(ckpt["actor"]) == _norm_count(ckpt["critic"]) == 2048
+    assert _norm_count(ckpt["actor"]) == _norm_count(ckpt["ppo"]["critic"]) == 2048
 
     policy = policy_from_checkpoint(ckpt)
     assert set(policy.in_keys) == {"observation", "depth"}
@@ -77,4 +77,4 @@ def test_vision_ppo_checkpoints_a_camera_policy_and_resumes(tmp_path: Path, trai
     resumed = load_checkpoint(run)
     assert resumed["kind"] == "vision" and resumed["frames"] == 3072 and resumed["generation"] == 1
     assert resumed["updates"] == ckpt["updates"] + 1
-    assert _norm_count(resumed["critic"]) == 3072
+    assert _norm_count(resumed["ppo"]["critic"]) == 3072

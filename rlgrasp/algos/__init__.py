@@ -1,2 +1,3 @@
-"""The learners on the training core (``rlgrasp.train.algorithm.Algorithm``): PPO and SAC. DAgger,
-which distills a camera student from a state teacher, lives with the cameras (``rlgrasp.vision``)."""
+"""The learners on the training core (``rlgrasp.train.algorithm.Algorithm``), one package each: PPO
+(``ppo``), SAC (``sac``), DAgger (``dagger``, ``algo=distill``). ``registry`` finds them; a new one is
+a package here with an ``ALGORITHM`` entry and a ``configs/algo/<name>.yaml``. Light to import."""

@@ -1,7 +1,7 @@
 """Learning from demonstrations: behaviour-cloning pre-training, and DAPG's imitation term in PPO.
 
 Both regress the actor's deterministic action onto the demonstrated one with TorchRL's ``BCLoss``
-(mean squared error, as the camera student of ``rlgrasp.vision.distill``): the expert's gripper
+(mean squared error, as the camera student of ``rlgrasp.algos.dagger``): the expert's gripper
 command is exactly +-1, where the squashed Gaussian's log-likelihood is unbounded. Pre-training
 also fits the critic to the demonstrations' discounted returns, so the first advantages are not
 computed against a random value. The imitation term is weighted ``coeff * decay ** k`` at update

@@ -1,6 +1,6 @@
 """A camera policy's teacher, evaluated beside it: which checkpoint, checked against the camera env.
 
-The teacher is the state policy a camera student was distilled from (``rlgrasp.vision.distill``). It
+The teacher is the state policy a camera student was distilled from (``rlgrasp.algos.dagger``). It
 runs in the very env the student runs in, on the same seeds, reading the ``privileged`` entry (the
 flat state it was trained on); the camera env's physics of a seed do not depend on the camera or the
 visuals, so both face the same episodes and the student/teacher ratio measures what the camera costs.

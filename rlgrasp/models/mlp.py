@@ -82,7 +82,7 @@ def _mlp(in_dim: int, out_dim: int, hidden: Sequence[int], activation: str, last
 
 #: The pre-tanh mean of a squashing actor is clamped to +-LOC_BOUND. Unbounded, a saturated action
 #: dimension drifts ever further out, and with the standard deviation at its floor its log-probs
-#: reach magnitudes whose differences overflow ``exp`` in the PPO ratio (``rlgrasp.train.ppo``).
+#: reach magnitudes whose differences overflow ``exp`` in the PPO ratio (``rlgrasp.algos.ppo.learner``).
 #: At 10 the mode is already at the bound (tanh(10) is 1 in float32, and TorchRL's safe tanh clamps
 #: it just below), so the clamp changes no deterministic action; trained policies stay below 5, so
 #: an ordinary run never reaches it and trains bit for bit as without it.

@@ -4,8 +4,8 @@ The core (``rlgrasp.train.loop``) owns everything a run has whatever learns in i
 collector and its batches, the periodic and final evaluations, checkpoints and resume, stop signals,
 faults, logging, ADR and a sweep's callback. An ``Algorithm`` owns the rest: its networks beyond the
 actor, its optimizers, what it keeps between batches (a replay buffer, a dataset), and what it does
-with a batch. The core builds it from ``algo._target_`` (PPO, SAC, DAgger), so adding one is adding
-a class and a config file, not a branch in the loop.
+with a batch. The core builds it from ``algo._target_`` (PPO, SAC, DAgger), so adding one is
+adding a package (``rlgrasp.algos.registry``) and a config file, not a branch in the loop.
 
 The policy that acts in evaluation, is saved as the checkpoint's ``actor`` and is exported is
 ``actor``; the workers run a copy of ``behaviour`` (the actor itself, or DAgger's mixture of its
@@ -21,6 +21,8 @@ from typing import TYPE_CHECKING, Any
 import torch
 from hydra.utils import get_class
 
+from rlgrasp.algos.registry import AlgorithmEntry, Check, entry, unknown_name
+
 if TYPE_CHECKING:
     from rlgrasp.train.parts import Parts
 
@@ -34,8 +36,19 @@ class Algorithm:
     run something else), implement ``update`` and extend ``state_dict``/``load_state_dict`` with
     whatever they must resume exactly."""
 
-    #: Its value for ``config["algo"]["name"]``: a checkpoint of one algorithm is not resumed as another.
+    #: Its value for ``config["algo"]["name"]``: a checkpoint of one algorithm is not resumed as another,
+    #: and the checkpoint's key of its ``state_dict``. Its package registers it by this name.
     name = "algorithm"
+
+    @classmethod
+    def schema(cls) -> type:
+        """Its config schema (a dataclass): the one its package registers (``rlgrasp.algos.registry``)."""
+        return _registered(cls.name).schema_class()
+
+    @classmethod
+    def check(cls, cfg: Any, batch: int, camera: Any) -> list[Check]:
+        """The problems of ``cfg.algo`` as ``(key, value, ok, allowed)``, before any worker starts."""
+        return _registered(cls.name).check(cfg, batch, camera)
 
     def __init__(self, cfg: Any, parts: Parts, device: torch.device) -> None:
         """``cfg``: the whole training config (``cfg.algo`` is this algorithm's node); ``parts`` as
@@ -82,11 +95,12 @@ class Algorithm:
         return {}
 
     def state_dict(self) -> dict[str, Any]:
-        """Merged into the checkpoint beside the core's entries (``actor``, counters, config)."""
+        """Saved in the checkpoint under ``name``, beside the core's entries (``actor``, counters, config)."""
         return {}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Restore what ``state_dict`` saved from a whole checkpoint."""
+        """Restore what ``state_dict`` saved (``rlgrasp.train.legacy.algorithm_state`` finds it in a
+        checkpoint of any age)."""
 
     def save_extra(self, run_dir: Any) -> None:
         """Write what does not belong in a checkpoint file (a replay buffer) into the run directory."""
@@ -99,6 +113,13 @@ class Algorithm:
                 raise NonFiniteError("non-finite values in the network parameters")
 
 
+def _registered(name: str) -> AlgorithmEntry:
+    found = entry(name)
+    if found is None:
+        raise TypeError(f"algo.name={name!r}: {unknown_name(name)[3]}")
+    return found
+
+
 def finite_or_raise(value: torch.Tensor, what: str) -> None:
     """``NonFiniteError`` naming ``what`` when a scalar loss or norm is NaN or inf."""
     if not math.isfinite(float(value)):
@@ -106,14 +127,10 @@ def finite_or_raise(value: torch.Tensor, what: str) -> None:
 
 
 def algorithm_class(algo_cfg: Any) -> type[Algorithm]:
-    """The class ``algo._target_`` names (an ``Algorithm``); older configs without a target were PPO's
-    or distillation's, named by ``algo.name``."""
-    target = algo_cfg.get("_target_") or LEGACY_TARGETS[algo_cfg.get("name", "ppo")]
+    """The class ``algo._target_`` names (an ``Algorithm``); a config without a target (written before
+    it existed) names its algorithm by ``algo.name``, read in the registry (``rlgrasp.algos``)."""
+    target = algo_cfg.get("_target_") or _registered(algo_cfg.get("name")).target
     cls = get_class(target)
     if not (isinstance(cls, type) and issubclass(cls, Algorithm)):
         raise TypeError(f"algo._target_={target!r} is not an rlgrasp Algorithm")
     return cls
-
-
-#: The algorithm of a config written before ``algo._target_`` existed, by its ``algo.name``.
-LEGACY_TARGETS = {"ppo": "rlgrasp.algos.ppo.PPO", "distill": "rlgrasp.vision.distill.DAgger"}

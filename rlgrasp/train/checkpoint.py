@@ -6,11 +6,12 @@ writes it, for every algorithm):
 - ``format``: 2 (1: RNG states as numpy/python objects, not loadable with ``weights_only=True``)
 - ``actor``: the policy's state dict (it includes the observation normalizer's buffers
   ``norm.mean``/``norm.var``/``norm.count``); every algorithm's, so evaluation and export read any
-- what the algorithm adds (``rlgrasp.train.algorithm.Algorithm.state_dict``): PPO ``critic`` and
-  ``optimizer`` (Adam's state); SAC ``sac`` (its loss's critics, target critics and temperature, the
-  optimizers, the gradient steps owed; the replay buffer is in the run directory's ``replay/``,
-  ``rlgrasp.algos.replay_files``);
-  DAgger ``student``, ``aux``, ``optimizer``
+- ``<algo.name>``: what the algorithm adds (``rlgrasp.train.algorithm.Algorithm.state_dict``) under
+  its own key: ``ppo``: ``critic``, ``optimizer`` (Adam's state) and each term with weights (``rnd``);
+  ``sac`` (a subclass's under its own name): its loss's critics, target critics and temperature, the
+  optimizers, the gradient steps owed (the replay buffer is in the run directory's ``replay/``,
+  ``rlgrasp.algos.sac.replay_files``); ``distill``: ``student``, ``aux``, ``optimizer``. Checkpoints
+  written before kept PPO's and DAgger's at the top level (``rlgrasp.train.legacy.algorithm_state``)
 - ``frames``, ``updates``: counters; ``generation``: how many times the run was resumed
 - ``best_eval_success``, ``last_eval``: evaluation bookkeeping (``last_eval`` may be None)
 - ``rng``: python / numpy / torch RNG states of the learner, as tensors and plain values
@@ -20,9 +21,7 @@ writes it, for every algorithm):
 - ``spec``: ``obs_key``, ``obs_dim``, ``action_dim``, ``action_low``, ``action_high``
 - ``versions``: python, torch, torchrl, tensordict, gymnasium, pybullet, rlgrasp
 - ``run_dir``: the run directory it was written in
-- ``rnd`` (runs with ``algo.terms.rnd.coeff`` > 0): the RND networks, their running statistics and the
-  intrinsic value head (``rlgrasp.train.rnd``); a demonstration file is referenced by
-  ``config["algo"]["demos"]``, not stored
+- a demonstration file is referenced by ``config["algo"]["demos"]``, not stored
 
 Only tensors and plain containers are stored, and every reader loads with ``weights_only=True``: a
 checkpoint someone sends cannot run code when it is loaded, and one that would need to unpickle any
@@ -342,7 +341,7 @@ def policy_from_checkpoint(
         ckpt = load_checkpoint(ckpt, map_location=device)
     spec = ckpt["spec"]
     model_cfg = OmegaConf.create(ckpt["config"]["model"])
-    if ckpt.get("kind") == "vision":  # a camera student (rlgrasp.vision.distill): state + images in
+    if ckpt.get("kind") == "vision":  # a camera student (rlgrasp.algos.dagger): state + images in
         try:
             return vision_policy(spec, model_cfg, ckpt["actor"]).to(device)
         except RuntimeError as exc:

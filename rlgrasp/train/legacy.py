@@ -1,4 +1,4 @@
-"""Checkpoint configs of an older shape: ``algo``'s keys in one bag.
+"""Checkpoints of an older shape: ``algo``'s keys in one bag, an algorithm's state at the top level.
 
 Older checkpoints keep ``algo``'s keys flat (``algo.lr``, where today's config has ``algo.optim.lr``:
 ``rlgrasp.config.ALGO_KEYS``), as ``policies/*.pt`` do. ``nest_algo`` maps such a node to today's
@@ -10,13 +10,15 @@ from __future__ import annotations
 
 from typing import Any
 
-from rlgrasp.config import PPOTermsConfig, moved_algo_key
+from rlgrasp.algos.registry import term_targets
+from rlgrasp.config import moved_algo_key
 
 
 def nest_algo(algo: dict[str, Any]) -> dict[str, Any]:
     """A flat ``algo`` node of before in today's shape (a copy; a nested one comes back unchanged).
-    PPO's terms get the ``_target_`` a flat config could not name: a resume keeps the checkpoint's
-    config and would otherwise have no class to build them with."""
+    Terms an algorithm builds by class (PPO's) get the ``_target_`` its schema gives them, which a flat
+    config could not name: a resume keeps the checkpoint's config and would otherwise have no class
+    to build them with."""
     nested: dict[str, Any] = {}
     for key, value in algo.items():
         path = moved_algo_key(key, algo.get("name")) if not isinstance(value, dict) else None
@@ -25,12 +27,24 @@ def nest_algo(algo: dict[str, Any]) -> dict[str, Any]:
         for part in parents:
             node = node.setdefault(part, {})
         node[leaf] = value
-    if algo.get("name") == "ppo":
-        for name, term in nested.get("terms", {}).items():
-            default = getattr(PPOTermsConfig(), name, None)
-            if isinstance(term, dict) and default is not None:
-                term.setdefault("_target_", default._target_)
+    targets = term_targets(algo.get("name"))
+    for name, term in nested.get("terms", {}).items():
+        if isinstance(term, dict) and name in targets:
+            term.setdefault("_target_", targets[name])
     return nested
+
+
+def algorithm_state(state: dict[str, Any]) -> dict[str, Any] | None:
+    """The algorithm's own state in a checkpoint, None in a policy file (nothing to continue).
+
+    Today each algorithm's state sits under its ``algo.name`` (SAC's always did, under ``sac``).
+    Checkpoints written before that kept PPO's and DAgger's at the top level beside the core's entries
+    (``critic``, ``optimizer``, a term's weights): the top level is then that state, read by the same
+    ``load_state_dict`` with the same keys. The one place that knows the older layout."""
+    name = ((state.get("config") or {}).get("algo") or {}).get("name")
+    if isinstance(state.get(name), dict):
+        return state[name]
+    return state if "optimizer" in state else None
 
 
 #: The env's keywords of before the task was a part, now the lift task's (``env.task``).

@@ -34,6 +34,7 @@ from rlgrasp.train.collect import read_env_errors
 from rlgrasp.train.collectors import begin_shutdown, shut_down
 from rlgrasp.train.eval_process import EvalProcessError, background_evaluator
 from rlgrasp.train.evaluate import periodic_evaluator, summarize
+from rlgrasp.train.legacy import algorithm_state
 from rlgrasp.train.logger import log, progress_line, setup_text_log
 from rlgrasp.train.metrics import Due, Phases, Throughput, finished_episodes
 from rlgrasp.train.parts import build_parts
@@ -143,7 +144,7 @@ class Trainer:
         state = {
             "format": ckpt_lib.FORMAT,
             "actor": self.actor.state_dict(),
-            **self.algo.state_dict(),
+            self.algo.name: self.algo.state_dict(),  # each algorithm's under its own key
             "frames": self.frames,
             "updates": self.algo.updates,
             "generation": self.generation,
@@ -164,8 +165,8 @@ class Trainer:
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Continue from a checkpoint: weights, the algorithm's state, RNG, counters; the generation
         moves on."""
-        saved = (state.get("config") or {}).get("algo", {}).get("name", "ppo")
-        if saved != self.algo.name:
+        saved = (state.get("config") or {}).get("algo", {}).get("name")
+        if saved is not None and saved != self.algo.name:
             raise ConfigError(
                 f"algo: the checkpoint was trained with algo={saved}, not algo={self.algo.name}; "
                 f"resume it with algo={saved}, or start a new run (algo.init_from=<checkpoint> to warm start)"
@@ -173,7 +174,7 @@ class Trainer:
         try:
             self.actor.load_state_dict(state["actor"])
             self.algo.updates = state["updates"]
-            self.algo.load_state_dict(state)
+            self.algo.load_state_dict(_algorithm_state(state))
         except (RuntimeError, KeyError) as exc:
             raise ConfigError(
                 f"checkpoint does not fit the model: {str(exc).splitlines()[-1].strip()[:200]}"
@@ -574,3 +575,11 @@ def train(cfg: DictConfig, on_eval: EvalCallback | None = None, changed: set[str
     result = trainer.run()
     trainer.signals.after_checkpoint(finished=trainer.frames >= cfg.total_frames)
     return result
+
+
+def _algorithm_state(state: dict[str, Any]) -> dict[str, Any]:
+    """The algorithm's part of a checkpoint (an older one's mapped by ``rlgrasp.train.legacy``)."""
+    found = algorithm_state(state)
+    if found is None:
+        raise KeyError("the checkpoint holds no training state of its algorithm")
+    return found

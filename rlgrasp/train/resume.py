@@ -29,6 +29,7 @@ from rlgrasp.config import CONFIG_DIR, ConfigError, validate_train
 from rlgrasp.received import logger_name
 from rlgrasp.rundir import CHECKPOINTS
 from rlgrasp.train import checkpoint as ckpt_lib
+from rlgrasp.train.legacy import algorithm_state
 from rlgrasp.utils import flatten
 
 log = logging.getLogger("rlgrasp.train")
@@ -96,7 +97,7 @@ def prepare_run(cfg: DictConfig, changed: Iterable[str] | None = None) -> tuple[
         path, state = ckpt_lib.newest_readable(source, user=user)
     else:
         path, state = source, ckpt_lib.read_checkpoint(source, user=user)
-    if "rng" not in state or "frames" not in state or "optimizer" not in state and "sac" not in state:
+    if "rng" not in state or "frames" not in state or algorithm_state(state) is None:
         raise ConfigError(
             f"resume={resume}: {path} is a policy file (no training state to continue); resume takes a "
             f"run directory or its checkpoint; to start a new run from this policy: algo.init_from={path}"

@@ -33,7 +33,7 @@ from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.envs import ExplorationType, set_exploration_type
 from torchrl.objectives import SACLoss, SoftUpdate
 
-from rlgrasp.algos.replay_files import ReplayFiles
+from rlgrasp.algos.sac.replay_files import ReplayFiles
 from rlgrasp.config import ConfigError
 from rlgrasp.demos.bc import mse_bc_loss
 from rlgrasp.demos.dataset import demo_transitions, demos_for
@@ -74,7 +74,13 @@ class QNet(nn.Module):
     the running statistics the actor (and so the deployed policy) uses."""
 
     def __init__(
-        self, norm: RunningNorm, in_dim: int, hidden: list[int], activation: str, layer_norm: bool
+        self,
+        norm: RunningNorm,
+        in_dim: int,
+        hidden: list[int],
+        activation: str,
+        layer_norm: bool,
+        outputs: int = 1,
     ) -> None:
         super().__init__()
         object.__setattr__(self, "norm", norm)  # a reference, not a submodule (see above)
@@ -87,7 +93,7 @@ class QNet(nn.Module):
                 ACTIVATIONS[activation](),
             ]
             width = size
-        layers.append(nn.Linear(width, 1))
+        layers.append(nn.Linear(width, outputs))  # Q, or a distributional critic's atoms
         self.mlp = nn.Sequential(*layers)
 
     def forward(self, observation: torch.Tensor, *rest: torch.Tensor) -> torch.Tensor:
@@ -95,14 +101,18 @@ class QNet(nn.Module):
         return self.mlp(torch.cat([self.norm(observation), *rest], dim=-1))
 
 
-def build_qvalue(norm: RunningNorm, in_keys: list[Any], in_dim: int, critic_cfg: Any) -> TensorDictModule:
-    """A Q-network as ``algo.critic`` describes it."""
-    net = QNet(norm, in_dim, list(critic_cfg.hidden_sizes), critic_cfg.activation, critic_cfg.layer_norm)
+def build_qvalue(
+    norm: RunningNorm, in_keys: list[Any], in_dim: int, critic_cfg: Any, outputs: int = 1
+) -> TensorDictModule:
+    """A Q-network as ``algo.critic`` describes it, with ``outputs`` values per state and action."""
+    c = critic_cfg
+    net = QNet(norm, in_dim, list(c.hidden_sizes), c.activation, c.layer_norm, outputs)
     return TensorDictModule(net, in_keys=in_keys, out_keys=["state_action_value"])
 
 
 class SAC(Algorithm):
-    """SAC, optionally with demonstrations sampled beside online data (RLPD)."""
+    """SAC, optionally with demonstrations sampled beside online data (RLPD). A subclass changes the
+    loss (``_make_loss``) and what a critic outputs (``critic_outputs``): TQC (``rlgrasp.algos.tqc``)."""
 
     name = "sac"
 
@@ -116,15 +126,7 @@ class SAC(Algorithm):
         self.aux = self._aux()
         self.object_map = self._object_map()
         act_dim = len(parts.spec["action_low"])
-        self.loss = SACLoss(
-            self._loss_actor(),
-            self._qvalue(act_dim).to(device),
-            num_qvalue_nets=a.loss.num_critics,
-            loss_function="l2",
-            alpha_init=a.loss.alpha_init,
-            target_entropy=a.loss.target_entropy if a.loss.target_entropy is not None else -float(act_dim),
-            delay_qvalue=True,
-        )
+        self.loss = self._make_loss(act_dim)
         self.loss.make_value_estimator(gamma=a.loss.gamma)
         self.target_update = SoftUpdate(self.loss, tau=a.loss.tau)
         self.optimizers = self._optimizers(a.optim)
@@ -141,6 +143,24 @@ class SAC(Algorithm):
         self.stored = 0
         self.saved = 0
         self.replay_sequence = 0  # the newest replay file's number: the checkpoint names it
+
+    def _make_loss(self, act_dim: int) -> SACLoss:
+        """TorchRL's ``SACLoss`` on the actor and the critics' template. A subclass may return another
+        loss of its interface (``qvalue_v2_loss``, ``actor_loss``, ``alpha_loss``): TQC's."""
+        loss = self.cfg.algo.loss
+        return SACLoss(
+            self._loss_actor(),
+            self._qvalue(act_dim).to(self.device),
+            num_qvalue_nets=loss.num_critics,
+            loss_function="l2",
+            alpha_init=loss.alpha_init,
+            target_entropy=self._target_entropy(act_dim),
+            delay_qvalue=True,
+        )
+
+    def _target_entropy(self, act_dim: int) -> float:
+        target = self.cfg.algo.loss.target_entropy
+        return float(target) if target is not None else -float(act_dim)
 
     def _optimizers(self, optim: Any) -> dict[str, torch.optim.Optimizer]:
         """Adam for the actor, the critics and the temperature; with a camera, for the encoders too,
@@ -194,15 +214,20 @@ class SAC(Algorithm):
     def _qvalue(self, act_dim: int) -> TensorDictModule:
         """The critics' template: on the state and the action; with a camera, on the state (the
         privileged one with ``algo.critic.privileged``), the images' features and the action."""
-        a, spec = self.cfg.algo, self.parts.spec
+        a, spec, out = self.cfg.algo, self.parts.spec, self.critic_outputs
         if not self.images:
-            return build_qvalue(self.norm, [OBS_KEY, "action"], spec["obs_dim"] + act_dim, a.critic)
+            return build_qvalue(self.norm, [OBS_KEY, "action"], spec["obs_dim"] + act_dim, a.critic, out)
         features = sum(e.project[0].out_features for e in self._encoder().values())
         if a.critic.privileged:
             key, norm, dim = PRIVILEGED_KEY, self.parts.norms[PRIVILEGED_KEY], spec["privileged_dim"]
         else:
             key, norm, dim = OBS_KEY, self.norm, spec["obs_dim"]
-        return build_qvalue(norm, [key, FEATURES_KEY, "action"], dim + features + act_dim, a.critic)
+        return build_qvalue(norm, [key, FEATURES_KEY, "action"], dim + features + act_dim, a.critic, out)
+
+    @property
+    def critic_outputs(self) -> int:
+        """What each critic outputs per state and action: one Q-value (TQC: its quantiles)."""
+        return 1
 
     def _demos(self) -> TensorDictReplayBuffer:
         """The demonstrations as transitions in a buffer of their own (read, and refused, before any
@@ -415,17 +440,14 @@ class SAC(Algorithm):
         """The critics, their targets, the temperature and the optimizers (the replay buffer goes
         to its own file, ``save_extra``)."""
         return {
-            "sac": {
-                "loss": self.loss.state_dict(),
-                "optimizers": {k: o.state_dict() for k, o in self.optimizers.items()},
-                "owed": self.owed,
-                "replay_sequence": self.replay_sequence,
-                **({"aux": self.aux.state_dict()} if self.aux is not None else {}),
-            }
+            "loss": self.loss.state_dict(),
+            "optimizers": {k: o.state_dict() for k, o in self.optimizers.items()},
+            "owed": self.owed,
+            "replay_sequence": self.replay_sequence,
+            **({"aux": self.aux.state_dict()} if self.aux is not None else {}),
         }
 
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        saved = state["sac"]
+    def load_state_dict(self, saved: dict[str, Any]) -> None:
         self.loss.load_state_dict(saved["loss"])
         for key, opt in self.optimizers.items():
             opt.load_state_dict(saved["optimizers"][key])
@@ -437,7 +459,7 @@ class SAC(Algorithm):
 
     def save_extra(self, run_dir: Any) -> None:
         """The transitions stored since the last checkpoint, one more file beside the checkpoints
-        (``rlgrasp.algos.replay_files``), written before the checkpoint that names it. The files
+        (``rlgrasp.algos.sac.replay_files``), written before the checkpoint that names it. The files
         older than the last checkpoint's buffer held are removed first: that checkpoint, the one a
         run killed before the next is written resumes from, keeps all of its own. A file that cannot
         be written (a full disk) does not cost the checkpoint too: it then names the files before,

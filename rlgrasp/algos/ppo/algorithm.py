@@ -1,4 +1,4 @@
-"""PPO on the training core: ``rlgrasp.train.ppo.PPOLearner``'s update, its learning-rate schedule,
+"""PPO on the training core: ``rlgrasp.algos.ppo.learner.PPOLearner``'s update, its learning-rate schedule,
 the critic's warm-up, and the auxiliary terms its config names (``algo.terms``: DAPG's imitation of
 ``algo.demos``, a camera student's imitation of a teacher, RND's curiosity), each built by its own
 class."""
@@ -11,16 +11,16 @@ from typing import Any
 import torch
 from hydra.utils import get_class
 
+from rlgrasp.algos.ppo.learner import Extra, PPOLearner
 from rlgrasp.demos.bc import pretrain
 from rlgrasp.demos.dataset import demos_for
 from rlgrasp.train.algorithm import Algorithm
-from rlgrasp.train.ppo import Extra, PPOLearner
 
 
 class PPO(Algorithm):
-    """Clipped PPO with GAE (``algo=ppo``); the checkpoint keeps ``critic``, ``optimizer`` and each
-    term with a state of its own (``rnd``) where they always were, so checkpoints written before the
-    core still resume."""
+    """Clipped PPO with GAE (``algo=ppo``); its checkpoint state (under ``ppo``) keeps ``critic``,
+    ``optimizer`` and each term with a state of its own (``rnd``) by the names they always had, so a
+    checkpoint written before, with them at the top level, resumes through the same code."""
 
     name = "ppo"
 

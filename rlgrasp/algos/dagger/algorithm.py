@@ -131,7 +131,8 @@ class DAgger(Algorithm):
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        self.student.load_state_dict(state.get("student") or state["actor"])
+        if state.get("student") is not None:  # else the student is the actor the core loaded
+            self.student.load_state_dict(state["student"])
         if self.aux is not None and state.get("aux") is not None:
             self.aux.load_state_dict(state["aux"])
         self.optimizer.load_state_dict(state["optimizer"])
