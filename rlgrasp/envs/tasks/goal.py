@@ -210,13 +210,7 @@ class StackTask(GoalTask):
     TERM_SETS = {
         **GoalTask.TERM_SETS,
         "dense": {
-            "terms": {
-                "reach": {"weight": 1.0},
-                "grasp": {"weight": 1.0},
-                "place": {"weight": 2.0},
-                "release": {"weight": 1.0},
-                "success": {"weight": 1.0},
-            },
+            "terms": {**GoalTask.TERM_SETS["dense"]["terms"], "release": {"weight": 1.0}},
             "normalize": True,
         },
     }
