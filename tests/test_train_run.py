@@ -64,7 +64,8 @@ def test_smoke_end_to_end_then_resume(tmp_path: Path, train_cfg) -> None:
 
     ckpt = load_checkpoint(run_dir)
     assert ckpt["frames"] == 2048
-    assert {"actor", "critic", "optimizer", "rng", "config", "versions", "spec"} <= set(ckpt)
+    assert {"actor", "ppo", "rng", "config", "versions", "spec"} <= set(ckpt)
+    assert {"critic", "optimizer"} <= set(ckpt["ppo"])  # the algorithm's state under its name
     assert ckpt["config"]["env"]["_target_"] == "rlgrasp.envs.PandaGraspEnv"
     norm_count = [v for k, v in ckpt["actor"].items() if k.endswith("norm.count")]
     assert len(norm_count) == 1 and float(norm_count[0]) > 0

@@ -384,11 +384,11 @@ def test_distillation_trains_checkpoints_resumes_and_evaluates(tmp_path, train_c
         and ckpt["frames"] == 2048
         and ckpt["spec"]["images"] == {"depth": [1, 64, 64]}
     )
-    assert ckpt["last_eval"]["teacher_success_rate"] >= 0.0 and "head.weight" in ckpt["aux"]
+    assert ckpt["last_eval"]["teacher_success_rate"] >= 0.0 and "head.weight" in ckpt["distill"]["aux"]
     policy = policy_from_checkpoint(ckpt)
     assert set(policy.in_keys) == {"observation", "depth"}
     # The experiment deploys a moving average of the student: both are kept, and they differ.
-    trained, deployed = ckpt["student"], ckpt["actor"]
+    trained, deployed = ckpt["distill"]["student"], ckpt["actor"]  # its state under its name
     assert trained.keys() == deployed.keys()
     assert any(not torch.equal(trained[k], deployed[k]) for k in trained)
     distill(train_cfg(*with_aux, f"resume={run}", "total_frames=3072", run_dir=run))
