@@ -207,3 +207,13 @@ def test_a_camera_policy_reads_the_goal_beside_its_image_and_never_sees_the_mark
         marker_in_view += int((seen != hidden).any())
     assert marker_in_view > 0  # the check above compared images that the marker would change
     env.close()
+
+
+def test_received_files_may_name_exactly_the_registered_tasks() -> None:
+    """received.py holds the tasks as strings (it must not import PyBullet): the two lists agree."""
+    from rlgrasp.received import PARTS
+
+    assert set(PARTS["task"]) == set(TASKS)
+    for name, path in PARTS["task"].items():
+        module, _, leaf = path.rpartition(".")
+        assert leaf == TASKS[name].__name__ and module == "rlgrasp.envs.tasks"
