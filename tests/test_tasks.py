@@ -128,6 +128,19 @@ def test_pick_place_draws_goals_in_the_air_and_on_the_table() -> None:
     env.close()
 
 
+def test_push_pays_the_hand_behind_the_object_more_than_in_front() -> None:
+    from rlgrasp.envs.tasks.goal import behind
+
+    centre, goal = np.array([0.6, 0.0, 0.025]), np.array([0.7, 0.0, 0.025])
+    readings = {"object_centre": centre, "desired_goal": goal}
+    back = behind(None, {**readings, "grasp_pos": centre - [0.05, 0.0, 0.0]})
+    front = behind(None, {**readings, "grasp_pos": centre + [0.05, 0.0, 0.0]})
+    assert back == pytest.approx(1.0) and front < 0.6  # 1 - tanh(5 x 0.1 m)
+    env = GraspEnv(task={"_target_": "rlgrasp.envs.tasks.PushTask", "reward": "dense"})
+    assert env.task.reward.names == ["behind", "place", "success"]
+    env.close()
+
+
 def test_goal_marker_shows_in_renders_only() -> None:
     watched = GraspEnv(task="push", render_mode="rgb_array")
     watched.reset(seed=0)

@@ -166,14 +166,29 @@ class PickPlaceTask(GoalTask):
         super().__init__(scene, objects, goal_height=goal_height, air_fraction=air_fraction, **task)
 
 
+def behind(task: Any, readings: Mapping[str, Any], scale: float = 5.0, standoff: float = 0.05) -> float:
+    """1 - tanh(scale x the grasp point's distance to the spot ``standoff`` behind the object's centre,
+    on the side away from the goal): a push needs the hand there, where ``reach`` pulls it to the
+    object from any side (and pushes it off the line as often as along it)."""
+    centre = readings["object_centre"]
+    to_goal = np.asarray(readings["desired_goal"][:2]) - centre[:2]
+    distance = math.hypot(*to_goal)
+    spot = centre.copy()
+    if distance > 1e-6:
+        spot[:2] -= to_goal / distance * standoff
+    offset = spot - readings["grasp_pos"]
+    return 1.0 - math.tanh(scale * math.sqrt(offset.dot(offset)))
+
+
 class PushTask(GoalTask):
     """Slide the object to a goal on the table; the gripper may stay closed."""
 
+    TERMS = {**GoalTask.TERMS, "behind": behind}
     TERM_SETS = {
         **GoalTask.TERM_SETS,
         "dense": {
             "terms": {
-                "reach": {"weight": 1.0},
+                "behind": {"weight": 1.0},
                 "place": {"weight": 2.0, "held": False},
                 "success": {"weight": 1.0},
             },
