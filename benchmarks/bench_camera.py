@@ -77,7 +77,7 @@ def main() -> None:
     for name, cam in CONFIGS.items():
         camera = None if cam is None else {**cam, "width": args.size, "height": args.size}
         visual = "none" if cam is None else args.visual
-        envs[name] = GraspEnv(control_mode="joint_delta", camera=camera, visual=visual)
+        envs[name] = GraspEnv(camera=camera, control={"mode": "joint_delta"}, sim={"visual": visual})
     fps = {name: [] for name in envs}
     for _ in range(args.rounds):
         for name, env in envs.items():

@@ -26,7 +26,7 @@ class Run:
 
     def __init__(self, model: str, objects: str, randomization: str):
         self.model = model
-        self.env = PandaGraspEnv(collision_model=model, objects=objects, randomization=randomization)
+        self.env = PandaGraspEnv(objects=objects, randomization=randomization, sim={"collision_model": model})
         self.expert = ScriptedExpert.for_env(self.env)
         self.raw_step = self.env.client.stepSimulation
         self.env.client.stepSimulation = self._timed_step  # an instance attribute wins
@@ -42,12 +42,12 @@ class Run:
         env = self.env
         env.reset(seed=seed)
         start = clock()
-        for _ in range(BARE_STEPS * env.substeps):
+        for _ in range(BARE_STEPS * env.sim.substeps):
             self.raw_step()
         self.bare += clock() - start
         obs, _ = env.reset(seed=seed)
         self.expert.reset()
-        for _ in range(env.max_episode_steps):
+        for _ in range(env.sim.max_episode_steps):
             action = self.expert(obs)
             start = clock()
             obs, _, _, _, info = env.step(action)

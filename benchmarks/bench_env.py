@@ -71,7 +71,7 @@ def bare_rate(env: PandaGraspEnv, steps: int) -> float:
     env.reset(seed=0)
     step = env.client.stepSimulation._step
     start = clock()
-    for _ in range(steps * env.substeps):
+    for _ in range(steps * env.sim.substeps):
         step()
     return steps / (clock() - start)
 
@@ -114,7 +114,7 @@ def main() -> None:
     cases = [("ee_delta", "expert") if m == "expert" else (m, "random") for m in args.modes]
     ratios = {}
     for mode, policy_name in cases:
-        env = PandaGraspEnv(control_mode=mode, **scene)
+        env = PandaGraspEnv(**scene, control={"mode": mode})
         PhysicsTimer(env)
         env.reset(seed=int(rng.integers(1 << 31)))
         if policy_name == "expert":

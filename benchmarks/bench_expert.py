@@ -101,10 +101,10 @@ def run(
     env = PandaGraspEnv(
         randomization=preset,
         objects=objects,
-        ee_yaw=ee_yaw,
         robot=arm,
-        collision_model=collision_model,
         task=task,
+        control={"ee_yaw": ee_yaw},
+        sim={"collision_model": collision_model},
     )
     expert = OffCentreExpert.for_env(env, offset=offset) if task == "lift" else expert_for(env)
     successes, steps_to_success, reasons, failed = 0, [], collections.Counter(), []
@@ -112,7 +112,7 @@ def run(
         obs, info = env.reset(seed=seed)
         expert.reset()
         infos, first = [info], None
-        for step in range(env.max_episode_steps):
+        for step in range(env.sim.max_episode_steps):
             obs, _, _, _, info = env.step(expert(obs))
             infos.append(info)
             if info["is_success"] and first is None:

@@ -12,7 +12,7 @@ object's tilt had changed since the first grasp. Episodes are the evaluation's s
 lets go") was measured with it. The arguments are ``rlgrasp-eval``'s keys:
 
     python benchmarks/bench_grasp_depth.py ckpt=policies/grasp_ppo_xarm6.pt episodes=100
-    python benchmarks/bench_grasp_depth.py policy=scripted robot=xarm6 env.ee_yaw=true episodes=100
+    python benchmarks/bench_grasp_depth.py policy=scripted robot=xarm6 env.control.ee_yaw=true episodes=100
 
 Why not ``rlgrasp-eval``: its episode runner keeps what every policy is judged by (success, lift,
 outcome), not one observation part at one step; this reads that part with the same rules.

@@ -6,7 +6,7 @@ TensorBoard and writes a CSV and a PNG. Minutes count from the launch of the tra
 start-up time is charged to the run.
 
     python benchmarks/bench_learning.py --seeds 0 1 2 --minutes 5 --out outputs/bench_learning
-    python benchmarks/bench_learning.py --minutes 30 --tag joint_delta -- env.control_mode=joint_delta
+    python benchmarks/bench_learning.py --minutes 30 --tag joint_delta -- env.control.mode=joint_delta
     python benchmarks/bench_learning.py --experiment grasp_objects_ppo --tag grasp_objects_ppo --minutes 20 \
         --eval-objects random_urdfs_test train_mix --eval-episodes 200
 

@@ -84,7 +84,7 @@ def main() -> None:
     print(f"{'objects':<20}{'reset ms':>10}{'steps/s':>10}")
     seeds = range(args.resets)
     for objects in args.objects:
-        env = PandaGraspEnv(objects=objects, randomization=args.randomization, ee_yaw=True)
+        env = PandaGraspEnv(objects=objects, randomization=args.randomization, control={"ee_yaw": True})
         reset_ms(env, seeds)  # warm the caches
         ms = statistics.median(reset_ms(env, seeds) for _ in range(args.rounds))
         rate = steps_per_second(env, args.steps)

@@ -4,7 +4,7 @@ Both run one after the other on the same machine, on the same wall-clock budget.
 
     pip install -c constraints.txt -e ".[peer]"
     python benchmarks/bench_peer.py --minutes 5 --seed 0
-    python benchmarks/bench_peer.py --minutes 5 --only sb3 -- env.control_mode=ee_delta
+    python benchmarks/bench_peer.py --minutes 5 --only sb3 -- env.control.mode=ee_delta
     python benchmarks/bench_peer.py --minutes 5 --experiment grasp_sac
 
 rlgrasp runs as ``scripts/train.py experiment=<experiment>`` and is read back from its TensorBoard.

@@ -47,8 +47,8 @@ def main() -> None:
         for name, cam in CAMERAS.items():
             camera = {**cam, "width": args.size, "height": args.size}
             envs = {
-                "as is": GraspEnv(robot=as_is, camera=camera, visual="none"),
-                "low poly": GraspEnv(robot=robot, camera=camera, visual="none"),
+                "as is": GraspEnv(robot=as_is, camera=camera, sim={"visual": "none"}),
+                "low poly": GraspEnv(robot=robot, camera=camera, sim={"visual": "none"}),
             }
             times = {k: [] for k in envs}
             for env in envs.values():

@@ -63,7 +63,7 @@ def rollouts(run: Path, visual: str, episodes: int) -> None:
     spec, cfg = state["spec"], OmegaConf.create(state["config"])
     actor, _, tap = _encoder(spec, cfg.model, state["actor"])
     env_cfg = compose_train(
-        [f"experiment={cfg.experiment_name}", f"env.visual={visual}", "objects=random_urdfs_test"]
+        [f"experiment={cfg.experiment_name}", f"env.sim.visual={visual}", "objects=random_urdfs_test"]
     )
     env = env_factory(env_cfg.env)()
     start, stop = spec["privileged_parts"]["object_cells"]

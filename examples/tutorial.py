@@ -75,7 +75,7 @@ def env() -> None:
 
     from rlgrasp.envs import GraspEnv, ScriptedExpert
 
-    env = GraspEnv(control_mode="ee_delta")  # the cube, `default` randomization, 50 steps an episode
+    env = GraspEnv(control={"mode": "ee_delta"})  # the cube, `default` randomization, 50 steps an episode
     check_env(env.unwrapped, skip_render_check=True)  # gymnasium's checker: spaces, seeding, determinism
     print("observation", env.observation_space.shape, "parts", list(env.obs_slices))
     print("action", env.action_space)
@@ -83,7 +83,7 @@ def env() -> None:
     expert = ScriptedExpert.for_env(env)  # the grasp the arm's description sets
     obs, info = env.reset(seed=0)
     episode_return, steps = 0.0, 0
-    for _ in range(env.max_episode_steps):
+    for _ in range(env.sim.max_episode_steps):
         obs, reward, terminated, truncated, info = env.step(expert(obs))
         episode_return, steps = episode_return + reward, steps + 1
         if terminated or truncated:
@@ -128,9 +128,9 @@ def sparse(out: str) -> None:
     from rlgrasp.train.loop import train
 
     # A sparse reward pays only success: random actions see nothing but zeros.
-    env = GraspEnv(control_mode="ee_delta", task={"name": "lift", "reward": "sparse"})
+    env = GraspEnv(task={"name": "lift", "reward": "sparse"}, control={"mode": "ee_delta"})
     env.reset(seed=0)
-    rewards = [env.step(env.action_space.sample())[1] for _ in range(env.max_episode_steps)]
+    rewards = [env.step(env.action_space.sample())[1] for _ in range(env.sim.max_episode_steps)]
     print("sparse rewards of a random episode:", sorted(set(np.round(rewards, 3))))
     env.close()
 
@@ -202,7 +202,7 @@ def workers() -> None:
 
     from rlgrasp.envs import GraspEnv
 
-    make = functools.partial(GraspEnv, control_mode="joint_delta")  # picklable: it travels to a worker
+    make = functools.partial(GraspEnv, control={"mode": "joint_delta"})  # picklable: it travels to a worker
     for vector in (SyncVectorEnv, AsyncVectorEnv):  # all in this process / one process per env
         envs = vector([make, make])
         envs.reset(seed=0)

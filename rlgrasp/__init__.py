@@ -17,8 +17,9 @@ def make_registered_env(**kwargs):
     # Lazy: `import rlgrasp` (configs, tools) must not load PyBullet and the env modules.
     from rlgrasp.envs import GraspEnv
 
-    kwargs.setdefault("max_episode_steps", 2**31 - 1)
-    return GraspEnv(**kwargs)
+    sim = dict(kwargs.pop("sim", None) or {})
+    sim.setdefault("max_episode_steps", 2**31 - 1)
+    return GraspEnv(sim=sim, **kwargs)
 
 
 def _skip_lookups_of_missing_pandas() -> None:

@@ -25,6 +25,7 @@ from omegaconf import MISSING, OmegaConf
 
 from rlgrasp.algos.common import positive
 from rlgrasp.algos.registry import algorithms, entry, unknown_name
+from rlgrasp.envs.grasp_env import EnvConfig
 from rlgrasp.envs.randomization import Randomizer
 from rlgrasp.rundir import register_resolvers
 from rlgrasp.utils import plain
@@ -34,54 +35,6 @@ CONFIG_DIR = os.environ.get("RLGRASP_CONFIG_DIR", str(Path(__file__).resolve().p
 
 
 # --- training ---------------------------------------------------------------------------------
-@dataclass
-class EnvConfig:
-    """``PandaGraspEnv``'s constructor as a ``_target_`` node: every keyword, with its default.
-
-    Built everywhere with ``hydra.utils.instantiate(cfg.env, _partial_=True)`` (see
-    ``rlgrasp.envs.factory.env_factory``); a test checks that the fields mirror the constructor.
-    """
-
-    _target_: str = "rlgrasp.envs.PandaGraspEnv"
-    control_mode: str = "ee_delta"  # ee_delta | joint_delta | joint_torque
-    # A preset name (the `randomization` config group sets it) or a mapping of ranges.
-    randomization: Any = "default"
-    max_episode_steps: int = 50
-    # One control step = substeps x time_step seconds of simulation.
-    time_step: float = 1.0 / 240.0
-    substeps: int = 12
-    # The task part (the `task` config group sets it): a `_target_` node of rlgrasp.envs.tasks (lift,
-    # pick_place, push, stack, or a task class of your own) with its keywords, e.g. env.task.reward=sparse,
-    # env.task.weights={lift: 4}. Typed Any: each task checks its own keywords (docs/tasks.md).
-    task: Any = "lift"
-    ee_step: float = 0.04
-    ee_yaw: bool = False
-    yaw_step: float = 0.2
-    joint_step: float = 0.05
-    torque_fraction: float = 0.3
-    gravity_compensation: bool = True
-    render_mode: str | None = None
-    render_width: int = 320
-    render_height: int = 240
-    camera_distance: float = 1.1
-    camera_yaw: float = 60.0
-    camera_pitch: float = -25.0
-    solver_iterations: int = 20
-    # An arm of rlgrasp.envs.robot.ROBOTS (the `robot` config group sets it) or a user's arm as a
-    # mapping of rlgrasp.envs.robot_spec.RobotSpec keys (docs/robots.md).
-    robot: Any = "panda"
-    robot_urdf: str | None = None  # null: the arm's own model file
-    # A set name (the `objects` config group sets it), a list of set names, or a mapping with
-    # sets / paths / max_width / scale: see rlgrasp/envs/objects.py.
-    objects: Any = "cube"
-    # null, or a camera (rlgrasp.envs.cameras.CameraSpec keys); the `cameras` config group sets it.
-    camera: Any = None
-    visual: str = "none"  # none | default | wide | heldout (the `visual` config group)
-    # mesh: the arm's own collision meshes; primitive: boxes and capsules for the Panda's hand and
-    # fingers (rlgrasp/envs/collision_model.py). The shipped policies were trained on the meshes.
-    collision_model: str = "mesh"
-
-
 # --- algorithms: each one's schema and checks are its package's (rlgrasp.algos.<name>.schema),
 # found through rlgrasp.algos.registry. The flat keys of before (algo.lr, ...) are mapped by ALGO_KEYS
 # below: old checkpoints load (rlgrasp.train.legacy) and an old override names its new key.
@@ -115,6 +68,22 @@ ALGO_KEYS = {
     "augment": "augment.kind",
     **{f"augment_{k}": f"augment.{k}" for k in ("grey", "shift")},
     "image_shift": "augment.shift",
+}
+
+
+#: Where each flat ``env`` keyword of before the env took parts lives now (``env.<key>`` ->
+#: ``env.<path>``): old checkpoints load (``rlgrasp.train.legacy.nest_env``) and an old override
+#: names its new key. ``robot_urdf`` became ``env.robot: {name: <arm>, model: <file>}``.
+ENV_KEYS = {
+    "control_mode": "control.mode",
+    **{k: f"control.{k}" for k in ("ee_step", "ee_yaw", "yaw_step", "joint_step", "torque_fraction")},
+    "gravity_compensation": "control.gravity_compensation",
+    **{k: f"sim.{k}" for k in ("time_step", "substeps", "solver_iterations", "max_episode_steps")},
+    **{k: f"sim.{k}" for k in ("collision_model", "visual")},
+    "render_width": "sim.viewer.width",
+    "render_height": "sim.viewer.height",
+    **{f"camera_{k}": f"sim.viewer.{k}" for k in ("distance", "yaw", "pitch")},
+    "robot_urdf": "robot.model",
 }
 
 
@@ -341,7 +310,7 @@ class EvalConfig:
     #   'randomization={preset:default,object_mass:[0.5,1.0],finger_force:[5,10]}'
     # (randomization=wide alone selects the training config group, which sets env.randomization.)
     randomization: Any = None
-    # Env keywords over the checkpoint's env config, e.g. env.max_episode_steps=80 (as in training;
+    # Env keywords over the checkpoint's env config, e.g. env.sim.max_episode_steps=80 (as in training;
     # rlgrasp.overrides adds the `+`). objects=random_urdfs_test or objects={paths:[...]} set env.objects.
     env: dict[str, Any] = field(default_factory=dict)
     # Worker processes (1 = in this process); results do not depend on it. A spawned worker pays

@@ -45,13 +45,17 @@ def make_env(
             randomization=randomization,
             render_mode="rgb_array",
             objects=objects,
-            ee_yaw=True,
+            control={"ee_yaw": True},
             task=task,
-            render_width=size[0],
-            render_height=size[1],
-            camera_distance=distance,
-            camera_yaw=yaw,
-            camera_pitch=pitch,
+            sim={
+                "viewer": {
+                    "width": size[0],
+                    "height": size[1],
+                    "distance": distance,
+                    "yaw": yaw,
+                    "pitch": pitch,
+                }
+            },
         )
     except ENV_ERRORS as exc:
         raise ValueError(f"--objects {objects}: {exc}") from None

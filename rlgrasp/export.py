@@ -33,8 +33,10 @@ from torch import nn
 
 from rlgrasp.config import CONFIG_DIR
 from rlgrasp.deploy import DeployPolicy, deploy_module
+from rlgrasp.envs.control import ControlConfig
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.envs.observation import PROPRIOCEPTION
+from rlgrasp.envs.part_config import env_setting
 from rlgrasp.evaluation.policies import CheckpointActor
 from rlgrasp.evaluation.source import (
     CKPT_KINDS,
@@ -257,16 +259,15 @@ def max_abs_diff(path: Path, observations: Inputs, reference: np.ndarray) -> flo
 # --- the JSON beside the file -------------------------------------------------------------------
 def action_meaning(env_cfg: dict[str, Any]) -> list[str]:
     """What each action entry does, in the env's units (entries are in [-1, 1], clipped)."""
-    mode = env_cfg.get("control_mode", "ee_delta")
-    if mode == "ee_delta":
-        step = env_cfg.get("ee_step", 0.04)
-        motion = [f"grasp point d{a} x {step} m (world frame)" for a in "xyz"]
-        if env_cfg.get("ee_yaw"):
-            motion.append(f"gripper yaw delta x {env_cfg.get('yaw_step', 0.2)} rad")
-    elif mode == "joint_delta":
-        motion = [f"panda_joint{i} delta x {env_cfg.get('joint_step', 0.05)} rad" for i in range(1, 8)]
+    control = ControlConfig(**env_setting(env_cfg, "control", {}))
+    if control.mode == "ee_delta":
+        motion = [f"grasp point d{a} x {control.ee_step} m (world frame)" for a in "xyz"]
+        if control.ee_yaw:
+            motion.append(f"gripper yaw delta x {control.yaw_step} rad")
+    elif control.mode == "joint_delta":
+        motion = [f"panda_joint{i} delta x {control.joint_step} rad" for i in range(1, 8)]
     else:
-        frac = env_cfg.get("torque_fraction", 0.3)
+        frac = control.torque_fraction
         motion = [f"panda_joint{i} torque x {frac} of its effort limit" for i in range(1, 8)]
     return [*motion, "finger width target, absolute: -1 closed, +1 open (0.08 m)"]
 
@@ -295,8 +296,10 @@ def describe(ckpt: dict[str, Any], ckpt_path: Path, env: Any) -> dict[str, Any]:
         "action_meaning": action_meaning(env_cfg),
         "action_low": list(spec["action_low"]),
         "action_high": list(spec["action_high"]),
-        "control_mode": env_cfg.get("control_mode"),
-        "control_hz": round(1.0 / (env_cfg.get("time_step", 1 / 240) * env_cfg.get("substeps", 12))),
+        "control_mode": env_setting(env_cfg, "control.mode", "ee_delta"),
+        "control_hz": round(
+            1.0 / (env_setting(env_cfg, "sim.time_step", 1 / 240) * env_setting(env_cfg, "sim.substeps", 12))
+        ),
         "normalization": normalization if model.get("obs_norm", True) else "none",
         "deterministic": (
             "tanh of the Gaussian's mean, scaled to the action bounds"

@@ -31,7 +31,7 @@ from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from rlgrasp.compose import compose_config
-from rlgrasp.config import CONFIG_DIR, moved_algo_key
+from rlgrasp.config import CONFIG_DIR, ENV_KEYS, moved_algo_key
 
 #: Groups whose files set one ``env`` key; a dict (or, for objects, a list) value is that key's value.
 ENV_GROUPS = {"objects": ("{", "["), "randomization": ("{",), "robot": ("{",)}
@@ -117,8 +117,11 @@ def explain(exc: BaseException, overrides: Sequence[str] = (), root: str = "the 
 
 
 def _moved(full_key: str, parent: Any) -> str:
-    """Where a flat ``algo`` key of before lives now (``algo.lr`` -> ``algo.optim.lr``), as a clause."""
+    """Where a flat ``algo`` or ``env`` key of before lives now (``algo.lr`` -> ``algo.optim.lr``,
+    ``env.control_mode`` -> ``env.control.mode``), as a clause."""
     where, _, key = full_key.rpartition(".")
+    if where == "env" and key in ENV_KEYS:
+        return f"; env.{key} is env.{ENV_KEYS[key]} now"
     if where != "algo":
         return ""
     moved = moved_algo_key(key, parent.get("name") if parent is not None else None)

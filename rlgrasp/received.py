@@ -41,7 +41,7 @@ from rlgrasp.algos.registry import alias_paths, class_paths
 #: rlgrasp's own parts, by kind: the short name a file may choose -> the class rlgrasp builds it with.
 #: Adding a kind or a part is one entry here (and its node path in ``NODES``).
 PARTS: dict[str, dict[str, str]] = {
-    # The class path rlgrasp's own env config writes (rlgrasp.config.EnvConfig): a rebuilt config then
+    # The class path rlgrasp's own env config writes (rlgrasp.envs.grasp_env.EnvConfig): a rebuilt config then
     # compares equal to the user's own on resume and is type-checked by EnvConfig.
     "env": {"grasp": "rlgrasp.envs.PandaGraspEnv"},
     "task": {
@@ -307,11 +307,12 @@ def _old_env(env: dict[str, Any], source: str) -> tuple[dict[str, Any], str]:
 
 
 def _old_task(env: dict[str, Any]) -> dict[str, Any]:
-    """An env of before the task part: its reward keys under ``env.task`` (``legacy.nest_task``; data
-    only: the task's class is rlgrasp's lift, written by rlgrasp's code)."""
-    from rlgrasp.train.legacy import nest_task  # lazy: it imports rlgrasp's config schemas (torch)
+    """An env of before the task and the other parts: its reward keys under ``env.task``, its control
+    and simulation keywords under ``env.control`` and ``env.sim`` (``legacy.nest_env``; data only: the
+    task's class is rlgrasp's lift, written by rlgrasp's code)."""
+    from rlgrasp.train.legacy import nest_env  # lazy: it imports rlgrasp's config schemas (torch)
 
-    return nest_task(env)
+    return nest_env(env)
 
 
 def _old_algo(algo: dict[str, Any]) -> dict[str, Any]:

@@ -26,9 +26,9 @@ from tensordict import TensorDict
 from rlgrasp import demo
 from rlgrasp.algos.ppo.schema import PPOConfig
 from rlgrasp.compose import compose_train
-from rlgrasp.config import EnvConfig
 from rlgrasp.demos.dataset import layout_of, write_demos
 from rlgrasp.envs.factory import env_factory
+from rlgrasp.envs.grasp_env import EnvConfig
 from rlgrasp.models.cnn import actor_norm, build_vision_actor
 from rlgrasp.models.spec import vision_spec
 from rlgrasp.train.checkpoint import FORMAT, load_checkpoint, read_checkpoint
@@ -92,11 +92,12 @@ def make_student(
     """A camera checkpoint laid out as ``Distiller.save`` writes it. ``spread``: weights that send
     the actions over the whole box (a fresh actor acts near zero, which would hide a wrong squashing
     or a wrong image scaling)."""
+    defaults = asdict(EnvConfig())
     env_cfg = {
-        **asdict(EnvConfig()),
-        "control_mode": "joint_delta",
+        **defaults,
+        "control": {**defaults["control"], "mode": "joint_delta"},
         "camera": {"mount": mount, "modality": modality},
-        "visual": visual,
+        "sim": {**defaults["sim"], "visual": visual},
     }
     spec = vision_spec(env_factory(env_cfg))
     torch.manual_seed(0)
@@ -135,7 +136,7 @@ def make_student(
 # --- files an entry point must refuse ------------------------------------------------------------
 def demo_env_cfg(control_mode: str = "ee_delta", *overrides: str) -> dict:
     """The default training config's env section with ``control_mode`` (and ``overrides``), resolved."""
-    cfg = compose_train([f"env.control_mode={control_mode}", "paths.output_dir=.", *overrides])
+    cfg = compose_train([f"env.control.mode={control_mode}", "paths.output_dir=.", *overrides])
     return OmegaConf.to_container(cfg.env, resolve=True)
 
 

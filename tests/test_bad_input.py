@@ -219,8 +219,8 @@ TRAIN = [
         ["algo.schedule.desired_kl=0"],
         "algo.schedule.desired_kl=0.0: must be > 0 or null",
     ),
-    ("no substeps", ["env.substeps=0"], "env: substeps must be a positive integer, got 0"),
-    ("unknown control mode", ["env.control_mode=fly"], "env: unknown control_mode 'fly'; valid modes"),
+    ("no substeps", ["env.sim.substeps=0"], "env: substeps must be a positive integer, got 0"),
+    ("unknown control mode", ["env.control.mode=fly"], "env: unknown control_mode 'fly'; valid modes"),
     ("no hidden layers", ["model.hidden_sizes=[]"], "model.hidden_sizes=[]: must be a non-empty list"),
     (
         "unknown action distribution",
@@ -260,7 +260,7 @@ TRAIN = [
         [
             "experiment=grasp_vision_finetune",
             "algo.terms.teacher.checkpoint={teacher}",
-            "env.control_mode=ee_delta",
+            "env.control.mode=ee_delta",
             "algo.init_from=null",
         ],
         "it reads 49 state values, this env's privileged state has 45",
@@ -542,7 +542,7 @@ EVAL = [
     ("missing checkpoint", ["ckpt={root}/nowhere.pt"], "missing checkpoint: "),
     ("truncated checkpoint", ["ckpt={truncated}"], "corrupt checkpoint: "),
     ("unknown env keyword", ["env.grip=1"], "env.grip: unknown key 'grip'; env has _target_, control_mode"),
-    ("env the checkpoint cannot act in", ["env.control_mode=joint_delta"], "action layout mismatch"),
+    ("env the checkpoint cannot act in", ["env.control.mode=joint_delta"], "action layout mismatch"),
     (
         "a checkpoint of another arm",
         ["robot=kuka_iiwa"],
@@ -592,7 +592,7 @@ EVAL = [
     (
         "a teacher of another control mode",
         ["ckpt={student}", "teacher={run}"],
-        "env.control_mode='ee_delta' in the teacher, 'joint_delta' here",
+        "env.control.mode='ee_delta' in the teacher, 'joint_delta' here",
     ),
     (
         "a camera policy as the teacher",
@@ -745,8 +745,8 @@ DEMOS = [
     ("keep neither", ["keep=some"], "keep=some: must be success or all"),
     (
         "the expert in another control mode",
-        ["env.control_mode=joint_delta"],
-        "env.control_mode=joint_delta: the scripted expert acts in ee_delta",
+        ["env.control.mode=joint_delta"],
+        "env.control.mode=joint_delta: the scripted expert acts in ee_delta",
     ),
     ("a missing policy checkpoint", ["policy={root}/nowhere.pt"], "nowhere.pt: missing checkpoint"),
     ("unknown objects option", ["objects=random_urdfs_tset"], "objects=random_urdfs_tset: no such option"),

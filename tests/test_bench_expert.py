@@ -14,7 +14,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(scope="module")
 def env():
-    env = PandaGraspEnv(randomization="none", objects="cube", ee_yaw=False)
+    env = PandaGraspEnv(randomization="none", objects="cube", control={"ee_yaw": False})
     yield env
     env.close()
 

@@ -47,8 +47,8 @@ def test_dict_observation_spaces_and_shapes(modality, keys, cam_env):
 
 @pytest.mark.parametrize("modality", ["depth", "rgbd"])
 def test_stacked_frames_hold_the_last_images_oldest_first(modality, cam_env):
-    single = cam_env(camera={"mount": "wrist", "modality": modality}, visual="default")
-    stacked = cam_env(camera={"mount": "wrist", "modality": modality, "frames": 3}, visual="default")
+    single = cam_env(camera={"mount": "wrist", "modality": modality}, sim={"visual": "default"})
+    stacked = cam_env(camera={"mount": "wrist", "modality": modality, "frames": 3}, sim={"visual": "default"})
     first, _ = stacked.reset(seed=4)
     one, _ = single.reset(seed=4)
     assert stacked.observation_space.contains(first)
@@ -71,7 +71,7 @@ def test_stacked_frames_hold_the_last_images_oldest_first(modality, cam_env):
 
 
 def test_camera_env_passes_gymnasiums_checker(cam_env):
-    check_env(cam_env(camera=WRIST_DEPTH, visual="default"), skip_render_check=True)
+    check_env(cam_env(camera=WRIST_DEPTH, sim={"visual": "default"}), skip_render_check=True)
 
 
 def test_state_part_holds_nothing_about_the_object(cam_env):
@@ -84,8 +84,8 @@ def test_state_part_holds_nothing_about_the_object(cam_env):
 
 def test_cameras_and_visuals_leave_the_physics_of_a_seed_alone(cam_env):
     """The low-poly render model, the compact ground and the visual draws change no physics."""
-    plain = cam_env(control_mode="joint_delta")
-    seen = cam_env(control_mode="joint_delta", camera=WRIST_DEPTH, visual="default")
+    plain = cam_env(control={"mode": "joint_delta"})
+    seen = cam_env(camera=WRIST_DEPTH, control={"mode": "joint_delta"}, sim={"visual": "default"})
     a, _ = plain.reset(seed=5)
     b, _ = seen.reset(seed=5)
     rng = np.random.default_rng(0)
@@ -100,7 +100,7 @@ def test_cameras_and_visuals_leave_the_physics_of_a_seed_alone(cam_env):
 def test_same_seed_same_images_and_visuals(cam_env, visual):
     runs = []
     for _ in range(2):
-        env = cam_env(camera={"mount": "wrist", "modality": "rgbd"}, visual=visual)
+        env = cam_env(camera={"mount": "wrist", "modality": "rgbd"}, sim={"visual": visual})
         obs, info = env.reset(seed=3)
         obs2 = env.step(np.zeros(env.action_dim))[0]
         runs.append((obs, obs2, info["randomization"]))
@@ -111,7 +111,7 @@ def test_same_seed_same_images_and_visuals(cam_env, visual):
 
 
 def test_visual_randomization_is_recorded_and_varies(cam_env):
-    env = cam_env(camera={"mount": "wrist", "modality": "rgb"}, visual="default")
+    env = cam_env(camera={"mount": "wrist", "modality": "rgb"}, sim={"visual": "default"})
     draws = [env.reset(seed=s)[1]["randomization"] for s in range(4)]
     visual_keys = {k for k in draws[0] if k.startswith("visual_")}
     expected = {"visual_object_hue", "visual_light_elevation", "visual_depth_noise", "visual_fov_delta"}
@@ -122,7 +122,7 @@ def test_visual_randomization_is_recorded_and_varies(cam_env):
 
 
 def test_no_visual_randomization_adds_nothing_to_info(cam_env):
-    info = cam_env(camera=WRIST_DEPTH, visual="none").reset(seed=0)[1]
+    info = cam_env(camera=WRIST_DEPTH, sim={"visual": "none"}).reset(seed=0)[1]
     assert not any(k.startswith("visual_") for k in info["randomization"])
 
 
@@ -149,7 +149,10 @@ def test_repaint_replaces_the_grounds_pixels_and_nothing_else(cam_env, monkeypat
     monkeypatch.setitem(VISUAL_PRESETS, "quiet", quiet)
     monkeypatch.setitem(VISUAL_PRESETS, "quiet_repaint", replace(quiet, ground_repaint=1.0))
     camera = {"mount": "wrist", "modality": "rgb"}
-    plain, painted = cam_env(camera=camera, visual="quiet"), cam_env(camera=camera, visual="quiet_repaint")
+    plain, painted = (
+        cam_env(camera=camera, sim={"visual": "quiet"}),
+        cam_env(camera=camera, sim={"visual": "quiet_repaint"}),
+    )
     seen, repainted = plain.reset(seed=2)[0]["rgb"], painted.reset(seed=2)[0]["rgb"]
     ground = painted.camera.render(painted.robot.camera_mount())["segmentation"] == painted.scene.ground
     assert 0.3 < ground.mean() < 1.0  # the wrist camera sees the ground, and more than the ground
@@ -242,8 +245,8 @@ def test_a_depth_cameras_computed_ground_matches_the_rendered_one(mount, cam_env
     """A depth-only camera adds the ground plane itself instead of rendering it; an RGB-D camera
     (whose colour needs the ground drawn) sees the same depth on the same episode, wherever the arm
     moves. A ray through the wrong pixel point, a flipped row or a wrong axis would be centimetres off."""
-    computed = cam_env(control_mode="joint_delta", camera={"mount": mount, "modality": "depth"})
-    rendered = cam_env(control_mode="joint_delta", camera={"mount": mount, "modality": "rgbd"})
+    computed = cam_env(camera={"mount": mount, "modality": "depth"}, control={"mode": "joint_delta"})
+    rendered = cam_env(camera={"mount": mount, "modality": "rgbd"}, control={"mode": "joint_delta"})
     assert computed.scene.ground is None and rendered.scene.ground is not None
     rng = np.random.default_rng(0)
     a, b = computed.reset(seed=3)[0], rendered.reset(seed=3)[0]
@@ -288,4 +291,4 @@ def test_a_camera_inside_the_robot_is_refused(cam_env, camera, link):
 
 def test_unknown_visual_preset_names_the_valid_ones(cam_env):
     with pytest.raises(ValueError, match="unknown visual preset 'bright'; valid presets: none, default"):
-        cam_env(camera=WRIST_DEPTH, visual="bright")
+        cam_env(camera=WRIST_DEPTH, sim={"visual": "bright"})

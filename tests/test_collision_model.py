@@ -21,7 +21,7 @@ def _shapes(env) -> dict[str, set[int]]:
 
 
 def test_primitive_model_replaces_only_the_hand_and_finger_meshes(make_env):
-    mesh, primitive = make_env(), make_env(collision_model="primitive")
+    mesh, primitive = make_env(), make_env(sim={"collision_model": "primitive"})
     before, after = _shapes(mesh), _shapes(primitive)
     for name in PRIMITIVE_LINKS:
         assert before[name] == {pybullet.GEOM_MESH}
@@ -37,18 +37,18 @@ def test_primitive_model_replaces_only_the_hand_and_finger_meshes(make_env):
 
 
 def test_primitive_model_with_a_wrist_camera_keeps_both_variants(make_env):
-    env = make_env(collision_model="primitive", camera={"mount": "wrist", "width": 16, "height": 16})
+    env = make_env(camera={"mount": "wrist", "width": 16, "height": 16}, sim={"collision_model": "primitive"})
     assert _shapes(env)["panda_leftfinger"] <= {pybullet.GEOM_BOX}
 
 
 def test_the_expert_still_lifts_the_cube_with_primitives(make_env):
-    env = make_env(collision_model="primitive")
+    env = make_env(sim={"collision_model": "primitive"})
     expert = ScriptedExpert(env.obs_slices, action_dim=env.action_dim)
     successes = 0
     for seed in range(3):
         obs, _ = env.reset(seed=seed)
         expert.reset()
-        for _ in range(env.max_episode_steps):
+        for _ in range(env.sim.max_episode_steps):
             obs, _, _, _, info = env.step(expert(obs))
         successes += bool(info["is_success"])
     assert successes == 3
@@ -56,12 +56,12 @@ def test_the_expert_still_lifts_the_cube_with_primitives(make_env):
 
 def test_bad_collision_model_fails_naming_the_valid_ones(make_env):
     with pytest.raises(ValueError, match="collision_model 'boxes'; valid: mesh, primitive"):
-        make_env(collision_model="boxes")
+        make_env(sim={"collision_model": "boxes"})
 
 
 def test_an_arm_without_primitive_shapes_is_refused(make_env):
     with pytest.raises(ValueError, match="no primitive shapes for robot 'xarm6'; arms that have them: panda"):
-        make_env(robot="xarm6", collision_model="primitive")
+        make_env(robot="xarm6", sim={"collision_model": "primitive"})
 
 
 def test_a_model_without_the_links_is_refused(tmp_path):

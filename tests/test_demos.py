@@ -184,7 +184,7 @@ def test_a_moved_file_is_refused_before_training(recorded: Path, tmp_path: Path)
     shutil.copytree(recorded, moved / "demos")
     args = [
         *SMOKE_IN_PROCESS,
-        "env.control_mode=joint_delta",
+        "env.control.mode=joint_delta",
         f"algo.demos={moved}",
         f"paths.output_dir={tmp_path / 'r'}",
     ]

@@ -17,7 +17,9 @@ from rlgrasp.envs import CONTROL_MODES, PandaGraspEnv, Randomizer, ScriptedExper
 
 @pytest.mark.parametrize("mode", CONTROL_MODES)
 def test_gymnasium_check_env_passes(mode, make_env):
-    env = make_env(control_mode=mode, render_mode="rgb_array", render_width=64, render_height=48)
+    env = make_env(
+        render_mode="rgb_array", control={"mode": mode}, sim={"viewer": {"width": 64, "height": 48}}
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # infinite observation bounds are deliberate
         check_env(env)
@@ -119,7 +121,7 @@ def _grasp_pos(env):
 
 @pytest.mark.parametrize("axis", [0, 1, 2])
 def test_ee_delta_moves_the_grasp_point_as_commanded(axis, make_env):
-    env = make_env(control_mode="ee_delta", randomization="none")
+    env = make_env(randomization="none", control={"mode": "ee_delta"})
     for sign in (1.0, -1.0):
         env.reset(seed=0)
         start = _grasp_pos(env)
@@ -134,7 +136,7 @@ def test_ee_delta_moves_the_grasp_point_as_commanded(axis, make_env):
 
 
 def test_ee_delta_keeps_fingertips_above_the_ground(make_env):
-    env = make_env(control_mode="ee_delta", randomization="none")
+    env = make_env(randomization="none", control={"mode": "ee_delta"})
     env.reset(seed=3)
     env.scene.client.resetBasePositionAndOrientation(env.scene.object, [0.2, 0.6, 0.025], [0, 0, 0, 1])
     for _ in range(15):
@@ -143,7 +145,7 @@ def test_ee_delta_keeps_fingertips_above_the_ground(make_env):
 
 
 def test_joint_delta_moves_the_commanded_joint(make_env):
-    env = make_env(control_mode="joint_delta", randomization="none")
+    env = make_env(randomization="none", control={"mode": "joint_delta"})
     env.reset(seed=0)
     q0 = env.robot.joint_state()[0]
     action = np.zeros(8, np.float32)
@@ -169,7 +171,9 @@ def test_torque_mode_with_gravity_compensation_holds_still(make_env):
     zero[-1] = 1.0
     drift = {}
     for compensate in (True, False):
-        env = make_env(control_mode="joint_torque", randomization="none", gravity_compensation=compensate)
+        env = make_env(
+            randomization="none", control={"mode": "joint_torque", "gravity_compensation": compensate}
+        )
         env.reset(seed=0)
         q0 = env.robot.joint_state()[0]
         for _ in range(20):
@@ -180,7 +184,7 @@ def test_torque_mode_with_gravity_compensation_holds_still(make_env):
 
 
 def test_torque_mode_applies_commanded_torque(make_env):
-    env = make_env(control_mode="joint_torque", randomization="none")
+    env = make_env(randomization="none", control={"mode": "joint_torque"})
     env.reset(seed=0)
     q0 = env.robot.joint_state()[0]
     action = np.zeros(8, np.float32)
@@ -224,8 +228,8 @@ def test_sparse_reward_and_terminate_on_success(make_env):
 def test_episode_info_comes_at_reset_and_at_the_last_step_only(terminate_on_success, make_env):
     env = make_env(
         randomization="default",
-        max_episode_steps=40,
         task={"name": "lift", "terminate_on_success": terminate_on_success},
+        sim={"max_episode_steps": 40},
     )
     expert = ScriptedExpert(env.obs_slices)
     episode_keys = {"object", "object_extents", "randomization"}
@@ -255,7 +259,7 @@ def test_scripted_expert_lifts_under_default_randomization(make_env):
 
 
 def test_rgb_render_has_the_configured_size(make_env):
-    env = make_env(render_mode="rgb_array", render_width=80, render_height=60)
+    env = make_env(render_mode="rgb_array", sim={"viewer": {"width": 80, "height": 60}})
     env.reset(seed=0)
     frame = env.render()
     assert frame.shape == (60, 80, 3) and frame.dtype == np.uint8 and frame.std() > 0
@@ -266,7 +270,7 @@ def test_rgb_render_has_the_configured_size(make_env):
 
 def test_unknown_control_mode_names_the_valid_ones():
     with pytest.raises(ValueError, match="'ee_velocity'.*ee_delta, joint_delta, joint_torque"):
-        PandaGraspEnv(control_mode="ee_velocity")
+        PandaGraspEnv(control={"mode": "ee_velocity"})
 
 
 def test_unknown_randomization_parameter_or_preset():
@@ -306,8 +310,8 @@ def test_non_finite_action_is_refused(make_env):
 def test_missing_model_file_names_the_path():
     with pytest.raises(FileNotFoundError, match="no_such_cube.urdf"):
         PandaGraspEnv(objects={"paths": ["no_such_cube.urdf"]})
-    with pytest.raises(FileNotFoundError, match="/tmp/missing/panda.urdf"):
-        PandaGraspEnv(robot_urdf="/tmp/missing/panda.urdf")
+    with pytest.raises(FileNotFoundError, match="env.robot.model: .*/tmp/missing/panda.urdf"):
+        PandaGraspEnv(robot={"name": "panda", "model": "/tmp/missing/panda.urdf"})
 
 
 def test_pybullet_clients_are_private(make_env):

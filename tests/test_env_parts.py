@@ -41,7 +41,7 @@ class ShortPanda(Panda):
 
 def test_a_new_robot_is_a_class_and_a_registry_entry(monkeypatch):
     monkeypatch.setitem(ROBOTS, "short_panda", ShortPanda)
-    env = GraspEnv(robot="short_panda", randomization="none", control_mode="joint_delta")
+    env = GraspEnv(robot="short_panda", randomization="none", control={"mode": "joint_delta"})
     try:
         obs, _ = env.reset(seed=0)
         q = obs[env.obs_slices["arm_q"]]
@@ -56,7 +56,7 @@ def test_a_new_robot_is_a_class_and_a_registry_entry(monkeypatch):
     [("ee_delta", EEDelta, 4), ("joint_delta", JointDelta, 8), ("joint_torque", JointTorque, 8)],
 )
 def test_control_modes_size_the_action_from_the_robot(mode, kind, dim, make_env):
-    env = make_env(control_mode=mode)
+    env = make_env(control={"mode": mode})
     assert isinstance(env.control, kind) and env.action_space.shape == (dim,)
 
 
@@ -70,7 +70,7 @@ def test_make_robot_loads_a_model_file_override(make_env):
 def test_a_step_reuses_readings_that_are_still_the_robots_state(mode, make_env):
     """The control target starts from the last observation's readings instead of reading the robot
     again: they must equal a fresh reading, and give the same target."""
-    env = make_env(control_mode=mode)
+    env = make_env(control={"mode": mode})
     env.reset(seed=3)
     rng = np.random.default_rng(0)
     for _ in range(3):

@@ -178,7 +178,7 @@ def test_layout_mismatch(tmp_path: Path) -> None:
         tmp_path,
         "action layout mismatch: checkpoint action_dim=4",
         f"ckpt={run2}",
-        "+env.control_mode=joint_delta",
+        "+env.control.mode=joint_delta",
     )
 
 

@@ -58,7 +58,7 @@ def test_every_format_matches_the_checkpoint_on_1000_observations(tmp_path: Path
         obs_dim, act_dim = meta["input"]["shape"][1], meta["output"]["shape"][1]
         stops = sorted(stop for _, stop in meta["observation_layout"].values())
         assert stops[-1] == obs_dim and len(meta["action_meaning"]) == act_dim
-        assert meta["control_mode"] == meta["env_kwargs"]["control_mode"] == "ee_delta"
+        assert meta["control_mode"] == meta["env_kwargs"]["control"]["mode"] == "ee_delta"
         assert "_target_" not in meta["env_kwargs"] and meta["versions"]["export"]["torch"]
 
 

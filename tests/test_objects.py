@@ -124,13 +124,13 @@ def test_fitted_meshes_fit_the_hand():
 
 @pytest.mark.parametrize("objects", ["cube", "primitives", "random_urdfs_test", "toys"])
 def test_expert_lifts_a_small_sample_of_each_set(objects, make_env):
-    env = make_env(objects=objects, randomization="default", ee_yaw=True)
+    env = make_env(objects=objects, randomization="default", control={"ee_yaw": True})
     expert = ScriptedExpert(env.obs_slices, action_dim=env.action_dim)
     successes = 0
     for seed in range(4):
         obs, _ = env.reset(seed=seed)
         expert.reset()
-        for _ in range(env.max_episode_steps):
+        for _ in range(env.sim.max_episode_steps):
             obs, _, _, _, info = env.step(expert(obs))
         successes += bool(info["is_success"])
     assert successes >= 3
@@ -217,9 +217,9 @@ def test_objects_spelling_reaches_env_objects_in_training_and_evaluation(tmp_pat
         "env.objects={paths:[/my/meshes]}",
         "env.objects=toys",
     ]
-    assert rewrite([own, "env.max_episode_steps=80", "randomization={preset:wide}"], open_env=True) == [
+    assert rewrite([own, "env.sim.max_episode_steps=80", "randomization={preset:wide}"], open_env=True) == [
         "++env.objects={paths:[/my/meshes]}",
-        "++env.max_episode_steps=80",
+        "++env.sim.max_episode_steps=80",
         "randomization={preset:wide}",
     ]
     out = f"paths.output_dir={tmp_path}"

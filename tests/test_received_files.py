@@ -175,7 +175,7 @@ def _layout() -> dict:
     from rlgrasp.demos.dataset import layout_of
     from rlgrasp.envs.factory import env_factory
 
-    cfg = compose_train(["env.control_mode=ee_delta", "paths.output_dir=."])
+    cfg = compose_train(["env.control.mode=ee_delta", "paths.output_dir=."])
     env = env_factory(cfg.env)()
     try:
         return layout_of(env, dict(cfg.env))

@@ -86,13 +86,13 @@ def test_resume_alone_continues_the_run_as_launched(run: Path) -> None:
 
 def test_resume_refuses_a_change_of_a_fixed_key_naming_both_values(run: Path) -> None:
     saved = ckpt_lib.load_checkpoint(run)["config"]
-    cfg = compose_train([*SMOKE, f"paths.output_dir={run}", "env.control_mode=joint_delta"])
+    cfg = compose_train([*SMOKE, f"paths.output_dir={run}", "env.control.mode=joint_delta"])
     with pytest.raises(
         ConfigError,
-        match=r"env.control_mode: the checkpoint has 'ee_delta', the command "
+        match=r"env.control.mode: the checkpoint has 'ee_delta', the command "
         r"line 'joint_delta'",
     ):
-        merged_config(cfg, saved, {"env.control_mode"})
+        merged_config(cfg, saved, {"env.control.mode"})
     cfg = compose_train([*SMOKE, f"paths.output_dir={run}", "randomization=wide"])
     with pytest.raises(ConfigError, match="env.randomization"):
         merged_config(cfg, saved, {"env.randomization"})

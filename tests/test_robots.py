@@ -100,7 +100,7 @@ def test_the_grasp_point_follows_ee_delta_and_ik_reaches_down(robot, arm_env):
 def test_joint_modes_move_the_arm_and_gravity_compensation_holds_it(robot, arm_env):
     dof = ARMS[robot][1]
     for mode in ("joint_delta", "joint_torque"):
-        env = arm_env(robot, control_mode=mode, randomization="none")
+        env = arm_env(robot, randomization="none", control={"mode": mode})
         assert env.action_space.shape == (dof + 1,)
         env.reset(seed=0)
         q0 = env.robot.joint_state()[0]
@@ -156,11 +156,11 @@ def test_a_wrist_camera_rides_on_each_arm(robot, arm_env):
 def test_cameras_see_the_arms_links_as_boxes_and_the_physics_is_unchanged(robot, arm_env):
     """The render model (``low_poly_meshes: boxes``) boxes every link but the gripper's and leaves
     every collision shape as it is: the arm moves as the arm without a camera does."""
-    plain = arm_env(robot, control_mode="joint_delta")
+    plain = arm_env(robot, control={"mode": "joint_delta"})
     seen = arm_env(
         robot,
-        control_mode="joint_delta",
         camera={"mount": "fixed", "modality": "depth", "width": 32, "height": 32},
+        control={"mode": "joint_delta"},
     )
     shapes = {s[1]: s[2] for s in seen.client.getVisualShapeData(seen.robot.body)}
     keep = {j for j, name in seen.robot.link_names.items() if name in seen.robot.wrist_names}
@@ -192,7 +192,7 @@ def test_each_arms_expert_lifts_the_cube(robot, arm_env):
     for seed in range(10):
         obs, info = env.reset(seed=seed)
         expert.reset()
-        for _ in range(env.max_episode_steps):
+        for _ in range(env.sim.max_episode_steps):
             obs, _, _, _, info = env.step(expert(obs))
         successes += bool(info["is_success"])
     assert successes >= 7
@@ -433,8 +433,8 @@ def test_torque_control_is_refused_where_the_model_says_it_is_not_meaningful(mon
 
     monkeypatch.setattr(grasp_env, "Scene", RecordedScene)
     mapping = {**dataclasses.asdict(PANDA), "torque_control": False, "fingers": PANDA_FINGERS}
-    with pytest.raises(ValueError, match="control_mode=joint_torque: this arm's model has no meaningful"):
-        PandaGraspEnv(robot=mapping, control_mode="joint_torque")
+    with pytest.raises(ValueError, match="env.control.mode=joint_torque: this arm's model has no meaningful"):
+        PandaGraspEnv(robot=mapping, control={"mode": "joint_torque"})
     # The refused env leaves no physics server behind for the garbage collector.
     assert len(scenes) == 1 and not pybullet.isConnected(scenes[0].client._client)
 

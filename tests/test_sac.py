@@ -105,7 +105,9 @@ def test_the_actor_learns_the_action_the_reward_pays_for(tmp_path: Path) -> None
 
 
 def test_demonstrations_fill_their_share_of_each_minibatch(tmp_path: Path, recorded_demos: Path) -> None:
-    sac = _sac(tmp_path, f"algo.demos={recorded_demos}", "algo.replay.demo_ratio=0.25", "env.ee_yaw=false")
+    sac = _sac(
+        tmp_path, f"algo.demos={recorded_demos}", "algo.replay.demo_ratio=0.25", "env.control.ee_yaw=false"
+    )
     demos = demo_transitions(load_demos(recorded_demos, _layout_of(sac)), sac.cfg.env)
     sac.update(_batch(sac, 64), 0)
     sample = sac._sample()
@@ -126,7 +128,7 @@ def test_the_bc_term_pulls_the_actor_to_the_demonstrated_actions(
             tmp_path,
             f"algo.demos={recorded_demos}",
             f"algo.terms.imitation.coeff={bc_coeff}",
-            "env.ee_yaw=false",
+            "env.control.ee_yaw=false",
             "algo.optim.utd_ratio=1",
             "algo.replay.learning_starts=0",
             "algo.optim.actor_lr=3e-3",
@@ -147,7 +149,9 @@ def test_the_bc_term_pulls_the_actor_to_the_demonstrated_actions(
 def test_pretraining_clones_the_demonstrations_before_the_first_frame(
     tmp_path: Path, recorded_demos: Path
 ) -> None:
-    sac = _sac(tmp_path, f"algo.demos={recorded_demos}", "algo.pretrain.epochs=30", "env.ee_yaw=false")
+    sac = _sac(
+        tmp_path, f"algo.demos={recorded_demos}", "algo.pretrain.epochs=30", "env.control.ee_yaw=false"
+    )
     demos = demo_transitions(load_demos(recorded_demos, _layout_of(sac)), sac.cfg.env)
 
     def distance() -> float:
@@ -484,7 +488,7 @@ def test_ground_swap_changes_the_ground_of_the_images_the_losses_read_and_nothin
     from rlgrasp.algos.sac import replay_bytes_per_frame
 
     out = tmp_path / "rgb"
-    camera = ["cameras=wrist_rgb", "env.ee_yaw=true"]
+    camera = ["cameras=wrist_rgb", "env.control.ee_yaw=true"]
     masked = [*camera, "+env.camera.ground_mask=true"]
     record_demos(compose_config("demos", ["episodes=1", f"out={out}", "workers=1", "keep=all", *masked]))
     swap = [*CAMERA, *masked, "algo.augment.shift=0", "algo.optim.batch_size=8"]
@@ -686,14 +690,14 @@ def _resumed(run: Path) -> Trainer:
 
 
 def _layout_of(sac: SAC) -> dict:
-    return _layout_of_env(ee_yaw=bool(sac.cfg.env.ee_yaw))
+    return _layout_of_env(ee_yaw=bool(sac.cfg.env.control.ee_yaw))
 
 
 def _layout_of_env(ee_yaw: bool) -> dict:
     from rlgrasp.demos.dataset import layout_of
     from rlgrasp.envs.factory import env_factory
 
-    cfg = compose_train(["experiment=grasp_sac", f"env.ee_yaw={ee_yaw}", "paths.output_dir=."])
+    cfg = compose_train(["experiment=grasp_sac", f"env.control.ee_yaw={ee_yaw}", "paths.output_dir=."])
     env = env_factory(cfg.env)()
     try:
         return layout_of(env, dict(cfg.env))
@@ -720,7 +724,14 @@ def test_camera_demonstrations_fill_a_camera_learners_minibatch_and_others_are_r
     record_demos(
         compose_config(
             "demos",
-            ["episodes=1", f"out={out}", "workers=1", "keep=all", "cameras=wrist_depth", "env.ee_yaw=true"],
+            [
+                "episodes=1",
+                f"out={out}",
+                "workers=1",
+                "keep=all",
+                "cameras=wrist_depth",
+                "env.control.ee_yaw=true",
+            ],
         )
     )
     sac = _sac(tmp_path, *CAMERA, f"algo.demos={out / 'demos'}", "algo.optim.batch_size=8")

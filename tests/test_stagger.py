@@ -14,7 +14,7 @@ EPISODE = 10
 
 
 def _rollout(stagger: bool, steps: int):
-    make_env = functools.partial(PandaGraspEnv, max_episode_steps=EPISODE)
+    make_env = functools.partial(PandaGraspEnv, sim={"max_episode_steps": EPISODE})
     env = make_batched_env(make_env, 4, base_seed=0, stagger=stagger)
     torch.manual_seed(0)
     try:

@@ -267,8 +267,8 @@ def test_named_choice_sets_several_keys_and_the_lr_schedule_can_stay_the_experim
             "control": {
                 "type": "categorical",
                 "choices": {
-                    "joint_delta": {"env": {"control_mode": "joint_delta", "ee_yaw": False}},
-                    "ee_delta_yaw": {"env": {"control_mode": "ee_delta", "ee_yaw": True}},
+                    "joint_delta": {"env": {"control": {"mode": "joint_delta", "ee_yaw": False}}},
+                    "ee_delta_yaw": {"env": {"control": {"mode": "ee_delta", "ee_yaw": True}}},
                 },
             },
             "algo": {"optim": {"epochs": {"type": "int", "low": 1, "high": 3}}},
@@ -276,8 +276,8 @@ def test_named_choice_sets_several_keys_and_the_lr_schedule_can_stay_the_experim
     )
     assert space.dists["control"].choices == ("joint_delta", "ee_delta_yaw") and "control" in space
     assert space.overrides({"control": "ee_delta_yaw", "algo.optim.epochs": 2}) == [
-        "env.control_mode=ee_delta",
-        "env.ee_yaw=true",
+        "env.control.mode=ee_delta",
+        "env.control.ee_yaw=true",
         "algo.optim.epochs=2",
     ]
     with pytest.raises(ValueError, match="control='ee': must be one of joint_delta, ee_delta_yaw"):

@@ -28,7 +28,7 @@ def _successes(env, expert, seeds) -> int:
     for seed in seeds:
         obs, _ = env.reset(seed=seed)
         expert.reset()
-        for _ in range(env.max_episode_steps):
+        for _ in range(env.sim.max_episode_steps):
             obs, _, _, _, info = env.step(expert(obs))
         successes += bool(info["is_success"])
     return successes
@@ -36,7 +36,7 @@ def _successes(env, expert, seeds) -> int:
 
 @pytest.mark.parametrize("task", sorted(AT_LEAST))
 def test_each_goal_expert_succeeds_on_most_seeds(task: str) -> None:
-    env = GraspEnv(task=task, ee_yaw=True)
+    env = GraspEnv(task=task, control={"ee_yaw": True})
     try:
         assert _successes(env, expert_for(env), range(EPISODES)) >= AT_LEAST[task]
     finally:

@@ -15,9 +15,10 @@ from omegaconf import OmegaConf
 from omegaconf.errors import ConfigKeyError, ValidationError
 
 from rlgrasp.algos.registry import algorithms
-from rlgrasp.config import CONFIG_DIR, ConfigError, EnvConfig, validate_train
+from rlgrasp.config import CONFIG_DIR, ConfigError, validate_train
 from rlgrasp.envs import PandaGraspEnv
 from rlgrasp.envs.factory import env_factory
+from rlgrasp.envs.grasp_env import EnvConfig
 from rlgrasp.train.collectors import CollectorBackend, RayCollector, SingleCollector, collector_backend
 from rlgrasp.train.logger import ConsoleLogger
 
@@ -124,7 +125,7 @@ def test_the_core_names_no_algorithm() -> None:
 def test_grasp_ppo_defaults(train_cfg) -> None:
     cfg = train_cfg("experiment=grasp_ppo")
     assert cfg.env.randomization == "default"
-    assert cfg.env.control_mode == "joint_delta"
+    assert cfg.env.control.mode == "joint_delta"
     assert cfg.algo.loss.gamma == pytest.approx(0.9)
     assert list(cfg.model.hidden_sizes) == [256, 256]
     assert cfg.algo.loss.gae_every_epoch is False
@@ -132,18 +133,26 @@ def test_grasp_ppo_defaults(train_cfg) -> None:
 
 
 def test_env_schema_mirrors_the_constructor() -> None:
-    """Every keyword of PandaGraspEnv, with the same default: a new one is a new EnvConfig field."""
+    """Every part PandaGraspEnv takes, with the same default: a new one is a new EnvConfig field. A
+    part with a schema of its own (control, sim) defaults to None in the constructor, which builds
+    that schema's defaults, and no field of it is declared again anywhere."""
     params = inspect.signature(PandaGraspEnv.__init__).parameters
     ctor = {k: p.default for k, p in params.items() if k != "self"}
     fields = [f.name for f in dataclasses.fields(EnvConfig) if f.name != "_target_"]
-    schema = {name: getattr(EnvConfig(), name) for name in fields}
-    assert schema == ctor
+    assert fields == list(ctor) and len(ctor) <= 8
+    default = EnvConfig()
+    for name in fields:
+        value = getattr(default, name)
+        if dataclasses.is_dataclass(value):
+            assert ctor[name] is None and value == type(value)()
+        else:
+            assert value == ctor[name], name
 
 
 def test_env_factory_is_one_picklable_partial(train_cfg) -> None:
-    cfg = train_cfg("env.ee_yaw=true", "env.randomization={preset:none,object_mass:[0.5,1.0]}")
+    cfg = train_cfg("env.control.ee_yaw=true", "env.randomization={preset:none,object_mass:[0.5,1.0]}")
     make_env = pickle.loads(pickle.dumps(env_factory(cfg.env)))
-    assert make_env.keywords["ee_yaw"] is True
+    assert make_env.keywords["control"]["ee_yaw"] is True
     assert make_env.keywords["randomization"] == {"preset": "none", "object_mass": [0.5, 1.0]}
     assert type(make_env.keywords["randomization"]) is dict  # plain values, not OmegaConf nodes
     env = make_env()
@@ -163,7 +172,7 @@ def test_env_factory_is_one_picklable_partial(train_cfg) -> None:
         ("collector=bogus", ConfigCompositionException, ["collector", "process", "single"]),
         ("collector.ray.address=auto", ConfigKeyError, ["collector.ray"]),  # only collector=ray has it
         ("logger=mlflow logger.entity=me", ConfigKeyError, ["logger.entity"]),  # a W&B key
-        ("env.ee_yaw=maybe", ValidationError, ["env.ee_yaw", "maybe"]),
+        ("env.control.ee_yaw=maybe", ValidationError, ["env.control.ee_yaw", "maybe"]),
         ("env.ee_yew=true", ConfigKeyError, ["ee_yew"]),
     ],
 )

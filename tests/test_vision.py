@@ -324,15 +324,15 @@ def test_labelled_frames_aggregate_up_to_capacity():
 def test_a_teacher_of_another_layout_is_refused():
     spec = dict(SPEC, privileged_dim=45)
     with pytest.raises(CheckpointError, match="it reads 49 state values, this env's privileged state has 45"):
-        load_teacher("policies/grasp_objects_ppo.pt", spec, {"control_mode": "ee_delta", "ee_yaw": False})
+        load_teacher("policies/grasp_objects_ppo.pt", spec, {"control": {"mode": "ee_delta"}})
 
 
 def test_a_teacher_of_another_control_mode_is_refused():
     spec = dict(SPEC, privileged_dim=49)
     with pytest.raises(
-        CheckpointError, match="env.control_mode='joint_delta' in the teacher, 'ee_delta' here"
+        CheckpointError, match="env.control.mode='joint_delta' in the teacher, 'ee_delta' here"
     ):
-        load_teacher("policies/grasp_ppo.pt", spec, {"control_mode": "ee_delta", "ee_yaw": False})
+        load_teacher("policies/grasp_ppo.pt", spec, {"control": {"mode": "ee_delta", "ee_yaw": False}})
 
 
 @pytest.mark.parametrize("robot", ["kuka_iiwa", "xarm6"])
@@ -342,9 +342,7 @@ def test_a_teacher_of_another_arm_is_refused(robot):
     with pytest.raises(
         CheckpointError, match=f"it was trained on the robot 'panda' and this env has the robot '{robot}'"
     ) as info:
-        load_teacher(
-            "policies/grasp_ppo.pt", spec, {"control_mode": "joint_delta", "ee_yaw": False, "robot": robot}
-        )
+        load_teacher("policies/grasp_ppo.pt", spec, {"control": {"mode": "joint_delta"}, "robot": robot})
     assert "\n" not in str(info.value)
     load_teacher(
         "policies/grasp_ppo.pt", spec, {"control_mode": "joint_delta", "ee_yaw": False, "robot": "panda"}
@@ -406,7 +404,7 @@ def test_distillation_trains_checkpoints_resumes_and_evaluates(tmp_path, train_c
         ("algo.augment.grey=0.5", "algo.augment.grey=0.5: must be in [0, 1], and 0 unless algo.augment.kind"),
         ("algo.augment.shift=-1", "algo.augment.shift=-1: must be in [0, 16] pixels"),
         ("cameras=none", "env.camera=null: a camera policy needs a camera"),
-        ("env.control_mode=ee_delta", "it reads 49 state values, this env's privileged state has 45"),
+        ("env.control.mode=ee_delta", "it reads 49 state values, this env's privileged state has 45"),
     ],
 )
 def test_bad_distillation_input_is_one_line_before_any_worker(override, match, tmp_path, train_cfg):

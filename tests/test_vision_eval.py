@@ -18,8 +18,8 @@ from omegaconf import OmegaConf
 from tensordict import TensorDict
 
 from rlgrasp.compose import compose_config, compose_eval
-from rlgrasp.config import EnvConfig
 from rlgrasp.envs.factory import env_factory
+from rlgrasp.envs.grasp_env import EnvConfig
 from rlgrasp.evaluation import EvaluationError
 from rlgrasp.evaluation.cli import evaluate
 from rlgrasp.evaluation.enjoy import camera_line, gui_settings, play, register_enjoy_config, set_up_gui

@@ -17,9 +17,10 @@ import hydra
 from omegaconf import DictConfig, OmegaConf
 
 from rlgrasp.config import CONFIG_DIR, register_configs
-from rlgrasp.demos.dataset import layout_of, summary, write_demos
+from rlgrasp.demos.dataset import LAYOUT_KEYS, layout_of, summary, write_demos
 from rlgrasp.demos.record import record, to_frames
 from rlgrasp.envs.factory import env_factory
+from rlgrasp.envs.part_config import env_setting
 from rlgrasp.evaluation.policies import PolicySource
 from rlgrasp.overrides import entry_point, unwritable
 from rlgrasp.train.checkpoint import CheckpointError, load_checkpoint
@@ -47,9 +48,10 @@ def _source(cfg: DictConfig) -> tuple[PolicySource, dict[str, Any]]:
     finally:
         env.close()
     if cfg.policy == "scripted":
-        if env_cfg["control_mode"] != "ee_delta":
+        mode = env_setting(env_cfg, "control.mode", "ee_delta")
+        if mode != "ee_delta":
             raise DemosInputError(
-                f"env.control_mode={env_cfg['control_mode']}: the scripted expert acts in ee_delta "
+                f"env.control.mode={mode}: the scripted expert acts in ee_delta "
                 "(or give policy=<checkpoint> of a policy trained in this mode)"
             )
         return PolicySource("scripted", env_cfg), layout
@@ -58,11 +60,11 @@ def _source(cfg: DictConfig) -> tuple[PolicySource, dict[str, Any]]:
     except CheckpointError as exc:
         raise DemosInputError(f"policy={cfg.policy}: {exc}") from None
     theirs = ckpt["config"]["env"]
-    for key in ("control_mode", "ee_yaw", "robot"):
-        if theirs.get(key) != env_cfg.get(key):
+    for path, default in LAYOUT_KEYS.values():
+        if env_setting(theirs, path, default) != env_setting(env_cfg, path, default):
             raise DemosInputError(
-                f"policy={cfg.policy}: trained with env.{key}={theirs.get(key)!r}, "
-                f"this env has {env_cfg.get(key)!r}"
+                f"policy={cfg.policy}: trained with env.{path}={env_setting(theirs, path, default)!r}, "
+                f"this env has {env_setting(env_cfg, path, default)!r}"
             )
     if ckpt["spec"]["obs_dim"] != layout["obs_dim"] or ckpt.get("kind") == "vision":
         raise DemosInputError(f"policy={cfg.policy}: it does not read this env's observation vector")

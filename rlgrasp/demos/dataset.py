@@ -21,6 +21,7 @@ from tensordict import TensorDict
 
 from rlgrasp.config import ConfigError
 from rlgrasp.envs.cameras import GROUND_MASK_KEY, CameraSpec
+from rlgrasp.envs.part_config import env_setting
 from rlgrasp.envs.tasks import task_name
 from rlgrasp.models.cnn import IMAGE_KEYS
 from rlgrasp.models.spec import PRIVILEGED_KEY
@@ -30,8 +31,13 @@ from rlgrasp.train.legacy import nest_task
 FORMAT = 1
 META = "demos.json"
 FRAMES = "frames"
-#: The env keys that change what an observation or an action means.
-LAYOUT_KEYS = ("control_mode", "ee_yaw", "robot")
+#: The env settings that change what an observation or an action means: the name a demonstrations
+#: folder records each under (``demos.json``), its path in the env config and its default.
+LAYOUT_KEYS = {
+    "control_mode": ("control.mode", "ee_delta"),
+    "ee_yaw": ("control.ee_yaw", False),
+    "robot": ("robot", "panda"),
+}
 
 
 class DemoError(ConfigError):
@@ -76,7 +82,7 @@ def layout_of(env: Any, env_cfg: dict[str, Any]) -> dict[str, Any]:
         "obs_slices": {k: [s.start, s.stop] for k, s in env.unwrapped.obs_slices.items()},
         "images": {k: list(space[k].shape) for k in IMAGE_KEYS if camera and k in space.spaces},
         "camera_view": camera_view(env_cfg.get("camera")),
-        **{k: env_cfg.get(k) for k in LAYOUT_KEYS},
+        **{k: env_setting(env_cfg, path, default) for k, (path, default) in LAYOUT_KEYS.items()},
     }
 
 

@@ -34,7 +34,7 @@ class ArmRobot(Robot):
         ``collision``: a name of ``rlgrasp.envs.collision_model.COLLISION_MODELS``."""
         check_spec_values(spec)
         self.spec, self.client = spec, client
-        key = "robot_urdf" if model else "robot.model"
+        key = "env.robot.model"
         try:
             path = data_path(model or spec.model)
         except FileNotFoundError as exc:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -18,6 +19,25 @@ from rlgrasp.envs.robot import Robot
 
 WORKSPACE_LOW = np.array([0.3, -0.35, 0.005])  # grasp-point targets are clipped to this box;
 WORKSPACE_HIGH = np.array([0.85, 0.35, 0.45])  # the z floor keeps the fingertips off the ground
+
+
+@dataclass
+class ControlConfig:
+    """``env.control``: how actions drive the arm; each mode reads its own settings."""
+
+    mode: str = "ee_delta"  # ee_delta | joint_delta | joint_torque
+    ee_step: float = 0.04  # ee_delta: m the grasp point moves per unit action
+    ee_yaw: bool = False  # ee_delta: the hand's yaw is an action too (the fingers turn to the object)
+    yaw_step: float = 0.2  # ee_delta with ee_yaw: rad per unit action
+    joint_step: float = 0.05  # joint_delta: rad per unit action
+    torque_fraction: float = 0.3  # joint_torque: the share of each joint's torque limit per unit action
+    gravity_compensation: bool = True  # joint_torque: the arm's weight is held for the policy
+
+    def __post_init__(self) -> None:
+        if self.mode not in CONTROL_MODES:
+            raise ValueError(
+                f"unknown env.control.mode {self.mode!r}; valid modes: {', '.join(CONTROL_MODES)}"
+            )
 
 
 class ControlMode(ABC):
@@ -137,17 +157,15 @@ class JointTorque(ControlMode):
 CONTROL_MODES = ("ee_delta", "joint_delta", "joint_torque")
 
 
-def make_control(mode: str, robot: Robot, **settings: Any) -> ControlMode:
-    """The control mode called ``mode``, given the env's settings (each mode takes its own)."""
-    if mode == "ee_delta":
-        return EEDelta(robot, settings["ee_step"], settings["ee_yaw"], settings["yaw_step"])
-    if mode == "joint_delta":
-        return JointDelta(robot, settings["joint_step"])
-    if mode == "joint_torque":
-        if not robot.torque_control:
-            raise ValueError(
-                "control_mode=joint_torque: this arm's model has no meaningful dynamics "
-                "(robot.torque_control=false); use ee_delta or joint_delta"
-            )
-        return JointTorque(robot, settings["torque_fraction"], settings["gravity_compensation"])
-    raise ValueError(f"unknown control_mode {mode!r}; valid modes: {', '.join(CONTROL_MODES)}")
+def make_control(config: ControlConfig, robot: Robot) -> ControlMode:
+    """The control mode ``config.mode`` on ``robot``, with that mode's settings."""
+    if config.mode == "ee_delta":
+        return EEDelta(robot, config.ee_step, config.ee_yaw, config.yaw_step)
+    if config.mode == "joint_delta":
+        return JointDelta(robot, config.joint_step)
+    if not robot.torque_control:
+        raise ValueError(
+            "env.control.mode=joint_torque: this arm's model has no meaningful dynamics "
+            "(robot.torque_control=false); use ee_delta or joint_delta"
+        )
+    return JointTorque(robot, config.torque_fraction, config.gravity_compensation)

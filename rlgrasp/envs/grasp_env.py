@@ -1,11 +1,13 @@
-"""GraspEnv: the gymnasium env, built from a scene, a robot, a control mode, a task, a randomizer
-and an observation layout. Each part owns its bodies and state; the env only sequences them."""
+"""GraspEnv: the gymnasium env, given its parts (task, robot, objects, control, camera,
+randomization, sim) and its config node ``EnvConfig``. Each part owns its bodies and state; the env
+only sequences them."""
 
 from __future__ import annotations
 
 import collections
-import math
+import dataclasses
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 import gymnasium as gym
@@ -13,148 +15,97 @@ import numpy as np
 
 from rlgrasp.envs.cameras import GROUND_MASK_KEY, Camera, CameraSpec, ImageHistory, object_cells
 from rlgrasp.envs.collision_model import COLLISION_MODELS
-from rlgrasp.envs.control import CONTROL_MODES, make_control
+from rlgrasp.envs.control import ControlConfig, make_control
 from rlgrasp.envs.observation import PROPRIOCEPTION, ObservationLayout, full_parts
+from rlgrasp.envs.part_config import part_config
 from rlgrasp.envs.randomization import Randomizer
 from rlgrasp.envs.robot import make_robot
-from rlgrasp.envs.scene import MARKER_COLOUR, Scene
+from rlgrasp.envs.scene import MARKER_COLOUR, Scene, SimConfig
 from rlgrasp.envs.tasks import Task, make_task
 from rlgrasp.envs.visuals import VisualRandomizer
 
 
-def _check_args(
-    control_mode: str,
-    render_mode: str | None,
-    max_episode_steps: int,
-    substeps: int,
-    time_step: float,
-    collision_model: str,
-) -> None:
-    """Bad constructor values fail here, naming the argument, before a physics client exists."""
-    if control_mode not in CONTROL_MODES:
-        raise ValueError(f"unknown control_mode {control_mode!r}; valid modes: {', '.join(CONTROL_MODES)}")
-    if collision_model not in COLLISION_MODELS:
-        raise ValueError(f"unknown collision_model {collision_model!r}; valid: {', '.join(COLLISION_MODELS)}")
+def _check_args(render_mode: str | None, sim: SimConfig) -> None:
+    """Bad constructor values fail here, naming the key, before a physics client exists."""
+    if sim.collision_model not in COLLISION_MODELS:
+        raise ValueError(
+            f"unknown env.sim.collision_model {sim.collision_model!r}; valid: {', '.join(COLLISION_MODELS)}"
+        )
     modes = GraspEnv.metadata["render_modes"]
     if render_mode is not None and render_mode not in modes:
         raise ValueError(f"unknown render_mode {render_mode!r}; valid: {', '.join(modes)}")
-    for name, value in (("max_episode_steps", max_episode_steps), ("substeps", substeps)):
-        if int(value) != value or value < 1:
-            raise ValueError(f"{name} must be a positive integer, got {value!r}")
-    if not (time_step > 0 and math.isfinite(time_step)):
-        raise ValueError(f"time_step must be a positive number, got {time_step!r}")
 
 
 MARKER_ALPHA = MARKER_COLOUR[3]
 
 
 class GraspEnv(gym.Env):
-    """A robot arm grasps an object on the ground and lifts it.
+    """A robot arm grasps an object on the ground and, per ``task``, lifts, places, pushes or stacks it.
 
-    ``objects`` says which objects episodes draw (``rlgrasp.envs.objects``; default the cube),
-    ``robot`` which arm (a name of ``rlgrasp.envs.robot.ROBOTS``, or a user's arm as a mapping of
-    ``rlgrasp.envs.robot_spec.RobotSpec`` keys: docs/robots.md). Observation: one float32 vector of named
-    parts (``obs_slices``; ``rlgrasp.envs.observation``): ``object_pos``/``object_quat`` are the
-    object's base (centre of mass) pose, ``object_minus_grasp`` is its bounding-box centre minus the
-    grasp point and ``object_extents`` the bounding box's size in the object's own frame.
-    Action: a Box in [-1, 1]; the last entry is the absolute finger-width target (-1 closed,
-    +1 open); the others depend on ``control_mode`` (``rlgrasp.envs.control``): ``ee_delta``,
-    ``joint_delta`` or ``joint_torque``.
+    The env is given its parts, each a config node (``EnvConfig``) or its Python value:
+    ``task`` (``rlgrasp.envs.tasks``: success, reward terms, goal), ``robot`` (a name of
+    ``rlgrasp.envs.robot.ROBOTS``, ``{name: panda, model: <file>}`` for another model file of it, or a
+    user's arm as ``RobotSpec`` keys: docs/robots.md), ``objects`` (the sets episodes draw from:
+    ``rlgrasp.envs.objects``), ``control`` (``ControlConfig``: ``ee_delta``, ``joint_delta`` or
+    ``joint_torque`` and their steps), ``camera`` (``CameraSpec`` keys, or none), ``randomization``
+    (a physics preset or ranges: ``rlgrasp.envs.randomization``), ``sim`` (``SimConfig``: stepping,
+    episode length, contact shapes, the visual preset, the viewer) and gymnasium's ``render_mode``.
 
-    With a ``camera`` (``rlgrasp.envs.cameras.CameraSpec`` keys) the observation is a ``Dict``:
-    ``state`` (proprioception only: nothing about the object), ``depth`` and/or ``rgb`` (channel
-    first) and ``privileged`` (the flat state vector above, for a teacher or a critic). ``visual``
-    names a visual randomization preset (``rlgrasp.envs.visuals``). ``collision_model``: ``mesh`` (the
-    arm's own collision meshes) or ``primitive`` (boxes and capsules for the hand and fingers:
-    ``rlgrasp.envs.collision_model``; the shipped policies were trained on the meshes).
+    Observation: one float32 vector of named parts (``obs_slices``; ``rlgrasp.envs.observation``);
+    a goal task's is gymnasium-robotics' ``Dict`` (``env.task.observation=dict``). With a camera it is
+    a ``Dict`` of ``state`` (proprioception only), ``depth`` and/or ``rgb`` (channel first) and
+    ``privileged`` (the flat state, for a teacher or a critic). Action: a Box in [-1, 1] whose last
+    entry is the absolute finger-width target (-1 closed, +1 open).
     """
 
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 20}
 
     def __init__(
         self,
-        control_mode: str = "ee_delta",
-        randomization: str | Mapping[str, Any] | None = "default",
-        max_episode_steps: int = 50,
-        time_step: float = 1.0 / 240.0,
-        substeps: int = 12,
         task: str | Mapping[str, Any] = "lift",
-        ee_step: float = 0.04,
-        ee_yaw: bool = False,
-        yaw_step: float = 0.2,
-        joint_step: float = 0.05,
-        torque_fraction: float = 0.3,
-        gravity_compensation: bool = True,
-        render_mode: str | None = None,
-        render_width: int = 320,
-        render_height: int = 240,
-        camera_distance: float = 1.1,
-        camera_yaw: float = 60.0,
-        camera_pitch: float = -25.0,
-        solver_iterations: int = 20,
         robot: str | Mapping[str, Any] = "panda",
-        robot_urdf: str | None = None,
         objects: str | list[str] | Mapping[str, Any] | None = "cube",
+        control: str | Mapping[str, Any] | ControlConfig | None = None,
         camera: Mapping[str, Any] | None = None,
-        visual: str | None = "none",
-        collision_model: str = "mesh",
+        randomization: str | Mapping[str, Any] | None = "default",
+        sim: Mapping[str, Any] | SimConfig | None = None,
+        render_mode: str | None = None,
     ):
-        _check_args(control_mode, render_mode, max_episode_steps, substeps, time_step, collision_model)
+        control = ControlConfig(mode=control) if isinstance(control, str) else control
+        self.control_config = part_config(ControlConfig, control, "env.control")
+        self.sim = part_config(SimConfig, sim, "env.sim")
+        _check_args(render_mode, self.sim)
         camera_spec = CameraSpec.from_config(camera) if camera else None
         self.randomizer = Randomizer(randomization)
-        self.max_episode_steps, self.substeps = int(max_episode_steps), int(substeps)
+        self.max_episode_steps, self.substeps = int(self.sim.max_episode_steps), int(self.sim.substeps)
         self.render_mode = render_mode
-        self.viewer = dict(
-            width=render_width,
-            height=render_height,
-            distance=camera_distance,
-            yaw=camera_yaw,
-            pitch=camera_pitch,
-        )
-        self.metadata = {**self.metadata, "render_fps": round(1.0 / (time_step * substeps))}
-
-        self._build_world(
-            time_step, solver_iterations, robot, robot_urdf, camera_spec, visual, collision_model
-        )
+        self.viewer = dataclasses.asdict(self.sim.viewer)
+        self.metadata = {**self.metadata, "render_fps": round(1.0 / (self.sim.time_step * self.substeps))}
+        self._build_world(robot, camera_spec)
         self._build_task(objects, task)
-        self.control_mode = control_mode
-        self._build_control(
-            ee_step=ee_step,
-            ee_yaw=ee_yaw,
-            yaw_step=yaw_step,
-            joint_step=joint_step,
-            torque_fraction=torque_fraction,
-            gravity_compensation=gravity_compensation,
-        )
+        self.control_mode = self.control_config.mode
+        self._build_control()
         self._build_spaces()
 
-    def _build_control(self, **settings: Any) -> None:
+    def _build_control(self) -> None:
         """The control mode's part, on the arm just built; the world is closed if the arm refuses
         the mode (joint_torque without meaningful dynamics)."""
         try:
-            self.control = make_control(self.control_mode, self.robot, **settings)
+            self.control = make_control(self.control_config, self.robot)
         except BaseException:
             self.close()
             raise
 
-    def _build_world(
-        self,
-        time_step: float,
-        solver_iterations: int,
-        robot: str | Mapping[str, Any],
-        robot_urdf: str | None,
-        camera_spec: CameraSpec | None,
-        visual: str | None,
-        collision_model: str,
-    ) -> None:
+    def _build_world(self, robot: str | Mapping[str, Any], camera_spec: CameraSpec | None) -> None:
         """The physics client, the robot (its cheap render model when a camera looks), the camera and
         the visual randomizer; the saved world each reset restores."""
-        self.scene = Scene(time_step, gui=self.render_mode == "human", solver_iterations=solver_iterations)
+        sim = self.sim
+        self.scene = Scene(sim.time_step, self.render_mode == "human", sim.solver_iterations)
         self.client = self.scene.client
         try:
             render = None if camera_spec is None else "wrist" if camera_spec.mount == "wrist" else "low_poly"
-            self.robot = make_robot(robot, self.client, robot_urdf, render, collision_model)
-            self.visuals = VisualRandomizer(visual, self.client)
+            self.robot = make_robot(robot, self.client, render=render, collision=sim.collision_model)
+            self.visuals = VisualRandomizer(sim.visual, self.client)
             self.camera = Camera(camera_spec, self.client) if camera_spec else None
             self.image_history = ImageHistory(camera_spec.frames if camera_spec else 1)
         except BaseException:
@@ -400,3 +351,30 @@ class GraspEnv(gym.Env):
     @property
     def object_extents(self) -> np.ndarray:
         return self.task.object_extents
+
+
+@dataclass
+class EnvConfig:
+    """``env``: ``GraspEnv``'s constructor as a ``_target_`` node, one field per part.
+
+    Built everywhere with ``hydra.utils.instantiate(cfg.env, _partial_=True)`` (see
+    ``rlgrasp.envs.factory.env_factory``); a test checks that the fields mirror the constructor. The
+    config groups set the parts: ``task=``, ``robot=``, ``objects=``, ``cameras=``,
+    ``randomization=``, ``visual=`` (``env.sim.visual``).
+    """
+
+    _target_: str = "rlgrasp.envs.PandaGraspEnv"
+    # A `_target_` node of rlgrasp.envs.tasks (lift, pick_place, push, stack, or a task class of your
+    # own) with its keywords, e.g. env.task.reward=sparse. Typed Any: each task checks its own keywords.
+    task: Any = "lift"
+    # An arm of rlgrasp.envs.robot.ROBOTS, {name: panda, model: <file>}, or a user's arm as a mapping
+    # of rlgrasp.envs.robot_spec.RobotSpec keys (docs/robots.md).
+    robot: Any = "panda"
+    # A set name, a list of set names, or a mapping with sets / paths / max_width / scale
+    # (rlgrasp/envs/objects.py).
+    objects: Any = "cube"
+    control: ControlConfig = field(default_factory=ControlConfig)
+    camera: Any = None  # null, or rlgrasp.envs.cameras.CameraSpec keys (the `cameras` group)
+    randomization: Any = "default"  # a preset name (the `randomization` group) or a mapping of ranges
+    sim: SimConfig = field(default_factory=SimConfig)
+    render_mode: str | None = None

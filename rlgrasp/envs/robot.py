@@ -69,10 +69,12 @@ def make_robot(
     render: str | None = None,
     collision: str = "mesh",
 ) -> Robot:
-    """The arm ``name`` (see ``resolve_robot``); ``model`` overrides its model file (a path or a
-    pybullet_data name); ``render`` asks for the model cameras render cheaply (``low_poly``, or
-    ``wrist``: only what a wrist camera sees); ``collision`` for its collision shapes
-    (``rlgrasp.envs.collision_model``)."""
+    """The arm ``name`` (see ``resolve_robot``; ``{name: panda, model: ...}`` is a registered arm with
+    another model file); ``model`` overrides its model file (a path or a pybullet_data name);
+    ``render`` asks for the model cameras render cheaply (``low_poly``, or ``wrist``: only what a
+    wrist camera sees); ``collision`` for its collision shapes (``rlgrasp.envs.collision_model``)."""
+    if isinstance(name, Mapping) and set(name) <= {"name", "model"} and "name" in name:
+        name, model = name["name"], name.get("model") or model  # a registered arm, another model file
     arm = resolve_robot(name)
     if isinstance(arm, RobotSpec):
         return ArmRobot(arm, client, model, render=render, collision=collision)

@@ -9,7 +9,9 @@ frees a removed body's shapes.
 from __future__ import annotations
 
 import functools
+import math
 import os
+from dataclasses import dataclass, field
 
 import numpy as np
 import pybullet
@@ -23,6 +25,44 @@ MESH_COLOUR = (0.57, 0.85, 0.78, 1.0)
 GROUND_COLOUR = (0.8, 0.8, 0.8, 1.0)
 MARKER_COLOUR = (0.1, 0.8, 0.2, 0.6)
 VIEWER_TARGET = (0.45, 0.0, 0.2)  # the viewer looks a little in front of the object's nominal place
+
+
+@dataclass
+class ViewerConfig:
+    """``env.sim.viewer``: the camera people's renders (``render_mode``) look through, not a policy's."""
+
+    width: int = 320
+    height: int = 240
+    distance: float = 1.1
+    yaw: float = 60.0
+    pitch: float = -25.0
+
+
+@dataclass
+class SimConfig:
+    """``env.sim``: how the world is simulated and shown: physics stepping, episode length, the
+    hand's contact shapes, the visual preset and the viewer."""
+
+    time_step: float = 1.0 / 240.0  # one control step = substeps x time_step seconds
+    substeps: int = 12
+    solver_iterations: int = 20
+    max_episode_steps: int = 50
+    # mesh: the arm's own collision meshes; primitive: boxes and capsules for the Panda's hand and
+    # fingers (rlgrasp/envs/collision_model.py). The shipped policies were trained on the meshes.
+    collision_model: str = "mesh"
+    visual: str = (
+        "none"  # the looks drawn per episode: none | default | wide | heldout | ... (`visual` group)
+    )
+    viewer: ViewerConfig = field(default_factory=ViewerConfig)
+
+    def __post_init__(self) -> None:
+        """Bad values fail here, naming the key, before a physics client exists."""
+        for name in ("max_episode_steps", "substeps", "solver_iterations"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or int(value) != value or value < 1:
+                raise ValueError(f"env.sim.{name} must be a positive integer, got {value!r}")
+        if not (self.time_step > 0 and math.isfinite(self.time_step)):
+            raise ValueError(f"env.sim.time_step must be a positive number, got {self.time_step!r}")
 
 
 def data_path(name: str) -> str:

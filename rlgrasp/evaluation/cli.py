@@ -21,6 +21,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from rlgrasp.config import CONFIG_DIR, register_configs
 from rlgrasp.envs import Randomizer
+from rlgrasp.envs.part_config import env_setting
 from rlgrasp.evaluation import metrics as M
 from rlgrasp.evaluation.episodes import episode_seeds, timed_run
 from rlgrasp.evaluation.plots import (
@@ -259,7 +260,9 @@ def _write_artefacts(
             )
             files.append("success_by_visual.png")
     if fmt:
-        step_s = source.env_cfg.get("time_step", 1 / 240) * source.env_cfg.get("substeps", 12)
+        step_s = env_setting(source.env_cfg, "sim.time_step", 1 / 240) * env_setting(
+            source.env_cfg, "sim.substeps", 12
+        )
         for r in results:
             if r.frames:
                 path = write_video(

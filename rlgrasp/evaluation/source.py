@@ -18,7 +18,8 @@ from hydra.errors import InstantiationException
 from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from rlgrasp.config import EnvConfig
+from rlgrasp.envs.grasp_env import EnvConfig
+from rlgrasp.envs.part_config import env_setting
 from rlgrasp.envs.robot import robot_label
 from rlgrasp.evaluation.policies import POLICIES, PolicySource, build_policy
 from rlgrasp.models.cnn import image_specs
@@ -205,7 +206,7 @@ def _checkpoint_info(full: dict[str, Any], path: Path, kind: str) -> dict[str, A
         # What it was trained on: an evaluation elsewhere says so (rlgrasp.evaluation.cli.conditions).
         "train_objects": env_cfg.get("objects", "cube"),
         "train_randomization": env_cfg.get("randomization", "default"),
-        "train_visual": env_cfg.get("visual", "none"),
+        "train_visual": env_setting(env_cfg, "sim.visual", "none"),
         "train_camera": env_cfg.get("camera"),
         "teacher": _teacher_of(full["config"].get("algo") or {}),
     }

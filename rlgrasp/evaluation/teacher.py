@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rlgrasp.envs.part_config import env_setting
 from rlgrasp.evaluation.policies import PolicySource, build_policy
 from rlgrasp.evaluation.source import (
     ENV_ERRORS,
@@ -26,7 +27,7 @@ from rlgrasp.models.cnn import image_specs
 from rlgrasp.train.checkpoint import resolve_policy_path
 
 #: Env keys a teacher must share with the student's env beyond the layout (same sizes, other meaning).
-SAME_ENV_KEYS = ("control_mode", "ee_yaw")
+SAME_ENV_KEYS = ("control.mode", "control.ee_yaw")
 
 
 def teacher_path(value: str, source: PolicySource) -> Path | None:
@@ -74,10 +75,9 @@ def prepare_teacher(value: str, source: PolicySource) -> PolicySource | None:
             f"{where}: the teacher must be a state policy, {path} is {describe_policy(spec)}"
         )
     for key in SAME_ENV_KEYS:
-        if t_env.get(key) != source.env_cfg.get(key):
-            raise EvaluationError(
-                f"{where}: env.{key}={t_env.get(key)!r} in the teacher, {source.env_cfg.get(key)!r} here"
-            )
+        theirs, ours = env_setting(t_env, key), env_setting(source.env_cfg, key)
+        if theirs != ours:
+            raise EvaluationError(f"{where}: env.{key}={theirs!r} in the teacher, {ours!r} here")
     teacher = dataclasses.replace(
         source,
         ckpt={k: full[k] for k in POLICY_KEYS if k in full},

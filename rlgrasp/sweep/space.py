@@ -2,7 +2,7 @@
 keys, and a trial's values -> Hydra overrides.
 
 A categorical whose ``choices`` is a mapping is a named choice that sets several training keys, e.g.
-``control: {type: categorical, choices: {ee_delta_yaw: {env: {control_mode: ee_delta, ee_yaw: true}},
+``control: {type: categorical, choices: {ee_delta_yaw: {env: {control: {mode: ee_delta, ee_yaw: true}}},
 ...}}``: Optuna samples the names; each name stands for the keys under it.
 """
 
@@ -96,7 +96,7 @@ def _named_choices(key: str, spec: Mapping[str, Any]) -> dict[str, dict[str, Any
         if not isinstance(keys, Mapping) or not keys:
             raise ValueError(
                 f"sweep.params.{key}.choices.{name}: must map training keys to values, "
-                f"e.g. {{env: {{control_mode: ee_delta}}}}"
+                f"e.g. {{env: {{control: {{mode: ee_delta}}}}}}"
             )
         out[str(name)] = flatten(keys)
     return out

@@ -14,6 +14,7 @@ from tensordict import TensorDictBase
 from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
 
 from rlgrasp.envs.factory import env_factory
+from rlgrasp.envs.part_config import env_setting
 from rlgrasp.train.collect import EnvFactory, make_batched_env
 from rlgrasp.utils import plain
 
@@ -124,4 +125,6 @@ def periodic_evaluator(make_env: EnvFactory, cfg: Any) -> Evaluator:
     if e.get("randomization") is not None:
         make_env = env_factory({**plain(cfg.env), "randomization": plain(e.randomization)})
     seed = cfg.seed * 1_000_003 + e.seed_offset
-    return Evaluator(make_env, cfg.env.get("max_episode_steps", 50), e.episodes, e.num_envs, seed)
+    return Evaluator(
+        make_env, env_setting(cfg.env, "sim.max_episode_steps", 50), e.episodes, e.num_envs, seed
+    )

@@ -11,7 +11,7 @@ from __future__ import annotations
 from typing import Any
 
 from rlgrasp.algos.registry import term_targets
-from rlgrasp.config import moved_algo_key
+from rlgrasp.config import ENV_KEYS, moved_algo_key
 
 
 def nest_algo(algo: dict[str, Any]) -> dict[str, Any]:
@@ -67,3 +67,24 @@ def nest_task(env: dict[str, Any]) -> dict[str, Any]:
                 task[new] = value
     env["task"] = task
     return env
+
+
+def nest_env(env: dict[str, Any]) -> dict[str, Any]:
+    """An ``env`` node of before the env took parts (``control_mode``, ``ee_yaw``, ``time_step``, ...
+    as its own keywords: ``rlgrasp.config.ENV_KEYS``) with them under ``env.control`` and ``env.sim``
+    (a copy; one of today's shape comes back unchanged). A ``robot_urdf`` becomes
+    ``env.robot: {name: <arm>, model: <file>}``."""
+    env = nest_task(env)
+    if not any(key in env for key in ENV_KEYS):
+        return env
+    model = env.pop("robot_urdf", None)
+    nested = {k: dict(v) if isinstance(v, dict) else v for k, v in env.items() if k not in ENV_KEYS}
+    for key in [k for k in env if k in ENV_KEYS]:
+        node = nested
+        *parents, leaf = ENV_KEYS[key].split(".")
+        for part in parents:
+            node = node.setdefault(part, {})
+        node[leaf] = env[key]
+    if model is not None and isinstance(nested.get("robot", "panda"), str):
+        nested["robot"] = {"name": nested.get("robot", "panda"), "model": model}
+    return nested
