@@ -296,9 +296,9 @@ def describe(ckpt: dict[str, Any], ckpt_path: Path, env: Any) -> dict[str, Any]:
         "action_meaning": action_meaning(env_cfg),
         "action_low": list(spec["action_low"]),
         "action_high": list(spec["action_high"]),
-        "control_mode": env_setting(env_cfg, "control.mode", "ee_delta"),
+        "control_mode": env_setting(env_cfg, "control.mode"),
         "control_hz": round(
-            1.0 / (env_setting(env_cfg, "sim.time_step", 1 / 240) * env_setting(env_cfg, "sim.substeps", 12))
+            1.0 / (env_setting(env_cfg, "sim.time_step") * env_setting(env_cfg, "sim.substeps"))
         ),
         "normalization": normalization if model.get("obs_norm", True) else "none",
         "deterministic": (

@@ -219,8 +219,14 @@ TRAIN = [
         ["algo.schedule.desired_kl=0"],
         "algo.schedule.desired_kl=0.0: must be > 0 or null",
     ),
-    ("no substeps", ["env.sim.substeps=0"], "env: substeps must be a positive integer, got 0"),
-    ("unknown control mode", ["env.control.mode=fly"], "env: unknown control_mode 'fly'; valid modes"),
+    ("no substeps", ["env.sim.substeps=0"], "env: sim.substeps must be a positive integer, got 0"),
+    ("unknown control mode", ["env.control.mode=fly"], "env: unknown control.mode 'fly'; valid modes"),
+    (
+        "an env key of before the env took parts",
+        ["env.control_mode=joint_delta"],
+        "env.control_mode=joint_delta: unknown key 'control_mode'; env has _target_, task, robot, objects, "
+        "control, camera, randomization, sim, render_mode; env.control_mode is env.control.mode now",
+    ),
     ("no hidden layers", ["model.hidden_sizes=[]"], "model.hidden_sizes=[]: must be a non-empty list"),
     (
         "unknown action distribution",
@@ -541,7 +547,7 @@ EVAL = [
     ("no workers", ["workers=0"], "workers=0: must be at least 1"),
     ("missing checkpoint", ["ckpt={root}/nowhere.pt"], "missing checkpoint: "),
     ("truncated checkpoint", ["ckpt={truncated}"], "corrupt checkpoint: "),
-    ("unknown env keyword", ["env.grip=1"], "env.grip: unknown key 'grip'; env has _target_, control_mode"),
+    ("unknown env keyword", ["env.grip=1"], "env.grip: unknown key 'grip'; env has _target_, task, robot"),
     ("env the checkpoint cannot act in", ["env.control.mode=joint_delta"], "action layout mismatch"),
     (
         "a checkpoint of another arm",

@@ -99,3 +99,33 @@ def test_the_cached_client_fails_after_close_as_pybullet_does():
             client.getNumBodies()
     finally:
         other.close()
+
+
+def test_an_env_config_of_before_the_parts_is_read_into_them() -> None:
+    """Checkpoints written when the env took flat keywords (policies/*.pt) build today's env."""
+    from rlgrasp.envs.factory import env_factory
+    from rlgrasp.train.legacy import nest_env
+
+    old = {
+        "_target_": "rlgrasp.envs.PandaGraspEnv",
+        "control_mode": "joint_delta",
+        "ee_yaw": False,
+        "max_episode_steps": 7,
+        "render_width": 64,
+        "visual": "default",
+        "robot": "panda",
+        "robot_urdf": "franka_panda/panda.urdf",
+        "reward": "sparse",
+    }
+    new = nest_env(old)
+    assert new["control"] == {"mode": "joint_delta", "ee_yaw": False}
+    assert new["sim"] == {"max_episode_steps": 7, "visual": "default", "viewer": {"width": 64}}
+    assert new["robot"] == {"name": "panda", "model": "franka_panda/panda.urdf"}
+    assert new["task"]["reward"] == "sparse" and nest_env(new) == new
+    env = env_factory(new)()
+    try:
+        env.reset(seed=0)
+        ends = [env.step(env.action_space.sample())[3] for _ in range(7)]
+        assert ends == [False] * 6 + [True] and env.action_space.shape == (8,)
+    finally:
+        env.close()

@@ -433,7 +433,7 @@ def test_torque_control_is_refused_where_the_model_says_it_is_not_meaningful(mon
 
     monkeypatch.setattr(grasp_env, "Scene", RecordedScene)
     mapping = {**dataclasses.asdict(PANDA), "torque_control": False, "fingers": PANDA_FINGERS}
-    with pytest.raises(ValueError, match="env.control.mode=joint_torque: this arm's model has no meaningful"):
+    with pytest.raises(ValueError, match="control.mode=joint_torque: this arm's model has no meaningful"):
         PandaGraspEnv(robot=mapping, control={"mode": "joint_torque"})
     # The refused env leaves no physics server behind for the garbage collector.
     assert len(scenes) == 1 and not pybullet.isConnected(scenes[0].client._client)

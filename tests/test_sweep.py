@@ -73,7 +73,7 @@ def test_sweep_fails_prunes_resumes_and_summarizes(tmp_path: Path) -> None:
         "sweep.n_trials=3",
         "sweep.plots=false",
         # trial 0 crashes (unknown control mode), trial 1 runs as sampled
-        "sweep.enqueue=[{env:{control_mode:bogus}},{algo:{optim:{epochs:1}}}]",
+        "sweep.enqueue=[{env:{control:{mode:bogus}}},{algo:{optim:{epochs:1}}}]",
     ]
     train = ["experiment=smoke"]
     study_dir = root / "smoke"

@@ -344,9 +344,7 @@ def test_a_teacher_of_another_arm_is_refused(robot):
     ) as info:
         load_teacher("policies/grasp_ppo.pt", spec, {"control": {"mode": "joint_delta"}, "robot": robot})
     assert "\n" not in str(info.value)
-    load_teacher(
-        "policies/grasp_ppo.pt", spec, {"control_mode": "joint_delta", "ee_yaw": False, "robot": "panda"}
-    )
+    load_teacher("policies/grasp_ppo.pt", spec, {"control": {"mode": "joint_delta"}, "robot": "panda"})
 
 
 SMALL_DISTILL = (

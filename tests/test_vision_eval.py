@@ -98,7 +98,7 @@ def test_camera_policy_beside_its_teacher_on_held_out_visuals(student: Path, tmp
     assert t["paired"]["both"] + t["paired"]["student_only"] == s_rate["successes"]
     assert t["paired"]["both"] + t["paired"]["teacher_only"] == t_rate["successes"]
     assert m["visual_label"] == "heldout (trained on default)"
-    assert m["config"]["env"]["visual"] == "heldout"
+    assert m["config"]["env"]["sim"]["visual"] == "heldout"
     summary = (out / "summary.md").read_text()
     assert "teacher success at end, same episodes [95% Wilson]" in summary
     assert "student / teacher success at end" in summary and "heldout (trained on default)" in summary
@@ -147,7 +147,7 @@ def test_teacher_options(student: Path, tmp_path: Path) -> None:
         r"this is a state policy \(\d+ state values\)",
     ):
         prepare_teacher(str(TEACHER), state)
-    with pytest.raises(EvaluationError, match="control_mode='ee_delta' in the teacher, 'joint_delta' here"):
+    with pytest.raises(EvaluationError, match="control.mode='ee_delta' in the teacher, 'joint_delta' here"):
         prepare_teacher(str(run), source)
     with pytest.raises(EvaluationError, match="teacher=.*nowhere.pt: missing checkpoint"):
         prepare_teacher(str(tmp_path / "nowhere.pt"), source)

@@ -48,7 +48,7 @@ def _source(cfg: DictConfig) -> tuple[PolicySource, dict[str, Any]]:
     finally:
         env.close()
     if cfg.policy == "scripted":
-        mode = env_setting(env_cfg, "control.mode", "ee_delta")
+        mode = env_setting(env_cfg, "control.mode")
         if mode != "ee_delta":
             raise DemosInputError(
                 f"env.control.mode={mode}: the scripted expert acts in ee_delta "
@@ -60,11 +60,11 @@ def _source(cfg: DictConfig) -> tuple[PolicySource, dict[str, Any]]:
     except CheckpointError as exc:
         raise DemosInputError(f"policy={cfg.policy}: {exc}") from None
     theirs = ckpt["config"]["env"]
-    for path, default in LAYOUT_KEYS.values():
-        if env_setting(theirs, path, default) != env_setting(env_cfg, path, default):
+    for path in LAYOUT_KEYS.values():
+        if env_setting(theirs, path) != env_setting(env_cfg, path):
             raise DemosInputError(
-                f"policy={cfg.policy}: trained with env.{path}={env_setting(theirs, path, default)!r}, "
-                f"this env has {env_setting(env_cfg, path, default)!r}"
+                f"policy={cfg.policy}: trained with env.{path}={env_setting(theirs, path)!r}, "
+                f"this env has {env_setting(env_cfg, path)!r}"
             )
     if ckpt["spec"]["obs_dim"] != layout["obs_dim"] or ckpt.get("kind") == "vision":
         raise DemosInputError(f"policy={cfg.policy}: it does not read this env's observation vector")

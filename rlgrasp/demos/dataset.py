@@ -32,12 +32,8 @@ FORMAT = 1
 META = "demos.json"
 FRAMES = "frames"
 #: The env settings that change what an observation or an action means: the name a demonstrations
-#: folder records each under (``demos.json``), its path in the env config and its default.
-LAYOUT_KEYS = {
-    "control_mode": ("control.mode", "ee_delta"),
-    "ee_yaw": ("control.ee_yaw", False),
-    "robot": ("robot", "panda"),
-}
+#: folder records each under (``demos.json``) and its path in the env config.
+LAYOUT_KEYS = {"control_mode": "control.mode", "ee_yaw": "control.ee_yaw", "robot": "robot"}
 
 
 class DemoError(ConfigError):
@@ -82,7 +78,7 @@ def layout_of(env: Any, env_cfg: dict[str, Any]) -> dict[str, Any]:
         "obs_slices": {k: [s.start, s.stop] for k, s in env.unwrapped.obs_slices.items()},
         "images": {k: list(space[k].shape) for k in IMAGE_KEYS if camera and k in space.spaces},
         "camera_view": camera_view(env_cfg.get("camera")),
-        **{k: env_setting(env_cfg, path, default) for k, (path, default) in LAYOUT_KEYS.items()},
+        **{k: env_setting(env_cfg, path) for k, path in LAYOUT_KEYS.items()},
     }
 
 

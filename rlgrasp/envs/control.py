@@ -35,9 +35,7 @@ class ControlConfig:
 
     def __post_init__(self) -> None:
         if self.mode not in CONTROL_MODES:
-            raise ValueError(
-                f"unknown env.control.mode {self.mode!r}; valid modes: {', '.join(CONTROL_MODES)}"
-            )
+            raise ValueError(f"unknown control.mode {self.mode!r}; valid modes: {', '.join(CONTROL_MODES)}")
 
 
 class ControlMode(ABC):
@@ -165,7 +163,7 @@ def make_control(config: ControlConfig, robot: Robot) -> ControlMode:
         return JointDelta(robot, config.joint_step)
     if not robot.torque_control:
         raise ValueError(
-            "env.control.mode=joint_torque: this arm's model has no meaningful dynamics "
+            "control.mode=joint_torque: this arm's model has no meaningful dynamics "
             "(robot.torque_control=false); use ee_delta or joint_delta"
         )
     return JointTorque(robot, config.torque_fraction, config.gravity_compensation)

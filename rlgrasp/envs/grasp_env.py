@@ -29,7 +29,7 @@ def _check_args(render_mode: str | None, sim: SimConfig) -> None:
     """Bad constructor values fail here, naming the key, before a physics client exists."""
     if sim.collision_model not in COLLISION_MODELS:
         raise ValueError(
-            f"unknown env.sim.collision_model {sim.collision_model!r}; valid: {', '.join(COLLISION_MODELS)}"
+            f"unknown sim.collision_model {sim.collision_model!r}; valid: {', '.join(COLLISION_MODELS)}"
         )
     modes = GraspEnv.metadata["render_modes"]
     if render_mode is not None and render_mode not in modes:
@@ -72,8 +72,8 @@ class GraspEnv(gym.Env):
         render_mode: str | None = None,
     ):
         control = ControlConfig(mode=control) if isinstance(control, str) else control
-        self.control_config = part_config(ControlConfig, control, "env.control")
-        self.sim = part_config(SimConfig, sim, "env.sim")
+        self.control_config = part_config(ControlConfig, control, "control")
+        self.sim = part_config(SimConfig, sim, "sim")
         _check_args(render_mode, self.sim)
         camera_spec = CameraSpec.from_config(camera) if camera else None
         self.randomizer = Randomizer(randomization)

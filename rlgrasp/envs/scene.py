@@ -60,9 +60,9 @@ class SimConfig:
         for name in ("max_episode_steps", "substeps", "solver_iterations"):
             value = getattr(self, name)
             if isinstance(value, bool) or int(value) != value or value < 1:
-                raise ValueError(f"env.sim.{name} must be a positive integer, got {value!r}")
+                raise ValueError(f"sim.{name} must be a positive integer, got {value!r}")
         if not (self.time_step > 0 and math.isfinite(self.time_step)):
-            raise ValueError(f"env.sim.time_step must be a positive number, got {self.time_step!r}")
+            raise ValueError(f"sim.time_step must be a positive number, got {self.time_step!r}")
 
 
 def data_path(name: str) -> str:

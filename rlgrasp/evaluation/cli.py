@@ -186,12 +186,12 @@ def conditions(source: Any) -> dict[str, str]:
     """The objects and the randomization the episodes use (for a camera env also the camera and the
     visuals), and whether the checkpoint trained on them: a held-out figure must say so, and so must
     one that is not."""
-    keys = ["objects", "randomization"]
+    paths = {"objects": "objects", "randomization": "randomization"}
     if source.env_cfg.get("camera"):
-        keys += ["camera", "visual"]
+        paths.update(camera="camera", visual="sim.visual")
     labels, info = {}, source.info or {}
-    for key in keys:
-        used = describe(source.env_cfg.get(key))
+    for key, path in paths.items():
+        used = describe(env_setting(source.env_cfg, path))
         trained = info.get(f"train_{key}")
         if trained is None and f"train_{key}" not in info:
             labels[key] = used
@@ -260,9 +260,7 @@ def _write_artefacts(
             )
             files.append("success_by_visual.png")
     if fmt:
-        step_s = env_setting(source.env_cfg, "sim.time_step", 1 / 240) * env_setting(
-            source.env_cfg, "sim.substeps", 12
-        )
+        step_s = env_setting(source.env_cfg, "sim.time_step") * env_setting(source.env_cfg, "sim.substeps")
         for r in results:
             if r.frames:
                 path = write_video(

@@ -206,7 +206,7 @@ def _checkpoint_info(full: dict[str, Any], path: Path, kind: str) -> dict[str, A
         # What it was trained on: an evaluation elsewhere says so (rlgrasp.evaluation.cli.conditions).
         "train_objects": env_cfg.get("objects", "cube"),
         "train_randomization": env_cfg.get("randomization", "default"),
-        "train_visual": env_setting(env_cfg, "sim.visual", "none"),
+        "train_visual": env_setting(env_cfg, "sim.visual"),
         "train_camera": env_cfg.get("camera"),
         "teacher": _teacher_of(full["config"].get("algo") or {}),
     }

@@ -10,11 +10,11 @@ import math
 from typing import Any
 
 import torch
+from omegaconf import OmegaConf
 from tensordict import TensorDictBase
 from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
 
 from rlgrasp.envs.factory import env_factory
-from rlgrasp.envs.part_config import env_setting
 from rlgrasp.train.collect import EnvFactory, make_batched_env
 from rlgrasp.utils import plain
 
@@ -126,5 +126,5 @@ def periodic_evaluator(make_env: EnvFactory, cfg: Any) -> Evaluator:
         make_env = env_factory({**plain(cfg.env), "randomization": plain(e.randomization)})
     seed = cfg.seed * 1_000_003 + e.seed_offset
     return Evaluator(
-        make_env, env_setting(cfg.env, "sim.max_episode_steps", 50), e.episodes, e.num_envs, seed
+        make_env, OmegaConf.select(cfg.env, "sim.max_episode_steps", default=50), e.episodes, e.num_envs, seed
     )

@@ -50,6 +50,7 @@ def algorithm_state(state: dict[str, Any]) -> dict[str, Any] | None:
 #: The env's keywords of before the task was a part, now the lift task's (``env.task``).
 TASK_KEYS = {"reward": "reward", "reward_weights": "weights", "success_height": "success_height"}
 LIFT_TASK = "rlgrasp.envs.tasks.LiftTask"
+GRASP_ENV = "rlgrasp.envs.PandaGraspEnv"
 
 
 def nest_task(env: dict[str, Any]) -> dict[str, Any]:
@@ -73,7 +74,11 @@ def nest_env(env: dict[str, Any]) -> dict[str, Any]:
     """An ``env`` node of before the env took parts (``control_mode``, ``ee_yaw``, ``time_step``, ...
     as its own keywords: ``rlgrasp.config.ENV_KEYS``) with them under ``env.control`` and ``env.sim``
     (a copy; one of today's shape comes back unchanged). A ``robot_urdf`` becomes
-    ``env.robot: {name: <arm>, model: <file>}``."""
+    ``env.robot: {name: <arm>, model: <file>}``. An env of another class (a user's own, a standin)
+    keeps its keywords: they are its own."""
+    target = str(env.get("_target_") or GRASP_ENV)
+    if not (target.startswith("rlgrasp.") and target.endswith(("PandaGraspEnv", "GraspEnv"))):
+        return dict(env)
     env = nest_task(env)
     if not any(key in env for key in ENV_KEYS):
         return env

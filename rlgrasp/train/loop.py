@@ -24,7 +24,6 @@ from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDictBase
 
 from rlgrasp.config import ConfigError
-from rlgrasp.envs.part_config import env_setting
 from rlgrasp.rundir import CHECKPOINTS, ENV_ERRORS, RunLockedError, run_lock
 from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
@@ -103,9 +102,8 @@ class Trainer:
             self.parts = build_parts(cfg, self.device)
         except (ValueError, TypeError, OSError) as exc:  # the env refuses its keywords or object files
             raise ConfigError(f"env: {exc}".splitlines()[0]) from exc
-        full_length = (
-            env_setting(cfg.env, "sim.max_episode_steps") if self.parts.collector.stagger_starts else None
-        )
+        stagger = self.parts.collector.stagger_starts
+        full_length = OmegaConf.select(cfg.env, "sim.max_episode_steps") if stagger else None
         self.adr = AdrSync.from_env_cfg(self.config["env"], full_length)
         self.algo: Algorithm = algorithm_class(cfg.algo)(cfg, self.parts, self.device)
         self.actor = self.algo.actor
@@ -372,7 +370,7 @@ class Trainer:
     def episode_metrics(self, batch: TensorDictBase) -> dict[str, float]:
         """Return, length and success of the episodes that ended in this batch (for the console too)."""
         stagger = self.parts.collector.stagger_starts
-        full_length = env_setting(self.cfg.env, "sim.max_episode_steps") if stagger else None
+        full_length = OmegaConf.select(self.cfg.env, "sim.max_episode_steps") if stagger else None
         ep = finished_episodes(batch, full_length, self.parts.spec.get("reward_terms", ()))
         for key in ("charts/episodic_return", "charts/success_rate"):
             if key in ep:
