@@ -1,9 +1,13 @@
-"""Every config schema but the algorithms' (each is its package's: ``rlgrasp.algos.registry``), and the
-validation of a training config.
+"""The run's config trees (training, evaluation, demonstrations, sweeps), their registration with
+Hydra, and the validation of a training config.
 
-The YAML files under ``configs/`` name these schemas in their defaults lists, so a typo, a wrong
-type or an unknown key fails at start with Hydra's message naming the key, instead of deep inside a
-worker process minutes later. Each default is written once, here; the YAML files carry only what
+A part's schema lives beside its code and is registered here: the env's (``rlgrasp.envs.grasp_env
+.EnvConfig`` with its parts' ``ControlConfig`` and ``SimConfig``), the models'
+(``rlgrasp.models``), the collectors' (``rlgrasp.train.collectors``), the loggers'
+(``rlgrasp.train.logger``) and each algorithm's (its package: ``rlgrasp.algos.registry``). The YAML
+files under ``configs/`` name these schemas in their defaults lists, so a typo, a wrong type or an
+unknown key fails at start with Hydra's message naming the key, instead of deep inside a worker
+process minutes later. Each default is written once, in its schema; the YAML files carry only what
 differs from it. Training (``train.yaml``), evaluation (``eval.yaml``) and sweeps
 (``sweep/<name>.yaml``) are three separate trees; ``rlgrasp.compose`` composes them outside a
 command line.
@@ -27,7 +31,12 @@ from rlgrasp.algos.common import positive
 from rlgrasp.algos.registry import algorithms, entry, unknown_name
 from rlgrasp.envs.grasp_env import EnvConfig
 from rlgrasp.envs.randomization import Randomizer
+from rlgrasp.errors import ConfigError
+from rlgrasp.models.cnn import POOLINGS, CNNConfig
+from rlgrasp.models.mlp import MLPConfig
 from rlgrasp.rundir import register_resolvers
+from rlgrasp.train.collectors import CollectorConfig, RayCollectorConfig
+from rlgrasp.train.logger import LoggerConfig, MlflowLoggerConfig, WandbLoggerConfig
 from rlgrasp.utils import plain
 
 #: The Hydra config tree (``configs/`` next to the package in a source checkout).
@@ -98,126 +107,6 @@ def moved_algo_key(key: str, algo_name: str | None = None) -> str | None:
     if path is None or found is None:
         return path
     return path if has_key(found.schema_class(), path) else None
-
-
-@dataclass
-class MLPConfig:
-    """Actor and critic MLPs; the observation normalizer sits inside both."""
-
-    name: str = "mlp"
-    hidden_sizes: list[int] = field(default_factory=lambda: [256, 256, 256])
-    activation: str = "tanh"  # tanh | relu | elu
-    init_log_std: float = -0.5
-    # Floor of the state-independent std: keeps long runs from collapsing exploration.
-    min_std: float = 0.05
-    obs_norm: bool = True
-    obs_clip: float = 10.0
-    # tanh_normal: a Gaussian squashed into the action bounds; normal: the Gaussian, the env clipping
-    # what it executes (Stable-Baselines3's and CleanRL's policy). docs/benchmarks/learning.md.
-    distribution: str = "tanh_normal"
-
-
-@dataclass
-class CollectorConfig:
-    """How frames are collected: ``_target_`` is the backend, a class of ``rlgrasp.train.collectors``
-    built from the other keys (``collector=process``: TorchRL's collector over worker processes;
-    ``single``: in-process; ``ray``: collector actors on a Ray cluster). Each worker steps one
-    gymnasium ``SyncVectorEnv`` of ``envs_per_worker`` envs and runs the actor on the whole batch;
-    frames per batch = workers x envs_per_worker x steps_per_env."""
-
-    _target_: str = "rlgrasp.train.collectors.ProcessCollector"
-    num_workers: int = 2  # 0: in-process
-    envs_per_worker: int = 4
-    steps_per_env: int = 128
-    torch_threads: int = 1
-    # Collect the next batch while the learner updates (one update of lag; rlgrasp/train/batches.py, ppo.py).
-    overlap: bool = True
-    # Cut each env's first episode at a different length so that a worker's envs are not in phase:
-    # needed when steps_per_env is short against an episode (rlgrasp/train/collect.py StaggeredStart).
-    stagger_starts: bool = False
-    # A batch not delivered within this many seconds ends the run (a worker that hangs, not dies: a
-    # checkpoint is saved and the run stops in one line, instead of waiting for ever).
-    worker_timeout_s: float = 600.0
-
-
-POOLINGS = ("flat", "keypoints")  # how a CNN's last feature maps become features (CNNConfig.pooling)
-
-
-@dataclass
-class CNNConfig:
-    """A small CNN per image (by default 8x8/4, 4x4/2, 3x3/1) joined with the normalized state in an MLP."""
-
-    name: str = "cnn"
-    channels: list[int] = field(default_factory=lambda: [16, 32, 32])
-    kernel_sizes: list[int] = field(default_factory=lambda: [8, 4, 3])
-    strides: list[int] = field(default_factory=lambda: [4, 2, 1])
-    # flat: the last feature map flattened into the projection; keypoints: each channel's expected
-    # image position (x, y) under a softmax over its pixels (rlgrasp/models/cnn.py, SpatialSoftmax)
-    pooling: str = "flat"
-    image_features: int = 256
-    hidden_sizes: list[int] = field(default_factory=lambda: [256, 256])
-    activation: str = "elu"  # tanh | relu | elu
-    init_log_std: float = -0.5
-    min_std: float = 0.05
-    obs_norm: bool = True
-    obs_clip: float = 10.0
-
-
-@dataclass
-class RayConfig:
-    """Where ``collector=ray`` runs its collector actors (one per worker)."""
-
-    # null: start a private local Ray bound to node_ip_address; "auto" or "host:6379": join a cluster.
-    address: str | None = None
-    # Local Ray only: stay on loopback unless told otherwise (set the node's address to go multi-machine).
-    node_ip_address: str = "127.0.0.1"
-    num_cpus: int | None = None  # local Ray only (null: all cores)
-    cpus_per_worker: float = 1.0  # Ray resources each collector actor reserves
-    memory_per_worker_gb: float = 1.0
-    include_dashboard: bool = False
-
-
-@dataclass
-class RayCollectorConfig(CollectorConfig):
-    """``collector=ray``: the process backend's keys plus where Ray runs (``collector.ray.*``)."""
-
-    _target_: str = "rlgrasp.train.collectors.RayCollector"
-    ray: RayConfig = field(default_factory=RayConfig)
-
-
-@dataclass
-class LoggerConfig:
-    """Where the run's curves go: ``_target_`` is a class of ``rlgrasp.train.logger`` (``logger=
-    tensorboard``; ``none``: the console only) or ``rlgrasp.train.trackers`` (``wandb``, ``mlflow``:
-    TensorBoard plus the tracker), built from the other keys."""
-
-    _target_: str = "rlgrasp.train.logger.TensorBoardLogger"
-    console_interval_s: float = 5.0  # the console's progress line at most this often
-
-
-@dataclass
-class TrackerLoggerConfig(LoggerConfig):
-    """``logger=wandb`` / ``logger=mlflow``: TensorBoard plus a tracker (``rlgrasp.train.trackers``)."""
-
-    project: str = "rlgrasp"  # W&B project / MLflow experiment
-    tags: list[str] = field(default_factory=list)  # run tags in the tracker's UI
-    run_name: str | None = None  # null: <experiment_name>/<run dir name>
-
-
-@dataclass
-class WandbLoggerConfig(TrackerLoggerConfig):
-    _target_: str = "rlgrasp.train.trackers.WandbLogger"
-    entity: str | None = None  # W&B team or user (null: your default)
-    # online | offline | disabled (null: $WANDB_MODE, else online).
-    mode: str | None = None
-
-
-@dataclass
-class MlflowLoggerConfig(TrackerLoggerConfig):
-    _target_: str = "rlgrasp.train.trackers.MlflowLogger"
-    # A server (http://...), a database (sqlite:///...) or a folder (file:...); null: $MLFLOW_TRACKING_URI,
-    # else the folder outputs/mlruns.
-    tracking_uri: str | None = None
 
 
 @dataclass
@@ -411,10 +300,6 @@ SWEEP_PRIMARY = "rlgrasp_sweep_primary"
 
 def _sum(*values: int) -> int:
     return sum(values)
-
-
-class ConfigError(ValueError):
-    """A bad training input; the message is one line naming the key, its value and what is allowed."""
 
 
 def register_configs() -> None:

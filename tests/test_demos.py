@@ -14,12 +14,11 @@ from tensordict import TensorDict
 
 from rlgrasp.algos.ppo.schema import ImitationTermConfig
 from rlgrasp.compose import compose_config, compose_train
-from rlgrasp.config import MLPConfig
 from rlgrasp.demos.bc import Imitation, decayed_weight, pretrain
 from rlgrasp.demos.cli import _objects_line, record_demos
 from rlgrasp.demos.dataset import DemoError, demos_for, layout_of, load_demos, write_demos
 from rlgrasp.envs.factory import env_factory
-from rlgrasp.models.mlp import build_models
+from rlgrasp.models.mlp import MLPConfig, build_models
 from rlgrasp.train.loop import Trainer
 from rlgrasp.train.resume import prepare_run
 from tests.helpers import SMOKE_IN_PROCESS, demo_env_cfg, demo_files, logged_scalars, ppo_algo

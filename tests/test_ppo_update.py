@@ -10,8 +10,7 @@ from omegaconf import OmegaConf
 from tensordict import TensorDict
 
 from rlgrasp.algos.ppo.learner import LOG_RATIO_BOUND, PPOLearner
-from rlgrasp.config import MLPConfig
-from rlgrasp.models.mlp import LOC_BOUND, build_models
+from rlgrasp.models.mlp import LOC_BOUND, MLPConfig, build_models
 from tests.helpers import ppo_algo
 
 OBS_DIM, ACT_DIM, ENVS, STEPS = 5, 2, 4, 32

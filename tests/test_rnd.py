@@ -10,8 +10,7 @@ from tensordict import TensorDict
 
 from rlgrasp.algos.ppo.learner import PPOLearner
 from rlgrasp.compose import compose_train
-from rlgrasp.config import MLPConfig
-from rlgrasp.models.mlp import RunningNorm, build_models
+from rlgrasp.models.mlp import MLPConfig, RunningNorm, build_models
 from rlgrasp.train.loop import Trainer
 from rlgrasp.train.resume import prepare_run
 from rlgrasp.train.rnd import INTRINSIC_REWARD, RND

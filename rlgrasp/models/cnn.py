@@ -9,6 +9,7 @@ deployed, so it may use what no robot senses).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import torch
@@ -16,8 +17,30 @@ from tensordict.nn import AddStateIndependentNormalScale, InteractionType, Tenso
 from torch import nn
 from torchrl.modules import ConvNet, ProbabilisticActor, TanhNormal
 
-from rlgrasp.config import POOLINGS
 from rlgrasp.models.mlp import ACTIVATIONS, OBS_KEY, RunningNorm, _bound, _mlp, bounded_loc
+
+POOLINGS = ("flat", "keypoints")  # how a CNN's last feature maps become features (CNNConfig.pooling)
+
+
+@dataclass
+class CNNConfig:
+    """A small CNN per image (by default 8x8/4, 4x4/2, 3x3/1) joined with the normalized state in an MLP."""
+
+    name: str = "cnn"
+    channels: list[int] = field(default_factory=lambda: [16, 32, 32])
+    kernel_sizes: list[int] = field(default_factory=lambda: [8, 4, 3])
+    strides: list[int] = field(default_factory=lambda: [4, 2, 1])
+    # flat: the last feature map flattened into the projection; keypoints: each channel's expected
+    # image position (x, y) under a softmax over its pixels (rlgrasp/models/cnn.py, SpatialSoftmax)
+    pooling: str = "flat"
+    image_features: int = 256
+    hidden_sizes: list[int] = field(default_factory=lambda: [256, 256])
+    activation: str = "elu"  # tanh | relu | elu
+    init_log_std: float = -0.5
+    min_std: float = 0.05
+    obs_norm: bool = True
+    obs_clip: float = 10.0
+
 
 IMAGE_KEYS = ("depth", "rgb")
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 
 import torch
 from tensordict.nn import (
@@ -12,6 +13,24 @@ from tensordict.nn import (
 )
 from torch import nn
 from torchrl.modules import MLP, IndependentNormal, ProbabilisticActor, TanhNormal, ValueOperator
+
+
+@dataclass
+class MLPConfig:
+    """Actor and critic MLPs; the observation normalizer sits inside both."""
+
+    name: str = "mlp"
+    hidden_sizes: list[int] = field(default_factory=lambda: [256, 256, 256])
+    activation: str = "tanh"  # tanh | relu | elu
+    init_log_std: float = -0.5
+    # Floor of the state-independent std: keeps long runs from collapsing exploration.
+    min_std: float = 0.05
+    obs_norm: bool = True
+    obs_clip: float = 10.0
+    # tanh_normal: a Gaussian squashed into the action bounds; normal: the Gaussian, the env clipping
+    # what it executes (Stable-Baselines3's and CleanRL's policy). docs/benchmarks/learning.md.
+    distribution: str = "tanh_normal"
+
 
 OBS_KEY = "observation"
 

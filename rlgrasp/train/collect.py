@@ -22,8 +22,8 @@ from torchrl.data import Composite, Unbounded
 from torchrl.envs import EnvBase, GymWrapper, default_info_dict_reader
 from torchrl.envs.transforms import Compose, RewardSum, StepCounter, TransformedEnv
 
-from rlgrasp.config import ConfigError
 from rlgrasp.envs.factory import EnvFactory
+from rlgrasp.errors import ConfigError
 from rlgrasp.utils import die_with_parent
 
 ERROR_FILE_PREFIX = "env_error_"

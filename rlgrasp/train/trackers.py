@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
 
-from rlgrasp.config import ConfigError
+from rlgrasp.errors import ConfigError
 from rlgrasp.train.logger import TensorBoardLogger
 from rlgrasp.utils import flatten
 
@@ -218,7 +218,7 @@ class TrackedLogger(TensorBoardLogger):
 
 
 class WandbLogger(TrackedLogger):
-    """``logger=wandb``: TensorBoard plus a W&B run (keys: ``rlgrasp.config.WandbLoggerConfig``)."""
+    """``logger=wandb``: TensorBoard plus a W&B run (keys: ``rlgrasp.train.logger.WandbLoggerConfig``)."""
 
     kind = "wandb"
 
@@ -242,7 +242,7 @@ class WandbLogger(TrackedLogger):
 
 
 class MlflowLogger(TrackedLogger):
-    """``logger=mlflow``: TensorBoard plus an MLflow run (keys: ``rlgrasp.config.MlflowLoggerConfig``)."""
+    """``logger=mlflow``: TensorBoard plus an MLflow run (keys: ``MlflowLoggerConfig``, train/logger.py)."""
 
     kind = "mlflow"
 
