@@ -109,7 +109,7 @@ def test_a_relabelled_goal_is_a_later_achieved_goal_of_the_same_episode(tmp_path
     layout, later = sac.her.layout, []
     for _ in range(20):
         sample = sac.replay.sample()
-        relabelled, chosen = sac.her.relabel(sample, sac.replay)
+        relabelled, chosen = sac.her.relabel(sample)
         obs, nxt = relabelled["observation"][chosen], relabelled["next", "observation"][chosen]
         goal, own = obs[:, layout.desired], nxt[:, layout.achieved]  # own: (episode, step + 1, env)
         assert torch.equal(nxt[:, layout.desired], goal)
@@ -128,7 +128,7 @@ def test_a_relabelled_goal_is_a_later_achieved_goal_of_the_same_episode(tmp_path
 def test_final_takes_the_last_stored_step_of_the_episode(tmp_path: Path) -> None:
     sac = _sac(tmp_path, "algo.her.strategy=final", "algo.her.relabel_ratio=1")
     episodes = _filled(sac, 240)
-    relabelled, _ = sac.her.relabel(sac.replay.sample(), sac.replay)
+    relabelled, _ = sac.her.relabel(sac.replay.sample())
     goal = relabelled["observation"][:, sac.her.layout.desired]
     for episode, step, env in goal.tolist():
         ended = int(episode) != episodes.episode[int(env)]  # else still running: its newest step
@@ -163,7 +163,7 @@ def test_a_resumed_run_relabels_the_transitions_it_reads_back(tmp_path: Path) ->
     episodes = _filled(resumed, 48)  # new episodes, numbered after those read back
     layout = resumed.her.layout
     for _ in range(10):
-        relabelled, chosen = resumed.her.relabel(resumed.replay.sample(), resumed.replay)
+        relabelled, chosen = resumed.her.relabel(resumed.replay.sample())
         goal = relabelled["observation"][chosen][:, layout.desired]
         own = relabelled["next", "observation"][chosen][:, layout.achieved]
         assert torch.equal(goal[:, 0], own[:, 0]) and bool((goal[:, 1] >= own[:, 1]).all())

@@ -185,7 +185,8 @@ class SAC(Algorithm):
         her = self.cfg.algo.get("her")
         if her is None or not her.enabled:
             return None
-        return Hindsight(her, goal_layout(self.parts.make_env), self.cfg.algo.replay.buffer_frames)
+        size = self.cfg.algo.replay.buffer_frames
+        return Hindsight(her, goal_layout(self.parts.make_env), size, self.device)
 
     def _aux(self) -> ObjectFromImages | None:
         """With ``algo.terms.aux.coeff`` > 0: a linear head on the image features regressed onto parts
@@ -333,7 +334,7 @@ class SAC(Algorithm):
                 torch.arange(self.stored, self.stored + transitions.shape[0])
                 % self.cfg.algo.replay.buffer_frames
             )
-            self.her.episodes.written(rows, transitions[EPISODE_KEY].cpu())
+            self.her.written(rows, transitions)
         self.stored += transitions.shape[0]
 
     def _newest(self, count: int) -> TensorDictBase:
@@ -346,7 +347,7 @@ class SAC(Algorithm):
         ``demo_ratio`` of it theirs (not relabelled: an expert's episodes reach their own goals)."""
         online = self.replay.sample()
         if self.her is not None:
-            online = self.her.relabel(online, self.replay)[0].exclude(EPISODE_KEY)
+            online = self.her.relabel(online)[0].exclude(EPISODE_KEY)
         if self.demos is None:
             return online
         return torch.cat([online, self.demos.sample()])

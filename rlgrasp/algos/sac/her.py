@@ -146,15 +146,25 @@ class Episodes:
 class Hindsight:
     """``algo.her`` on SAC's online replay: the episodes of its rows, and the relabelling of a sample."""
 
-    def __init__(self, her_cfg: Any, layout: GoalLayout, size: int) -> None:
+    def __init__(self, her_cfg: Any, layout: GoalLayout, size: int, device: torch.device) -> None:
         self.strategy = str(her_cfg.strategy)
         self.ratio = float(her_cfg.relabel_ratio)
         self.layout = layout
         self.episodes = Episodes(size)
+        # Each row's achieved goal after its step (3 floats a row): a goal is read from here, not
+        # gathered from the buffer's every key
+        self.achieved = torch.zeros(size, 3, device=device)
         self.paid = 0.0  # the share of the last minibatch's relabelled rows whose new goal was met
 
-    def relabel(self, sample: TensorDictBase, replay: Any) -> tuple[TensorDictBase, torch.Tensor]:
-        """``sample`` (drawn from ``replay``, with its rows' ``index``) with ``relabel_ratio`` of its rows,
+    def written(self, rows: torch.Tensor, transitions: TensorDictBase) -> None:
+        """Rows ``rows`` of the buffer now hold ``transitions`` (with their ``EPISODE_KEY``)."""
+        self.episodes.written(rows, transitions[EPISODE_KEY].cpu())
+        self.achieved[rows.to(self.achieved.device)] = transitions["next", OBS_KEY][
+            :, self.layout.achieved
+        ].to(self.achieved)
+
+    def relabel(self, sample: TensorDictBase) -> tuple[TensorDictBase, torch.Tensor]:
+        """``sample`` (drawn from the buffer, with its rows' ``index``) with ``relabel_ratio`` of its rows,
         drawn at random, given a goal from their episode and the reward it pays; the rows relabelled."""
         rows = sample["index"].reshape(-1).cpu()
         chosen = torch.randperm(rows.numel())[: round(rows.numel() * self.ratio)]
@@ -162,7 +172,7 @@ class Hindsight:
             return sample, chosen
         achieved, desired = self.layout.achieved, self.layout.desired
         goal_rows = self.episodes.goal_rows(rows[chosen], self.strategy)
-        goals = replay[goal_rows.to(sample.device)]["next", OBS_KEY][:, achieved]
+        goals = self.achieved[goal_rows.to(self.achieved.device)].to(sample.device)
         index = chosen.to(sample.device)
         observation, next_observation = sample[OBS_KEY].clone(), sample["next", OBS_KEY].clone()
         reward = sample["next", "reward"].clone()
