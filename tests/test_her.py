@@ -228,3 +228,12 @@ def test_a_short_her_run_trains(tmp_path: Path) -> None:
     success = train(compose_train([*SMALL, *HER, f"paths.output_dir={run}", "total_frames=192"]))
     last = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
     assert 0.0 <= success <= 1.0 and last["updates"] > 0 and last["config"]["algo"]["her"]["enabled"]
+
+
+def test_tqc_takes_her_as_sac_does(tmp_path: Path) -> None:
+    from tests.test_tqc import _tqc
+
+    tqc = _tqc(tmp_path, *HER, "algo.replay.learning_starts=24", "algo.optim.utd_ratio=0.1")
+    episodes = Episodes(tqc)
+    metrics = [tqc.update(episodes.batch(), 0) for _ in range(4)][-1]
+    assert tqc.her is not None and metrics["charts/gradient_steps"] > 0 and "her/relabelled_reward" in metrics
