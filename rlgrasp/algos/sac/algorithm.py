@@ -33,6 +33,7 @@ from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.envs import ExplorationType, set_exploration_type
 from torchrl.objectives import SACLoss, SoftUpdate
 
+from rlgrasp.algos.sac.her import EPISODE_KEY, Hindsight, goal_layout
 from rlgrasp.algos.sac.replay_files import ReplayFiles
 from rlgrasp.config import ConfigError
 from rlgrasp.demos.bc import mse_bc_loss
@@ -123,6 +124,9 @@ class SAC(Algorithm):
         self.images = image_specs(parts.spec)  # key -> shape; empty: a state policy
         privileged = a.critic.privileged or a.terms.aux.coeff > 0 or a.terms.object_map.coeff > 0
         self.transition_keys = _transition_keys(self.images, privileged, a.augment.ground_swap > 0)
+        self.her = self._her()
+        if self.her is not None:  # each transition's episode, which relabelling draws goals from
+            self.transition_keys = (*self.transition_keys, EPISODE_KEY)
         self.aux = self._aux()
         self.object_map = self._object_map()
         act_dim = len(parts.spec["action_low"])
@@ -174,6 +178,15 @@ class SAC(Algorithm):
             params = [*self._encoder().parameters(), *self._aux_parameters()]
             optimizers["encoder"] = torch.optim.Adam(params, lr=optim.critic_lr)
         return optimizers
+
+    def _her(self) -> Hindsight | None:
+        """With ``algo.her.enabled``: hindsight relabelling of the online replay (rlgrasp.algos.sac.her),
+        its goals' place in the observation read from the env (a task without goals refused here)."""
+        her = self.cfg.algo.get("her")
+        if her is None or not her.enabled:
+            return None
+        size = self.cfg.algo.replay.buffer_frames
+        return Hindsight(her, goal_layout(self.parts.make_env), size, self.device)
 
     def _aux(self) -> ObjectFromImages | None:
         """With ``algo.terms.aux.coeff`` > 0: a linear head on the image features regressed onto parts
@@ -286,6 +299,8 @@ class SAC(Algorithm):
         optim = self.cfg.algo.optim
         t0 = time.perf_counter()
         flat = batch.reshape(-1)
+        if self.her is not None:
+            flat.set(EPISODE_KEY, self.her.episodes.label(batch).to(flat.device))
         self.store(flat)
         if len(self.replay) < self.cfg.algo.replay.learning_starts:
             return {"charts/replay_frames": float(len(self.replay))}
@@ -314,6 +329,12 @@ class SAC(Algorithm):
 
     def _extend(self, transitions: TensorDictBase) -> None:
         self.replay.extend(transitions.to(self.device))
+        if self.her is not None:  # the rows the ring wrote (as _newest reads them back)
+            rows = (
+                torch.arange(self.stored, self.stored + transitions.shape[0])
+                % self.cfg.algo.replay.buffer_frames
+            )
+            self.her.written(rows, transitions)
         self.stored += transitions.shape[0]
 
     def _newest(self, count: int) -> TensorDictBase:
@@ -322,10 +343,14 @@ class SAC(Algorithm):
         return self.replay[torch.arange(self.stored - count, self.stored) % size]
 
     def _sample(self) -> TensorDictBase:
-        """A minibatch: online transitions, and with demonstrations ``demo_ratio`` of it theirs."""
+        """A minibatch: online transitions (with ``algo.her``, some relabelled), and with demonstrations
+        ``demo_ratio`` of it theirs (not relabelled: an expert's episodes reach their own goals)."""
+        online = self.replay.sample()
+        if self.her is not None:
+            online = self.her.relabel(online)[0].exclude(EPISODE_KEY)
         if self.demos is None:
-            return self.replay.sample()
-        return torch.cat([self.replay.sample(), self.demos.sample()])
+            return online
+        return torch.cat([online, self.demos.sample()])
 
     def _step(self) -> dict[str, float]:
         """One gradient step of the critics (and a camera's encoders), the actor (every
@@ -371,6 +396,8 @@ class SAC(Algorithm):
             metrics["loss_aux"] = float(loss_aux.detach())
         if loss_map is not None:
             metrics["loss_object_map"] = float(loss_map.detach())
+        if self.her is not None:
+            metrics["her/relabelled_reward"] = self.her.paid
         return metrics
 
     def _bc_loss(self, for_critic: TensorDictBase) -> torch.Tensor | None:

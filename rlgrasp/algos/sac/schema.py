@@ -120,6 +120,24 @@ class ReplayAugmentConfig:
     ground_swap: float = 0.0
 
 
+#: Where a relabelled transition's new goal comes from (``algo.her.strategy``; rlgrasp.algos.sac.her).
+HER_STRATEGIES = ("future", "final")
+
+
+@dataclass
+class HERConfig:
+    """Hindsight experience replay (Andrychowicz et al. 2017; ``rlgrasp.algos.sac.her``): on a goal task
+    with the sparse reward, ``relabel_ratio`` of each online minibatch's rows take, in place of their
+    desired goal, where the object was after a later step of the same episode (``future``) or after its
+    last stored step (``final``), and the reward that goal pays. A failed episode then still teaches
+    how to put the object somewhere. Demonstrations' rows are not relabelled."""
+
+    enabled: bool = False
+    strategy: str = "future"  # future | final
+    # 0.8: SB3's and RL Zoo's n_sampled_goal=4 (four relabelled rows for each one kept)
+    relabel_ratio: float = 0.8
+
+
 #: The losses that may train a camera SAC's image encoders (``algo.encoder.trained_by``).
 ENCODER_TRAINERS = ("critic", "actor", "both")
 
@@ -144,6 +162,7 @@ class SACConfig:
     loss: SACLossConfig = field(default_factory=SACLossConfig)
     optim: SACOptimConfig = field(default_factory=SACOptimConfig)
     replay: ReplayConfig = field(default_factory=ReplayConfig)
+    her: HERConfig = field(default_factory=HERConfig)  # hindsight relabelling of a goal task's replay
     critic: SACCriticConfig = field(default_factory=SACCriticConfig)
     demos: str | None = None  # a demonstrations directory (rlgrasp-demos)
     pretrain: SACPretrainConfig = field(default_factory=SACPretrainConfig)
@@ -162,7 +181,7 @@ SCHEMA = SACConfig
 
 def check(cfg: Any, batch: int, camera: Any) -> list[Check]:
     """SAC's keys (a subclass's schema, TQC's, adds its own to these)."""
-    return [*_sac_checks(cfg.algo, camera), *_sac_demo_checks(cfg.algo)]
+    return [*_sac_checks(cfg.algo, camera), *_sac_demo_checks(cfg.algo), *_her_checks(cfg, camera)]
 
 
 def _sac_checks(a: Any, camera: Any) -> list[Check]:
@@ -225,4 +244,43 @@ def _sac_demo_checks(a: Any) -> list[Check]:
         ("algo.pretrain.epochs", p.epochs, p.epochs >= 0, "must be >= 0 (0: no pre-training)"),
         ("algo.pretrain.epochs", p.epochs, not p.epochs or a.demos, needs),
         *rate_checks("algo.pretrain.lr", p.lr),
+    ]
+
+
+def _her_checks(cfg: Any, camera: Any) -> list[Check]:
+    """HER's keys, and what it needs of the run: a state learner (it rewrites the flat observation's
+    goal entries; a camera learner's goal is also in its images' scene) and the sparse reward (the only
+    one a relabelled goal's reward can be recomputed for: the dense terms read the arm and the grasp
+    at that step, which the replay does not keep). That the task has goals, and the success rule HER
+    recomputes, is read from the env when the learner builds it (``rlgrasp.algos.sac.her.goal_layout``)."""
+    h = cfg.algo.get("her")
+    if h is None:  # a config written before the key
+        return []
+    reward = (cfg.env.get("task") or {}).get("reward")
+    return [
+        (
+            "algo.her.strategy",
+            h.strategy,
+            h.strategy in HER_STRATEGIES,
+            "must be " + " or ".join(HER_STRATEGIES),
+        ),
+        (
+            "algo.her.relabel_ratio",
+            h.relabel_ratio,
+            0 <= h.relabel_ratio <= 1,
+            "must be in [0, 1] (the share of each online minibatch relabelled; 0.8: SB3's n_sampled_goal=4)",
+        ),
+        (
+            "algo.her.enabled",
+            h.enabled,
+            not h.enabled or not camera,
+            "relabels the goal in a state learner's flat observation; needs env.camera=null",
+        ),
+        (
+            "algo.her.enabled",
+            h.enabled,
+            not h.enabled or reward == "sparse",
+            f"relabelled rewards are recomputed with a goal task's sparse rule; needs a goal task "
+            f"(task=pick_place or task=push) with env.task.reward=sparse, not {reward!r}",
+        ),
     ]
