@@ -28,9 +28,9 @@ from typing import Any
 import torch
 from tensordict import TensorDictBase
 
-from rlgrasp.config import ConfigError
 from rlgrasp.envs.factory import EnvFactory
 from rlgrasp.envs.tasks.goal import GoalTask
+from rlgrasp.errors import ConfigError
 from rlgrasp.models.mlp import OBS_KEY
 
 #: Where a stored transition keeps the number of its episode (unique within the run).
