@@ -13,7 +13,7 @@ import math
 import random
 import signal
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -25,15 +25,13 @@ from tensordict import TensorDictBase
 
 from rlgrasp.config import ConfigError
 from rlgrasp.rundir import CHECKPOINTS, ENV_ERRORS, RunLockedError, run_lock
-from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.adr_sync import AdrSync
 from rlgrasp.train.algorithm import Algorithm, NonFiniteError, algorithm_class
 from rlgrasp.train.batches import Batches
 from rlgrasp.train.collect import read_env_errors
 from rlgrasp.train.collectors import begin_shutdown, shut_down
-from rlgrasp.train.eval_process import EvalProcessError, background_evaluator
-from rlgrasp.train.evaluate import periodic_evaluator, summarize
+from rlgrasp.train.evaluations import CallbackStop, EvalCallback, Evaluations, Stopped, TrainingError
 from rlgrasp.train.legacy import algorithm_state
 from rlgrasp.train.logger import log, progress_line, setup_text_log
 from rlgrasp.train.metrics import Due, Phases, Throughput, finished_episodes
@@ -43,25 +41,7 @@ from rlgrasp.train.resume import prepare_run
 from rlgrasp.train.warm_start import warm_start
 from rlgrasp.utils import flatten, keep_freed_memory
 
-#: Called after each evaluation with (frames, metrics); see ``train``.
-EvalCallback = Callable[[int, dict[str, float]], None]
-
-
-class TrainingError(RuntimeError):
-    """Training stopped on a fault (env crash, NaN); the message says what and where."""
-
-
-class _Stopped(Exception):
-    """A stop signal arrived: save and leave the loop."""
-
-
-class _CallbackStop(Exception):
-    """Carries what ``on_eval`` raised (a sweep's pruner) past the fault handler, to be re-raised
-    unchanged by ``train``."""
-
-    def __init__(self, raised: BaseException) -> None:
-        super().__init__(repr(raised))
-        self.raised = raised
+__all__ = ["EvalCallback", "Trainer", "TrainingError", "train"]
 
 
 def resolve_device(device: str) -> torch.device:
@@ -109,10 +89,11 @@ class Trainer:
         self.actor = self.algo.actor
         torch.set_num_threads(self.algo.learner_threads)
         keep_freed_memory()  # the learner's per-step tensors reuse the heap (rlgrasp.utils)
+        # Beside the loop: periodic and final evaluations, their curves, last and best, best.pt.
+        self.evaluations = Evaluations(cfg, self.parts.make_env, self.actor, self.algo, on_eval)
 
         # --- counters, possibly resumed
         self.frames, self.generation = 0, 0
-        self.best_success, self.last_eval = -math.inf, None
         if resumed is not None:
             self.load_state_dict(resumed)
             log.info("resumed from %s at %s frames", cfg.resume, f"{self.frames:,}")
@@ -125,9 +106,6 @@ class Trainer:
         )
         if resumed is None:
             self.logger.text("config", OmegaConf.to_yaml(self.config), 0)
-        self.evaluator = periodic_evaluator(self.parts.make_env, cfg)
-        self.background = background_evaluator(cfg, self.evaluator, self.actor)  # None: in this process
-        self.final_episodes = cfg.eval.final_episodes or cfg.eval.episodes
 
     @property
     def updates(self) -> int:
@@ -149,8 +127,7 @@ class Trainer:
             "frames": self.frames,
             "updates": self.algo.updates,
             "generation": self.generation,
-            "best_eval_success": self.best_success,
-            "last_eval": self.last_eval,
+            **self.evaluations.state_dict(),  # best_eval_success, last_eval
             "rng": ckpt_lib.rng_state(),
             "config": self.config,
             "spec": self.parts.spec,
@@ -186,8 +163,7 @@ class Trainer:
             raise ConfigError(f"checkpoint's rng state is unreadable ({type(exc).__name__}: {exc})") from None
         self.frames = state["frames"]
         self.generation = state.get("generation", 0) + 1
-        self.best_success = state.get("best_eval_success", -math.inf)
-        self.last_eval = state.get("last_eval")
+        self.evaluations.load_state_dict(state)
         if self.adr is not None and "adr" in state:
             self.adr.state.load_state_dict(state["adr"])
 
@@ -215,9 +191,7 @@ class Trainer:
                 self.logger.close()
                 raise ConfigError(str(exc)) from None
             cleanup.callback(self.logger.close)
-            cleanup.callback(self.evaluator.close)
-            if self.background is not None:
-                cleanup.callback(self.background.close)
+            cleanup.callback(self.evaluations.close)
             log.info(
                 "run dir %s | %s | device %s | %d frames per batch (%s) | %s",
                 self.run_dir,
@@ -243,18 +217,18 @@ class Trainer:
                             begin_shutdown(batches.collector)  # the workers end during the final eval
                         return self.finish()
                 return self.finish()
-            except (KeyboardInterrupt, _Stopped):
+            except (KeyboardInterrupt, Stopped):
                 stopped_by = self.signals.received
                 why = signal.Signals(stopped_by).name if stopped_by else "interrupted"
                 log.warning("%s at %s frames: saving a checkpoint", why, f"{self.frames:,}")
                 self.save()
-                return float((self.last_eval or {}).get("success_rate", float("nan")))
+                return float((self.evaluations.last or {}).get("success_rate", float("nan")))
             except NonFiniteError as exc:
                 raise TrainingError(
                     f"{exc} at {self.frames:,} frames; stopped without saving, the last good checkpoint "
                     f"is {self.ckpt_dir / 'last.pt'}"
                 ) from exc
-            except _CallbackStop as stop:
+            except CallbackStop as stop:
                 raise stop.raised from None
             except (TrainingError, ConfigError):
                 raise
@@ -278,9 +252,12 @@ class Trainer:
             )
         raise TrainingError(f"{cause} at {self.frames:,} frames; {kept}") from exc
 
+    def stop_requested(self) -> bool:
+        return self.signals.received is not None
+
     def _check_stop(self) -> None:
-        if self.signals.received is not None:
-            raise _Stopped
+        if self.stop_requested():
+            raise Stopped
 
     @contextlib.contextmanager
     def _collector(self) -> Iterator[Batches]:
@@ -329,18 +306,18 @@ class Trainer:
             metrics["charts/SPS"] = sps = throughput(batch.numel(), t0)
             with self.phases("logging"):
                 self.logger.scalars(metrics, self.frames)
-                self.peek_eval()
+                self.evaluations.on_batch_end(self)
 
             is_best = False
             if eval_due(self.frames) and self.frames < cfg.total_frames:  # the final eval runs at the end
                 with self.phases("periodic evaluations"):
-                    is_best = self.periodic_eval()
+                    is_best = self.evaluations.on_eval_due(self)
             if ckpt_due(self.frames) or is_best:
                 self.save(is_best)
             with self.phases("logging"):
                 self.logger.progress(self.progress(sps, budget_s - (time.monotonic() - start)))
         with self.phases("periodic evaluations"):
-            self.pick_up_eval()  # the one still in the background, before the final one
+            self.evaluations.on_loop_end(self)  # the one still in the background, before the final one
 
     def collect(self, batches: Iterator[TensorDictBase]) -> TensorDictBase:
         """The next batch, flattened to ``[envs * workers, time]`` (not yet counted in ``frames``: the
@@ -380,7 +357,8 @@ class Trainer:
     def progress(self, sps: float, budget_left_s: float) -> str:
         """The console's progress line (the logger shows it every ``logger.console_interval_s``)."""
         eta = min((self.cfg.total_frames - self.frames) / max(sps, 1e-9), budget_left_s)
-        eval_success = self.last_eval.get("success_rate") if self.last_eval else None
+        last = self.evaluations.last
+        eval_success = last.get("success_rate") if last else None
         return progress_line(
             self.frames,
             self.cfg.total_frames,
@@ -391,159 +369,18 @@ class Trainer:
             eta,
         )
 
-    def evaluate(self, final: bool = False) -> bool:
-        """Deterministic evaluation of the current weights in this process (the final one shared with
-        the evaluation process when there is one: ``_play_final``); logs it, reports it to
-        ``on_eval``; returns whether it is the best.
-
-        An exception from ``on_eval`` (a sweep's pruner) saves a checkpoint and propagates.
-        """
-        t0 = time.perf_counter()
-        episodes = self.final_episodes if final else self.cfg.eval.episodes
-        self.actor.eval()
-        try:
-            result = self._play_final(episodes) if final else None
-            if result is None:
-                result = self.evaluator.run(self.actor, episodes)
-        finally:
-            self.actor.train()
-        is_best = self.record_eval(result, self.frames, episodes, time.perf_counter() - t0, final)
-        self.report_eval(result, self.frames, lambda: self.save(is_best))
-        return is_best
-
-    def _play_final(self, episodes: int) -> dict[str, float] | None:
-        """The final evaluation split with the evaluation process, if ``eval.background`` started one:
-        it plays the later rounds on a copy of the weights while this process plays the first ones,
-        and the episodes are joined in order, so the figures are those of one process (the collector's
-        workers are gone by then: the process has a core to itself). None: no process to share with."""
-        bg, rounds = self.background, self.evaluator.rounds(episodes)
-        if bg is None or not bg.running or bg.pending is not None or rounds < 2:
-            return None
-        mine = (rounds + 1) // 2
-        try:
-            bg.submit(self.frames, self.actor.state_dict(), episodes, part=(mine, rounds - mine))
-        except EvalProcessError as exc:
-            self._eval_process_failed(exc)
-        played = self.evaluator.play(self.actor, episodes, 0, mine)
-        return summarize([played, self._wait_for_background()[1]], episodes)
-
-    def _wait_for_background(self) -> tuple[Any, Any]:
-        """The evaluation process's pending evaluation and its result, once it has arrived; a stop
-        signal meanwhile ends the wait (``_Stopped``), a failed process ends the run."""
-        try:
-            done = self.background.wait(stop=lambda: self.signals.received is not None)
-        except EvalProcessError as exc:
-            self._eval_process_failed(exc)
-        if done is None:
-            raise _Stopped
-        return done
-
-    def periodic_eval(self) -> bool:
-        """The evaluation due now; returns whether the checkpoint to save now is the best.
-
-        With ``eval.background`` the previous one is picked up first (``pick_up_eval``) and this one
-        starts in the evaluation process on the current weights, kept with a copy of the whole state
-        (what ``best.pt`` gets if it is the best); training goes on meanwhile.
-        """
-        if self.background is None:
-            return self.evaluate()
-        self.pick_up_eval()
-        try:
-            self.background.submit_state(self.frames, self.state_dict(), self.cfg.eval.episodes)
-        except EvalProcessError as exc:
-            self._eval_process_failed(exc)
-        return False
-
-    def peek_eval(self) -> None:
-        """Log the background evaluation's figures as soon as they have arrived (the learner checks
-        after each batch), so a curve against the wall clock shows them when they were known; what
-        depends on them (``last_eval``, ``best.pt``, ``on_eval``) waits for ``pick_up_eval``, at a fixed
-        point of the loop."""
-        done = None if self.background is None else self.background.ready()
-        if done is not None and done[0].logged is None and done[0].part is None:
-            pending, result = done
-            pending.logged = self.log_eval(result, pending.frames, pending.episodes, self.background.seconds)
-
-    def pick_up_eval(self) -> None:
-        """Wait for the background evaluation, if one is under way, and record it at the frames of
-        the weights it evaluated: a fixed point of the loop, so one seed still gives one run."""
-        bg = self.background
-        if bg is None or bg.pending is None:
-            return
-        t0 = time.perf_counter()
-        pending, result = self._wait_for_background()
-        self.logger.scalars({"time/eval_wait_s": time.perf_counter() - t0}, self.frames)
-        if pending.logged is None:
-            pending.logged = self.log_eval(result, pending.frames, pending.episodes, bg.seconds)
-        is_best = self.keep_eval(pending.logged, pending.frames, pending.episodes)
-        if is_best:  # the weights that were evaluated, with this evaluation's bookkeeping
-            pending.keep.update(last_eval=self.last_eval, best_eval_success=self.best_success)
-            path = ckpt_lib.save_checkpoint(self.ckpt_dir / "best.pt", pending.keep)
-            log.info("checkpoint %s (the weights of %s frames)", path, f"{pending.frames:,}")
-        self.report_eval(result, pending.frames, self.save)
-
-    def _eval_process_failed(self, exc: EvalProcessError) -> NoReturn:
-        self._check_stop()  # a scheduler's signal reached the evaluation process too: a stop
-        self.save()
-        where = f"at {self.frames:,} frames; checkpoint saved in {self.ckpt_dir}"
-        raise TrainingError(f"{exc}\n  {where}") from exc
-
-    def record_eval(
-        self, result: dict[str, float], frames: int, episodes: int, seconds: float, final: bool = False
-    ) -> bool:
-        """Log an evaluation of the weights of ``frames`` at ``frames``; keep it as ``last_eval``;
-        returns whether it is the best so far."""
-        return self.keep_eval(self.log_eval(result, frames, episodes, seconds, final), frames, episodes)
-
-    def log_eval(
-        self, result: dict[str, float], frames: int, episodes: int, seconds: float, final: bool = False
-    ) -> dict[str, float]:
-        """Log an evaluation at ``frames`` (with the algorithm's extras); returns what was logged."""
-        result = {**result, **self.algo.eval_extras(result, self.evaluator.run, episodes)}
-        self.logger.scalars({f"eval/{k}": v for k, v in result.items()}, frames)
-        self.logger.scalars({"time/eval_s": seconds}, frames)
-        log.info("eval at %s frames: %s", f"{frames:,}", {k: round(v, 3) for k, v in result.items()})
-        if final and "success_rate" in result:
-            wins = round(result["success_rate"] * episodes)
-            low, high = wilson_interval(wins, episodes)
-            log.info("final eval: success %d/%d [95%% Wilson %.3f, %.3f]", wins, episodes, low, high)
-        return result
-
-    def keep_eval(self, result: dict[str, float], frames: int, episodes: int) -> bool:
-        """Keep a logged evaluation as ``last_eval``; returns whether it is the best so far."""
-        self.last_eval = {**result, "frames": frames, "episodes": episodes}
-        score = result.get("success_rate", result["mean_reward"])
-        is_best = score > self.best_success
-        if is_best:
-            self.best_success = score
-        return is_best
-
-    def report_eval(self, result: dict[str, float], frames: int, save: Callable[[], None]) -> None:
-        """``on_eval(frames, result)``; an exception from it calls ``save`` and propagates."""
-        if self.on_eval is None:
-            return
-        try:
-            self.on_eval(frames, {**result, "frames": frames})
-        except BaseException as exc:
-            log.warning("stopped by the eval callback at %s frames: %r", f"{self.frames:,}", exc)
-            save()
-            if isinstance(exc, Exception):  # past the fault handler, unchanged (``run`` unwraps it)
-                raise _CallbackStop(exc) from exc
-            raise
-
     def finish(self) -> float:
         """Final evaluation (unless the last one is current) and checkpoint; hparams; the result."""
-        last = self.last_eval
-        if last is None or last["frames"] != self.frames or self.final_episodes > self.cfg.eval.episodes:
-            with self.phases("final evaluation"):
-                is_best = self.evaluate(final=True)
+        with self.phases("final evaluation"):
+            is_best = self.evaluations.on_train_end(self)
+        if is_best is not None:
             self.save(is_best)
         elif (
             not (self.ckpt_dir / "last.pt").exists()
             or ckpt_lib.load_checkpoint(self.run_dir, user=self.config)["frames"] != self.frames
         ):
             self.save()
-        result = self.last_eval or {}
+        result = self.evaluations.last or {}
         success = float(result.get("success_rate", float("nan")))
         self.logger.hparams(
             flatten(self.config),
