@@ -24,7 +24,7 @@ PRIMITIVE_COLOUR = (0.85, 0.45, 0.2, 1.0)
 MESH_COLOUR = (0.57, 0.85, 0.78, 1.0)
 GROUND_COLOUR = (0.8, 0.8, 0.8, 1.0)
 MARKER_COLOUR = (0.1, 0.8, 0.2, 0.6)
-#: Where people's renders look: just before and above the object's nominal place (0.6, 0), so that
+#: Where people's renders look: above the object's nominal place (0.6, 0), so that
 #: at the viewer's default distance the cube and the fingers are plainly visible and a lift stays in
 #: the frame (from 1.1 m at (0.45, 0, 0.2) the cube was a few pixels across).
 VIEWER_TARGET = (0.6, 0.0, 0.22)
