@@ -142,6 +142,7 @@ def grid(rows: list[list[np.ndarray]], row_labels: list[str], col_labels: list[s
 
 
 def parse(argv: list[str] | None) -> argparse.Namespace:
+    """The flags; the defaults make the docs' two pictures, small values make the test's tiny grid."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--arms", action="store_true", help="the arms at their grasp, not the cameras")
     parser.add_argument("--presets", nargs="+", default=list(PRESETS), help="visual presets (rows)")
