@@ -16,13 +16,15 @@ import numpy as np
 from matplotlib.animation import FuncAnimation, PillowWriter
 
 from rlgrasp.envs import PandaGraspEnv, Randomizer, expert_for
+from rlgrasp.envs.scene import ViewerConfig
 from rlgrasp.envs.tasks import TASKS
 from rlgrasp.evaluation.source import ENV_ERRORS
 from rlgrasp.overrides import OneLineParser, unwritable
 from rlgrasp.utils import pyplot
 
-#: The viewer's camera (distance m, yaw and pitch degrees) unless ``--camera`` gives one.
-CAMERA = (1.1, 60.0, -25.0)
+#: The viewer's camera (distance m, yaw and pitch degrees) unless ``--camera`` gives one: the env's
+#: default viewer, framed on the workspace so that the object and the fingers read on the sheet.
+CAMERA = (ViewerConfig.distance, ViewerConfig.yaw, ViewerConfig.pitch)
 
 
 def make_env(

@@ -20,6 +20,7 @@ from tensordict import TensorDict
 from rlgrasp.compose import compose_config, compose_eval
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.envs.grasp_env import EnvConfig
+from rlgrasp.envs.scene import VIEWER_TARGET, ViewerConfig
 from rlgrasp.evaluation import EvaluationError
 from rlgrasp.evaluation.cli import evaluate
 from rlgrasp.evaluation.enjoy import camera_line, gui_settings, play, register_enjoy_config, set_up_gui
@@ -339,7 +340,8 @@ def test_enjoy_shows_the_camera_preview_panes(modality: str, rgb: int, depth: in
         assert flags[pybullet.COV_ENABLE_GUI] == 1
         assert flags[pybullet.COV_ENABLE_RGB_BUFFER_PREVIEW] == rgb
         assert flags[pybullet.COV_ENABLE_DEPTH_BUFFER_PREVIEW] == depth
-        assert client.calls[-1] == ("camera", 1.1, 60.0, -25.0, [0.45, 0.0, 0.2])
+        viewer = ViewerConfig()  # the GUI looks where the videos do: the env's default viewer
+        assert client.calls[-1] == ("camera", viewer.distance, viewer.yaw, viewer.pitch, list(VIEWER_TARGET))
         assert camera_line(env).startswith(f"camera: wrist {modality} 64x64; the GUI's preview panes")
     finally:
         env.close()

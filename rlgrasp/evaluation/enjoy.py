@@ -23,6 +23,7 @@ from hydra.core.config_store import ConfigStore
 
 from rlgrasp.config import CONFIG_DIR, register_configs
 from rlgrasp.envs.factory import env_factory
+from rlgrasp.envs.scene import VIEWER_TARGET
 from rlgrasp.evaluation.episodes import run_episode
 from rlgrasp.evaluation.policies import Actor, PolicySource, build_policy
 from rlgrasp.evaluation.source import EvaluationError, prepare
@@ -123,7 +124,7 @@ def set_up_gui(env: Any, client: Any = None) -> None:
     for flag, value in gui_settings(env):
         client.configureDebugVisualizer(flag, value)
     viewer = env.unwrapped.viewer
-    client.resetDebugVisualizerCamera(viewer["distance"], viewer["yaw"], viewer["pitch"], [0.45, 0.0, 0.2])
+    client.resetDebugVisualizerCamera(viewer["distance"], viewer["yaw"], viewer["pitch"], list(VIEWER_TARGET))
 
 
 def camera_line(env: Any) -> str | None:
