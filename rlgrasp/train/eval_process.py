@@ -55,7 +55,7 @@ class Pending:
     #: ``(first_round, rounds)`` when the process plays only those rounds of the evaluation (its
     #: answer is then ``Evaluator.play``'s per-episode figures, not the metrics); None: all of it.
     part: tuple[int, int] | None = None
-    #: The metrics as logged when the result arrived (``Trainer.peek_eval``); None: not yet logged.
+    #: The metrics as logged when the result arrived (``Evaluations.on_batch_end``); None: not yet logged.
     logged: dict[str, float] | None = None
 
 
