@@ -4,7 +4,8 @@ The file holds ``rlgrasp.deploy``'s module: a state policy reads one ``observati
 policy also its images (``depth`` float32 metres, ``rgb`` uint8, channel first). Every export is
 checked against the checkpoint policy on observations recorded from env rollouts (the camera env's,
 for a camera policy), and a JSON file beside it names the inputs (names, shapes, dtypes) and says
-what the vectors mean.
+what the vectors mean. ``format=folder`` writes a policy folder instead (``rlgrasp.policy_folder``):
+data, not a program, read back by rlgrasp and checked to act exactly as the checkpoint.
 """
 
 from __future__ import annotations

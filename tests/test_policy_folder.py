@@ -178,3 +178,16 @@ def test_the_model_card_names_the_env_and_the_algorithm() -> None:
     meta = json.loads((FOLDER / "config.json").read_text())
     assert meta["config"]["env"]["control"]["mode"] == "joint_delta"  # today's nested shape
     assert meta["config"]["algo"] == {"name": "ppo"} and len(meta["interface"]["action_meaning"]) == 8
+
+
+def test_the_docs_read_a_folder_without_rlgrasp(monkeypatch) -> None:
+    """docs/export.md's numpy reader of the shipped folder acts as rlgrasp does (to float32 rounding)."""
+    text = (ROOT / "docs" / "export.md").read_text()
+    (code,) = [b for b in text.split("```python\n")[1:] if "def act(obs)" in b]
+    monkeypatch.chdir(ROOT)  # the snippet names policies/grasp_ppo/ from the repository root
+    namespace: dict = {}
+    exec(code.split("```")[0], namespace)
+    observations, reference = record(read_checkpoint(FOLDER), 20, seed=0)
+    actions = np.stack([namespace["act"](obs) for obs in observations["observation"]])
+    np.testing.assert_allclose(actions, reference, atol=1e-6)
+    assert namespace["config"]["spec"]["obs_dim"] == observations["observation"].shape[1]
