@@ -208,8 +208,8 @@ Nothing in the folder is unpickled: reading it is `safetensors` and `json`.
 ## Evaluate it
 
 ```bash
-pip install "rlgrasp[policy]"
-rlgrasp-eval ckpt=<this folder> episodes=100
+pip install -e ".[policy]"                    # in an rlgrasp checkout: safetensors
+rlgrasp-eval ckpt=<this folder> episodes=100  # seeds 0-99, success with a 95% interval
 ```
 
 The run's own evaluation: {shown} (`model-index` above; after {meta.get("frames")} frames).

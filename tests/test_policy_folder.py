@@ -191,3 +191,16 @@ def test_the_docs_read_a_folder_without_rlgrasp(monkeypatch) -> None:
     actions = np.stack([namespace["act"](obs) for obs in observations["observation"]])
     np.testing.assert_allclose(actions, reference, atol=1e-6)
     assert namespace["config"]["spec"]["obs_dim"] == observations["observation"].shape[1]
+
+
+def test_a_camera_policy_converts_with_its_images_and_teacher(tmp_path: Path) -> None:
+    """A camera student: its images in the spec, its teacher named, the same actions on its own
+    episodes (the export's check reads the folder back and compares on 10 camera observations)."""
+    pt = ROOT / "policies" / "grasp_vision_depth.pt"
+    result = _export(f"ckpt={pt}", "format=folder", f"out={tmp_path / 'v'}", "verify_obs=10")
+    assert result["folder"]["max_abs_action_diff"] == 0.0
+    folder = read_checkpoint(tmp_path / "v")
+    assert folder["kind"] == "vision" and folder["spec"] == read_checkpoint(pt)["spec"]
+    assert folder["config"]["algo"]["teacher"] == "policies/grasp_ppo.pt"
+    card = yaml.safe_load((tmp_path / "v" / "README.md").read_text().split("---\n")[1])
+    assert {"vision", "distill"} <= set(card["tags"])
