@@ -4,7 +4,8 @@ The file holds ``rlgrasp.deploy``'s module: a state policy reads one ``observati
 policy also its images (``depth`` float32 metres, ``rgb`` uint8, channel first). Every export is
 checked against the checkpoint policy on observations recorded from env rollouts (the camera env's,
 for a camera policy), and a JSON file beside it names the inputs (names, shapes, dtypes) and says
-what the vectors mean.
+what the vectors mean. ``format=folder`` writes a policy folder instead (``rlgrasp.policy_folder``):
+data, not a program, read back by rlgrasp and checked to act exactly as the checkpoint.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import json
 import logging
 import os
 import re
+import shutil
 import sys
 import warnings
 from collections.abc import Callable, Iterator
@@ -51,7 +53,8 @@ from rlgrasp.models.cnn import image_specs
 from rlgrasp.models.mlp import squashes
 from rlgrasp.overrides import entry_point, unwritable
 from rlgrasp.received import ReceivedError, check_inside
-from rlgrasp.train.checkpoint import package_versions
+from rlgrasp.train.checkpoint import CheckpointError, package_versions, read_checkpoint
+from rlgrasp.train.policy_folder import CONFIG, INSTALL, WEIGHTS, is_policy_folder
 
 log = logging.getLogger("rlgrasp.export")
 
@@ -61,6 +64,9 @@ ENV_ID = "rlgrasp/PandaGrasp-v0"
 #: Default ``tolerance`` per policy kind. A camera policy's convolutions sum thousands of terms, in
 #: another order in onnxruntime than in torch: its last bits differ more than an MLP's.
 TOLERANCE = {"state": 1e-5, "vision": 1e-4}
+#: ``format=folder``: a policy folder (``rlgrasp.train.policy_folder``), data only, read by rlgrasp
+#: itself: its actions must equal the checkpoint's exactly unless ``tolerance`` says otherwise.
+FOLDER = "folder"
 #: An exported file's inputs by name (``observation``, and ``depth``/``rgb`` for a camera policy).
 Inputs = dict[str, np.ndarray]
 
@@ -73,10 +79,12 @@ class ExportError(RuntimeError):
 class ExportConfig:
     """``rlgrasp-export``'s config (``configs/export.yaml``)."""
 
-    ckpt: str | None = None  # a run directory (-> checkpoints/<ckpt_kind>.pt) or a checkpoint file
+    # a run directory (-> checkpoints/<ckpt_kind>.pt), a checkpoint file or a policy folder
+    ckpt: str | None = None
     ckpt_kind: str = "best"  # best | last, when ckpt is a run directory
-    format: str = "torchscript"  # torchscript | onnx | pt2 | all
-    # null: <run>/export/policy.<ext>. A file path (one format) or a directory (policy.<ext> in it).
+    format: str = "torchscript"  # torchscript | onnx | pt2 | all | folder (model.safetensors + config.json)
+    # null: <run>/export/policy.<ext> (folder: <run>/export/policy/). A file path (one format) or a
+    # directory (policy.<ext> in it); for format=folder the policy folder itself.
     out: str | None = None
     verify: bool = True  # compare with the checkpoint policy on recorded observations
     verify_obs: int = 1000  # how many observations to record (episodes of the checkpoint's env)
@@ -310,7 +318,7 @@ def describe(ckpt: dict[str, Any], ckpt_path: Path, env: Any) -> dict[str, Any]:
         "env_kwargs": env_kwargs,
         "checkpoint": {
             "path": str(ckpt_path),
-            "sha256": hashlib.sha256(ckpt_path.read_bytes()).hexdigest(),
+            "sha256": digest(ckpt_path),
             "kind": ckpt.get("kind", "state"),
             "frames": ckpt.get("frames"),
             "best_eval_success": ckpt.get("best_eval_success"),
@@ -319,6 +327,15 @@ def describe(ckpt: dict[str, Any], ckpt_path: Path, env: Any) -> dict[str, Any]:
         },
         "versions": {"export": versions(), "training": ckpt.get("versions", {})},
     }
+
+
+def digest(path: Path) -> str:
+    """The sha256 of a checkpoint file, or of a policy folder's weights then its config."""
+    files = [path / WEIGHTS, path / CONFIG] if path.is_dir() else [path]
+    sha = hashlib.sha256()
+    for file in files:
+        sha.update(file.read_bytes())
+    return sha.hexdigest()
 
 
 def observation_layout(env: Any, spec: dict[str, Any]) -> dict[str, list[int]]:
@@ -368,33 +385,40 @@ def camera_description(env: Any) -> dict[str, Any]:
 
 # --- the command ------------------------------------------------------------------------------
 def output_paths(fmt: str, out: str | None, ckpt_path: Path) -> dict[str, Path]:
-    """Format -> file: ``out`` as a file (one format) or a folder; default ``<run>/export/``."""
+    """Format -> file: ``out`` as a file (one format) or a folder; default ``<run>/export/``.
+    ``format=folder``: the policy folder, ``out`` or ``<run>/export/policy/``."""
+    if fmt == FOLDER:
+        return {FOLDER: Path(out).expanduser() if out else export_dir(ckpt_path) / "policy"}
     formats = list(FORMATS) if fmt == "all" else [fmt]
     if any(f not in FORMATS for f in formats):
-        raise ExportError(f"format={fmt}: must be one of {', '.join(FORMATS)} or all")
+        raise ExportError(f"format={fmt}: must be one of {', '.join(FORMATS)}, all or {FOLDER}")
     if out and len(formats) == 1 and Path(out).suffix and not Path(out).expanduser().is_dir():
         path = Path(out).expanduser()
         if path.suffix != FORMATS[fmt]:  # loaders (load_exported, the example) go by the extension
             raise ExportError(f"out={out}: a {fmt} file must end in {FORMATS[fmt]}")
         return {fmt: path}
-    if out:
-        folder = Path(out).expanduser()
-    else:  # <run>/checkpoints/x.pt -> <run>/export; a loose file -> export/ beside it; never via a link
-        parent = ckpt_path.absolute().parent
-        base = parent.parent if parent.name == "checkpoints" else parent
-        folder = base / "export"
-        try:
-            for path in (ckpt_path, folder):
-                check_inside(base, path, f"ckpt={ckpt_path}")
-        except ReceivedError as exc:
-            raise ExportError(str(exc)) from None
+    folder = Path(out).expanduser() if out else export_dir(ckpt_path)
     return {f: folder / f"policy{FORMATS[f]}" for f in formats}
+
+
+def export_dir(ckpt_path: Path) -> Path:
+    """The default output folder: ``<run>/checkpoints/x.pt`` -> ``<run>/export``; a loose file or a
+    policy folder -> ``export/`` beside it; never reached through a link."""
+    parent = ckpt_path.absolute().parent
+    base = parent.parent if parent.name == "checkpoints" else parent
+    folder = base / "export"
+    try:
+        for path in (ckpt_path, folder):
+            check_inside(base, path, f"ckpt={ckpt_path}")
+    except ReceivedError as exc:
+        raise ExportError(str(exc)) from None
+    return folder
 
 
 def load_source(ckpt: str | None, kind: str) -> tuple[dict[str, Any], Path]:
     """The checkpoint, checked like evaluation checks it (its messages, as ``ExportError``)."""
     if not ckpt:
-        raise ExportError("ckpt=<run dir or checkpoint file> is required")
+        raise ExportError("ckpt=<run dir, checkpoint file or policy folder> is required")
     try:
         path = resolve_checkpoint_path(ckpt, kind)
         return load_checked_checkpoint(path), path
@@ -414,10 +438,26 @@ def check_request(cfg: Any, paths: dict[str, Path]) -> None:
         missing = [m for m in needed if importlib.util.find_spec(m) is None]
         if missing:
             raise ExportError(f'format=onnx needs {", ".join(missing)}: pip install -e ".[export]"')
+    if FOLDER in paths:
+        check_folder_request(paths[FOLDER])
     for path in paths.values():
-        problem = unwritable(path)
+        problem = unwritable(path, folder=FOLDER in paths)
         if problem:
             raise ExportError(f"cannot write {path}: {problem}")
+
+
+def check_folder_request(folder: Path) -> None:
+    """``format=folder``: safetensors installed, and ``out`` new, empty or a policy folder (which is
+    replaced): any other folder is the user's, never overwritten."""
+    if importlib.util.find_spec("safetensors") is None:
+        raise ExportError(f"format={FOLDER} needs the safetensors package: {INSTALL}")
+    if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
+        raise ExportError(f"out={folder}: is not a folder (a policy folder is written as a new folder)")
+    if folder.is_dir() and any(folder.iterdir()) and not is_policy_folder(folder):
+        raise ExportError(
+            f"out={folder}: exists and is not a policy folder (no {WEIGHTS} and {CONFIG}); give a new "
+            "or empty folder, or a policy folder to replace"
+        )
 
 
 def export(cfg: Any) -> dict[str, dict[str, Any]]:
@@ -430,8 +470,65 @@ def export(cfg: Any) -> dict[str, dict[str, Any]]:
     with _one_thread():
         recorded = record(ckpt, cfg.verify_obs, cfg.seed) if cfg.verify else None
         for fmt, path in paths.items():
-            results[fmt] = _write_one(module, fmt, path, info, recorded, cfg, tolerance)
+            if fmt == FOLDER:
+                limit = 0.0 if cfg.tolerance is None else cfg.tolerance
+                results[fmt] = _write_folder(ckpt, ckpt_path, path, info, recorded, limit)
+            else:
+                results[fmt] = _write_one(module, fmt, path, info, recorded, cfg, tolerance)
     return results
+
+
+def _write_folder(
+    ckpt: dict[str, Any],
+    ckpt_path: Path,
+    folder: Path,
+    info: dict[str, Any],
+    recorded: tuple[Inputs, np.ndarray] | None,
+    tolerance: float,
+) -> dict[str, Any]:
+    """The policy folder, written and read back under a temporary name beside ``folder`` (its
+    actions compared with the checkpoint's on ``recorded``), then put in place of ``folder``: a
+    failed check or write leaves the previous folder as it was and nothing temporary."""
+    from rlgrasp.policy_folder import write_policy_folder  # lazy: it imports this module's describe
+
+    folder = folder.absolute()
+    tmp = folder.with_name(f".{folder.name}.tmp{os.getpid()}")
+    old = folder.with_name(f".{folder.name}.old{os.getpid()}")
+    try:
+        with _writing(folder):
+            write_policy_folder(ckpt, tmp, info, ckpt_path, folder.name)
+        diff = folder_diff(tmp, *recorded) if recorded else None
+        if diff is not None and not diff <= tolerance:
+            raise ExportError(
+                f"{folder}: the folder's actions differ from the checkpoint's by {diff:.3g} "
+                f"> tolerance {tolerance} (nothing was replaced)"
+            )
+        with _writing(folder):
+            if folder.exists():
+                os.replace(folder, old)
+            os.replace(tmp, folder)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+        shutil.rmtree(old, ignore_errors=True)
+    shown = "not verified" if diff is None else f"max |action diff| {diff:.2e} on {len(recorded[1])} obs"
+    log.info("%s: %s (%s)", FOLDER, folder, shown)
+    return {"path": str(folder), "json": str(folder / CONFIG), "max_abs_action_diff": diff}
+
+
+def folder_diff(folder: Path, observations: Inputs, reference: np.ndarray) -> float:
+    """Largest |folder policy's action - reference| over the recorded observations: the folder read
+    back as any reader reads it (``read_checkpoint``), acting as ``rlgrasp-eval`` acts."""
+    try:
+        actor = CheckpointActor(read_checkpoint(folder), deterministic=True)
+    except CheckpointError as exc:
+        raise ExportError(f"the written folder does not read back: {exc}") from exc
+    state_key = "state" if len(observations) > 1 else None
+    actions = []
+    for i in range(len(reference)):
+        row = {k: v[i] for k, v in observations.items()}
+        obs = {**row, "state": row["observation"]} if state_key else row["observation"]
+        actions.append(actor(obs))
+    return float(np.abs(np.stack(actions).astype(np.float32) - reference).max())
 
 
 def _write_one(
@@ -469,7 +566,7 @@ def _write_one(
         }
         meta = {"format": fmt, "file": path.name, **info, "verification": check if recorded else None}
         with _writing(json_path):
-            json_tmp.write_text(_dumps(meta))
+            json_tmp.write_text(dumps(meta))
         os.replace(tmp, path)
         os.replace(json_tmp, json_path)
     finally:
@@ -517,7 +614,7 @@ def _one_thread() -> Iterator[None]:
         torch.set_num_threads(threads)
 
 
-def _dumps(meta: dict[str, Any]) -> str:
+def dumps(meta: dict[str, Any]) -> str:
     """Indented JSON with short lists on one line (the layout stays readable)."""
     text = json.dumps(meta, indent=2)
     return re.sub(r"\[\s+([^\[\]{}]*?)\s+\]", lambda m: "[" + " ".join(m.group(1).split()) + "]", text) + "\n"

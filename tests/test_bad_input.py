@@ -615,7 +615,11 @@ EVAL = [
     ("own objects: a mesh of zero volume", ["objects={paths:[{flat}]}"], "flat.obj has zero volume"),
 ]
 EXPORT = [
-    ("unknown format", ["format=tflite"], "format=tflite: must be one of torchscript, onnx, pt2 or all"),
+    (
+        "unknown format",
+        ["format=tflite"],
+        "format=tflite: must be one of torchscript, onnx, pt2, all or folder",
+    ),
     ("an unwritable output path", ["out={unwritable}/policy.pt"], "cannot write "),
     (
         "a file name for another format",

@@ -26,6 +26,7 @@ from rlgrasp.models.cnn import image_specs
 from rlgrasp.overrides import explain
 from rlgrasp.received import ReceivedError, check_inside
 from rlgrasp.train.checkpoint import CheckpointError, read_checkpoint
+from rlgrasp.train.policy_folder import is_policy_folder
 
 CKPT_KINDS = ("best", "last")
 # What a checkpoint must hold for evaluation (see rlgrasp.train.checkpoint's docstring).
@@ -43,11 +44,12 @@ class EvaluationError(RuntimeError):
 
 
 def resolve_checkpoint_path(ckpt: str | os.PathLike, kind: str = "best") -> Path:
-    """A checkpoint file, or ``<run dir>/checkpoints/<kind>.pt`` for a run directory."""
+    """A checkpoint file or a policy folder (``model.safetensors`` + ``config.json``) as given, or
+    ``<run dir>/checkpoints/<kind>.pt`` for a run directory."""
     if kind not in CKPT_KINDS:
         raise EvaluationError(f"ckpt_kind={kind}: must be one of {', '.join(CKPT_KINDS)}")
     path = Path(ckpt).expanduser()
-    if path.is_dir():
+    if path.is_dir() and not is_policy_folder(path):
         ckpt_dir = path / "checkpoints"
         candidate = ckpt_dir / f"{kind}.pt"
         if not candidate.is_file():
@@ -212,6 +214,13 @@ def _checkpoint_info(full: dict[str, Any], path: Path, kind: str) -> dict[str, A
     }
 
 
+def _source_kind(path: Path, ckpt: str, ckpt_kind: str) -> str:
+    """What an evaluation reports the checkpoint was: ``best``/``last`` of a run, a file, a folder."""
+    if is_policy_folder(path):
+        return "folder"
+    return ckpt_kind if Path(ckpt).is_dir() else "file"
+
+
 def prepare(
     policy: str,
     ckpt: str | None = None,
@@ -225,7 +234,8 @@ def prepare(
     if policy == "checkpoint":
         if not ckpt:
             raise EvaluationError(
-                "ckpt=<run dir or checkpoint file> is required (or policy=scripted / policy=random)"
+                "ckpt=<run dir, checkpoint file or policy folder> is required "
+                "(or policy=scripted / policy=random)"
             )
         path = resolve_checkpoint_path(ckpt, ckpt_kind)
         full = load_checked_checkpoint(path)
@@ -235,7 +245,7 @@ def prepare(
         trimmed = {k: full[k] for k in POLICY_KEYS if k in full}
         if randomization is None:  # what the run's own evaluations played, if it chose (eval.randomization)
             randomization = (full["config"].get("eval") or {}).get("randomization")
-        info = _checkpoint_info(full, path, ckpt_kind if Path(ckpt).is_dir() else "file")
+        info = _checkpoint_info(full, path, _source_kind(path, ckpt, ckpt_kind))
         run_dir = run_of(path)
     else:
         if ckpt:

@@ -26,6 +26,9 @@ writes it, for every algorithm):
 Only tensors and plain containers are stored, and every reader loads with ``weights_only=True``: a
 checkpoint someone sends cannot run code when it is loaded, and one that would need to unpickle any
 other object is refused (``CheckpointError``).
+
+Every reader here also takes a policy folder (``model.safetensors`` + ``config.json``,
+``rlgrasp.train.policy_folder``) where it takes a file: the same dict, with nothing unpickled at all.
 """
 
 from __future__ import annotations
@@ -49,10 +52,11 @@ from omegaconf import OmegaConf
 from tensordict.nn import TensorDictModuleBase
 
 from rlgrasp.config import CONFIG_DIR
-from rlgrasp.models.cnn import vision_policy
+from rlgrasp.models.cnn import build_vision_actor
 from rlgrasp.models.mlp import OBS_KEY, RunningNorm, build_actor
 from rlgrasp.received import ReceivedError, check_finite, check_inside, check_tree, read_config
 from rlgrasp.rundir import CHECKPOINTS
+from rlgrasp.train.policy_folder import CONFIG, WEIGHTS, is_policy_folder, read_policy_folder
 
 FORMAT = 2
 _NUMBERED = re.compile(r"ckpt_(\d+)\.pt$")
@@ -104,6 +108,12 @@ def read_checkpoint(
     (``rlgrasp.received.read_config``; ``user``: the user's own config, whose classes the file may
     name at the same nodes); ``CheckpointError`` says in one line what is wrong."""
     path = Path(path)
+    if is_policy_folder(path):
+        return _read_folder(path, map_location, user)
+    if path.is_dir():
+        raise CheckpointError(
+            f"missing checkpoint: {path} is a folder without {WEIGHTS} and {CONFIG} (not a policy folder)"
+        )
     if not path.is_file():
         raise CheckpointError(f"missing checkpoint: {path} does not exist")
     try:
@@ -134,6 +144,19 @@ def read_checkpoint(
         check_state(state, str(path))
     except ReceivedError as exc:
         raise CheckpointError(str(exc)) from None
+    return state
+
+
+def _read_folder(
+    path: Path, map_location: str | torch.device, user: Mapping[str, Any] | None
+) -> dict[str, Any]:
+    """A policy folder's checkpoint dict (``rlgrasp.train.policy_folder``), checked as a file's is."""
+    try:
+        state = read_policy_folder(path, user)
+        check_state(state, f"policy folder {path}")
+    except ReceivedError as exc:
+        raise CheckpointError(str(exc)) from None
+    state["actor"] = {k: v.to(map_location) for k, v in state["actor"].items()}
     return state
 
 
@@ -247,8 +270,9 @@ def newest_readable(
 
 
 def resolve_policy_path(path: str) -> str:
-    """A checkpoint path as given, or, when relative and not found from the working directory, from
-    the repository root: the experiments name the shipped policies ``policies/<name>.pt``."""
+    """A checkpoint path (a file, a policy folder, a run directory) as given, or, when relative and
+    not found from the working directory, from the repository root: the experiments name the shipped
+    policies ``policies/<name>.pt`` (or the folder ``policies/<name>``)."""
     candidate = Path(path).expanduser()
     if not candidate.is_absolute() and not candidate.exists():
         from_root = Path(CONFIG_DIR).parent / candidate
@@ -260,10 +284,10 @@ def resolve_policy_path(path: str) -> str:
 def load_checkpoint(
     path: str | os.PathLike, map_location: str | torch.device = "cpu", user: Mapping[str, Any] | None = None
 ) -> dict[str, Any]:
-    """Load a checkpoint file, or a run directory's newest readable one (normally ``last.pt``);
-    ``user``: the user's own config (``read_checkpoint``)."""
+    """Load a checkpoint file or a policy folder, or a run directory's newest readable checkpoint
+    (normally ``last.pt``); ``user``: the user's own config (``read_checkpoint``)."""
     path = Path(path)
-    if path.is_dir():
+    if path.is_dir() and not is_policy_folder(path):
         return newest_readable(path, map_location, user)[1]
     return read_checkpoint(path, map_location, user)
 
@@ -328,26 +352,14 @@ def write_checkpoints(
     return numbered
 
 
-def policy_from_checkpoint(
-    ckpt: dict[str, Any] | str | os.PathLike, device: str | torch.device = "cpu"
-) -> TensorDictModuleBase:
-    """The deterministic policy (normalizer included) from a checkpoint alone.
-
-    Reads ``ckpt["observation"]`` from a tensordict (a camera policy, ``kind == "vision"``, also its
-    image entries) and writes ``"action"`` (the distribution's mode).
-    Accepts a loaded dict, a checkpoint path or a run directory.
-    """
-    if not isinstance(ckpt, dict):
-        ckpt = load_checkpoint(ckpt, map_location=device)
-    spec = ckpt["spec"]
-    model_cfg = OmegaConf.create(ckpt["config"]["model"])
-    if ckpt.get("kind") == "vision":  # a camera student (rlgrasp.algos.dagger): state + images in
-        try:
-            return vision_policy(spec, model_cfg, ckpt["actor"]).to(device)
-        except RuntimeError as exc:
-            raise CheckpointError(f"checkpoint does not fit its own model: {_first_line(exc)}") from exc
+def policy_module(spec: Mapping[str, Any], model_cfg: Any, vision: bool) -> TensorDictModuleBase:
+    """The deterministic policy a checkpoint's ``spec`` and model config describe, with fresh weights:
+    what its ``actor`` state dict is loaded into, and what a policy folder's tensors are checked
+    against (``rlgrasp.train.policy_folder``), so both readers expect the same keys and shapes."""
+    if vision:  # a camera student (rlgrasp.algos.dagger): state + images in
+        return build_vision_actor(spec, model_cfg, deterministic=True)
     norm = RunningNorm(spec["obs_dim"], clip=model_cfg.obs_clip, enabled=model_cfg.obs_norm)
-    actor = build_actor(
+    return build_actor(
         norm,
         spec["obs_dim"],
         torch.as_tensor(spec["action_low"]),
@@ -355,10 +367,28 @@ def policy_from_checkpoint(
         model_cfg,
         deterministic=True,
     )
+
+
+def policy_from_checkpoint(
+    ckpt: dict[str, Any] | str | os.PathLike, device: str | torch.device = "cpu"
+) -> TensorDictModuleBase:
+    """The deterministic policy (normalizer included) from a checkpoint alone.
+
+    Reads ``ckpt["observation"]`` from a tensordict (a camera policy, ``kind == "vision"``, also its
+    image entries) and writes ``"action"`` (the distribution's mode).
+    Accepts a loaded dict, a checkpoint path, a policy folder or a run directory.
+    """
+    if not isinstance(ckpt, dict):
+        ckpt = load_checkpoint(ckpt, map_location=device)
+    spec = ckpt["spec"]
+    model_cfg = OmegaConf.create(ckpt["config"]["model"])
+    vision = ckpt.get("kind") == "vision"
+    actor = policy_module(spec, model_cfg, vision)
     try:
         actor.load_state_dict(ckpt["actor"])
     except RuntimeError as exc:
-        raise CheckpointError(f"checkpoint does not fit its own model config: {_first_line(exc)}") from exc
-    if spec.get("obs_key", OBS_KEY) != OBS_KEY:
+        what = "model" if vision else "model config"
+        raise CheckpointError(f"checkpoint does not fit its own {what}: {_first_line(exc)}") from exc
+    if not vision and spec.get("obs_key", OBS_KEY) != OBS_KEY:
         raise CheckpointError(f"checkpoint observation key {spec.get('obs_key')!r}, expected {OBS_KEY!r}")
     return actor.to(device).eval()
