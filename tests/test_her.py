@@ -230,6 +230,26 @@ def test_a_short_her_run_trains(tmp_path: Path) -> None:
     assert 0.0 <= success <= 1.0 and last["updates"] > 0 and last["config"]["algo"]["her"]["enabled"]
 
 
+def test_her_beside_demonstrations_samples_both(tmp_path: Path) -> None:
+    """HER on the online rows and the expert's (sparse-reward) episodes beside them: the
+    demonstrations carry no episode number and are never relabelled."""
+    from rlgrasp.compose import compose_config
+    from rlgrasp.demos.cli import record_demos
+
+    out = tmp_path / "demos"
+    demo_task = ["task=pick_place", "env.task.observation=flat", "env.task.reward=sparse"]
+    record_demos(
+        compose_config(
+            "demos",
+            ["episodes=1", f"out={out}", "workers=1", "keep=all", "env.control.ee_yaw=true", *demo_task],
+        )
+    )
+    sac = _sac(tmp_path, f"algo.demos={out / 'demos'}", "env.control.ee_yaw=true")
+    _filled(sac, 240)
+    minibatch = sac._sample()
+    assert EPISODE_KEY not in minibatch.keys() and minibatch.shape[0] == 32
+
+
 def test_tqc_takes_her_as_sac_does(tmp_path: Path) -> None:
     from tests.test_tqc import _tqc
 

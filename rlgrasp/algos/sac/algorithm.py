@@ -257,7 +257,9 @@ class SAC(Algorithm):
         demos = _buffer(
             frames.numel(), min(batch - 1, max(1, round(batch * a.replay.demo_ratio))), self.device
         )
-        demos.extend(_compact(frames.select(*self.transition_keys)).to(self.device))
+        # Not relabelled, so without the episode number HER keeps for the online rows.
+        keys = [k for k in self.transition_keys if k != EPISODE_KEY]
+        demos.extend(_compact(frames.select(*keys)).to(self.device))
         return demos
 
     def start(self, log_scalars: Any) -> None:
