@@ -109,7 +109,7 @@ def warm_sac(cfg: Any, batch: Any, threads: int) -> Any:
     torch.set_num_threads(threads)
     torch.manual_seed(0)
     algo = algorithm_class(cfg.algo)(cfg, build_parts(cfg), torch.device("cpu"))
-    algo.store(batch.reshape(-1))  # a camera's images too
+    algo.remember(batch)  # a camera's images too; with algo.her, each transition's episode
     for _ in range(3):  # warm-up: the optimizers' state, the allocator
         algo._step()
     return algo

@@ -300,10 +300,7 @@ class SAC(Algorithm):
         holds ``learning_starts`` frames (the steps not taken before are not made up)."""
         optim = self.cfg.algo.optim
         t0 = time.perf_counter()
-        flat = batch.reshape(-1)
-        if self.her is not None:
-            flat.set(EPISODE_KEY, self.her.episodes.label(batch).to(flat.device))
-        self.store(flat)
+        flat = self.remember(batch)
         if len(self.replay) < self.cfg.algo.replay.learning_starts:
             return {"charts/replay_frames": float(len(self.replay))}
         self.owed += optim.utd_ratio * flat.numel()
@@ -318,6 +315,15 @@ class SAC(Algorithm):
         metrics["charts/gradient_steps"] = float(steps)
         metrics["time/train_s"] = time.perf_counter() - t0
         return metrics
+
+    def remember(self, batch: TensorDictBase) -> TensorDictBase:
+        """Store a collector batch ``[envs, steps]`` (with ``algo.her``, each transition labelled with
+        its episode first); returns it flattened."""
+        flat = batch.reshape(-1)
+        if self.her is not None:
+            flat.set(EPISODE_KEY, self.her.episodes.label(batch).to(flat.device))
+        self.store(flat)
+        return flat
 
     def store(self, flat: TensorDictBase) -> None:
         """Add a flat batch of transitions to the replay buffer (images in their stored dtype) and
