@@ -35,7 +35,7 @@ from rlgrasp.errors import ConfigError
 from rlgrasp.models.cnn import POOLINGS, CNNConfig
 from rlgrasp.models.mlp import MLPConfig
 from rlgrasp.rundir import register_resolvers
-from rlgrasp.train.collectors import CollectorConfig, RayCollectorConfig
+from rlgrasp.train.collector_schema import CollectorConfig, RayCollectorConfig
 from rlgrasp.train.logger import LoggerConfig, MlflowLoggerConfig, WandbLoggerConfig
 from rlgrasp.utils import plain
 
