@@ -40,6 +40,10 @@ def _nested_class(cls: type, name: str) -> type | None:
     return factory if isinstance(factory, type) and dataclasses.is_dataclass(factory) else None
 
 
+#: The env settings that change what an action means: a policy acts in an env only if they agree
+#: (a teacher, a warm start, a DAgger teacher).
+ACTION_SETTINGS = ("control.mode", "control.ee_yaw")
+
 #: ``env_setting``'s default: the value ``EnvConfig`` gives the path.
 SCHEMA_DEFAULT = object()
 

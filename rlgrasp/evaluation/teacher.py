@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rlgrasp.envs.part_config import env_setting
+from rlgrasp.envs.part_config import ACTION_SETTINGS, env_setting
 from rlgrasp.evaluation.policies import PolicySource, build_policy
 from rlgrasp.evaluation.source import (
     ENV_ERRORS,
@@ -27,7 +27,7 @@ from rlgrasp.models.cnn import image_specs
 from rlgrasp.train.checkpoint import resolve_policy_path
 
 #: Env keys a teacher must share with the student's env beyond the layout (same sizes, other meaning).
-SAME_ENV_KEYS = ("control.mode", "control.ee_yaw")
+SAME_ENV_KEYS = ACTION_SETTINGS
 
 
 def teacher_path(value: str, source: PolicySource) -> Path | None:

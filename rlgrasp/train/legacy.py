@@ -22,16 +22,20 @@ def nest_algo(algo: dict[str, Any]) -> dict[str, Any]:
     nested: dict[str, Any] = {}
     for key, value in algo.items():
         path = moved_algo_key(key, algo.get("name")) if not isinstance(value, dict) else None
-        node = nested
-        *parents, leaf = (path or key).split(".")
-        for part in parents:
-            node = node.setdefault(part, {})
-        node[leaf] = value
+        _set_path(nested, path or key, value)
     targets = term_targets(algo.get("name"))
     for name, term in nested.get("terms", {}).items():
         if isinstance(term, dict) and name in targets:
             term.setdefault("_target_", targets[name])
     return nested
+
+
+def _set_path(node: dict[str, Any], path: str, value: Any) -> None:
+    """``value`` at the dotted ``path`` of ``node``, the nodes on the way made as needed."""
+    *parents, leaf = path.split(".")
+    for part in parents:
+        node = node.setdefault(part, {})
+    node[leaf] = value
 
 
 def algorithm_state(state: dict[str, Any]) -> dict[str, Any] | None:
@@ -85,11 +89,7 @@ def nest_env(env: dict[str, Any]) -> dict[str, Any]:
     model = env.pop("robot_urdf", None)
     nested = {k: dict(v) if isinstance(v, dict) else v for k, v in env.items() if k not in ENV_KEYS}
     for key in [k for k in env if k in ENV_KEYS]:
-        node = nested
-        *parents, leaf = ENV_KEYS[key].split(".")
-        for part in parents:
-            node = node.setdefault(part, {})
-        node[leaf] = env[key]
+        _set_path(nested, ENV_KEYS[key], env[key])
     if model is not None and isinstance(nested.get("robot", "panda"), str):
         nested["robot"] = {"name": nested.get("robot", "panda"), "model": model}
     return nested

@@ -15,7 +15,7 @@ from typing import Any
 
 from torch import nn
 
-from rlgrasp.envs.part_config import env_setting
+from rlgrasp.envs.part_config import ACTION_SETTINGS, env_setting
 from rlgrasp.envs.robot import robot_label
 from rlgrasp.train.checkpoint import CheckpointError, load_checkpoint, resolve_policy_path
 from rlgrasp.utils import plain
@@ -71,7 +71,7 @@ def _env_differences(trained: dict[str, Any], here: dict[str, Any]) -> list[tupl
         out = [(f"camera.{k}", v, ours.get(k)) for k, v in theirs.items() if ours.get(k) != v]
     return out + [
         (k, env_setting(trained, k), env_setting(here, k))
-        for k in ("control.mode", "control.ee_yaw")
+        for k in ACTION_SETTINGS
         if env_setting(trained, k) != env_setting(here, k)
     ]
 

@@ -13,7 +13,7 @@ from torchrl.data import LazyTensorStorage, ReplayBuffer
 from torchrl.data.replay_buffers import RandomSampler
 from torchrl.envs import ExplorationType, set_exploration_type
 
-from rlgrasp.envs.part_config import env_setting
+from rlgrasp.envs.part_config import ACTION_SETTINGS, env_setting
 from rlgrasp.envs.robot import robot_label
 from rlgrasp.models.mlp import OBS_KEY
 from rlgrasp.models.spec import PRIVILEGED_KEY
@@ -62,7 +62,7 @@ def load_teacher(path: str, spec: dict[str, Any], env_cfg: Any) -> tuple[Privile
             f"teacher={path}: it reads {t_spec['obs_dim']} state values, this env's privileged state has "
             f"{spec['privileged_dim']} ({why})"
         )
-    for key in ("control.mode", "control.ee_yaw"):
+    for key in ACTION_SETTINGS:
         theirs, ours = env_setting(t_env, key), env_setting(env_cfg, key)
         if theirs != ours:
             raise CheckpointError(f"teacher={path}: env.{key}={theirs!r} in the teacher, {ours!r} here")
