@@ -30,7 +30,7 @@ from rlgrasp.demos.bc import mse_bc_loss
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.models.cnn import actor_norm, build_vision_actor
 from rlgrasp.models.spec import vision_spec
-from rlgrasp.train.checkpoint import resolve_policy_path
+from rlgrasp.policy_file import resolve_policy_path
 from rlgrasp.vision.augment import augment
 from rlgrasp.vision.dagger import load_teacher
 

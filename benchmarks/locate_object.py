@@ -33,7 +33,7 @@ from rlgrasp.algos.sac.replay_files import ReplayFiles
 from rlgrasp.compose import compose_train
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.models.cnn import build_vision_actor, vision_net
-from rlgrasp.train.checkpoint import load_checkpoint
+from rlgrasp.policy_file import load_checkpoint
 from rlgrasp.vision.augment import augment_images
 from rlgrasp.vision.object_map import MapTap, last_conv, map_cross_entropy, map_window
 

@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a check
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # results_file, also when loaded by path
 import results_file
 
-from rlgrasp.train.checkpoint import CheckpointError, newest_readable, read_checkpoint
+from rlgrasp.policy_file import CheckpointError, newest_readable, read_checkpoint
 from rlgrasp.utils import markdown_table
 from tests.procs import processes_in_group
 

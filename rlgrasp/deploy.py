@@ -18,7 +18,7 @@ from torch import nn
 
 from rlgrasp.models.cnn import ImageEncoder, SpatialSoftmax, image_specs
 from rlgrasp.models.mlp import squashes
-from rlgrasp.train.checkpoint import policy_from_checkpoint
+from rlgrasp.policy_file import policy_from_checkpoint
 
 
 class DeployPolicy(nn.Module):

@@ -52,9 +52,16 @@ from rlgrasp.evaluation.source import (
 from rlgrasp.models.cnn import image_specs
 from rlgrasp.models.mlp import squashes
 from rlgrasp.overrides import entry_point, unwritable
+from rlgrasp.policy_file import (
+    CONFIG,
+    INSTALL,
+    WEIGHTS,
+    CheckpointError,
+    is_policy_folder,
+    package_versions,
+    read_checkpoint,
+)
 from rlgrasp.received import ReceivedError, check_inside
-from rlgrasp.train.checkpoint import CheckpointError, package_versions, read_checkpoint
-from rlgrasp.train.policy_folder import CONFIG, INSTALL, WEIGHTS, is_policy_folder
 
 log = logging.getLogger("rlgrasp.export")
 
@@ -64,7 +71,7 @@ ENV_ID = "rlgrasp/PandaGrasp-v0"
 #: Default ``tolerance`` per policy kind. A camera policy's convolutions sum thousands of terms, in
 #: another order in onnxruntime than in torch: its last bits differ more than an MLP's.
 TOLERANCE = {"state": 1e-5, "vision": 1e-4}
-#: ``format=folder``: a policy folder (``rlgrasp.train.policy_folder``), data only, read by rlgrasp
+#: ``format=folder``: a policy folder (``rlgrasp.policy_file``), data only, read by rlgrasp
 #: itself: its actions must equal the checkpoint's exactly unless ``tolerance`` says otherwise.
 FOLDER = "folder"
 #: An exported file's inputs by name (``observation``, and ``depth``/``rgb`` for a camera policy).

@@ -1,6 +1,6 @@
 """Write a policy folder: ``model.safetensors``, ``config.json`` and a model card, read without unpickling.
 
-The format and its reader: ``rlgrasp.train.policy_folder``. Written by ``rlgrasp-export
+The format and its reader: ``rlgrasp.policy_file``. Written by ``rlgrasp-export
 format=folder`` (``rlgrasp.export``, which checks the folder's actions against the checkpoint's)
 and ``scripts/policy_folder.py`` (a ``.pt`` policy -> a folder).
 """
@@ -17,14 +17,14 @@ import yaml
 
 from rlgrasp.envs.part_config import env_setting
 from rlgrasp.export import dumps
-from rlgrasp.train.checkpoint import package_versions
-from rlgrasp.train.policy_folder import (
+from rlgrasp.policy_file import (
     CARD,
     CONFIG,
-    FORMAT,
+    FOLDER_FORMAT,
     FORMAT_VERSION,
     RECORDS,
     WEIGHTS,
+    package_versions,
     safetensors_torch,
 )
 
@@ -76,7 +76,7 @@ def folder_config(ckpt: Mapping[str, Any], interface: Mapping[str, Any], source:
     }
     return plain(
         {
-            "format": FORMAT,
+            "format": FOLDER_FORMAT,
             "format_version": FORMAT_VERSION,
             "kind": ckpt.get("kind", "state"),
             "config": run,
@@ -116,7 +116,7 @@ def write_policy_folder(
     meta = folder_config(ckpt, interface, source)
     # contiguous, unshared copies: safetensors refuses views and tensors sharing memory
     tensors = {k: v.detach().cpu().contiguous().clone() for k, v in ckpt["actor"].items()}
-    (folder / WEIGHTS).write_bytes(st.save(tensors, metadata={"format": FORMAT, "config": CONFIG}))
+    (folder / WEIGHTS).write_bytes(st.save(tensors, metadata={"format": FOLDER_FORMAT, "config": CONFIG}))
     (folder / CONFIG).write_text(dumps(meta), encoding="utf-8")
     (folder / CARD).write_text(model_card(meta, name), encoding="utf-8")
     return folder

@@ -26,6 +26,7 @@ import torch
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a checkout, uninstalled
 
+from rlgrasp import policy_file  # noqa: E402
 from rlgrasp.received import ReceivedError, read_config  # noqa: E402
 from rlgrasp.train import checkpoint as ckpt_lib  # noqa: E402
 
@@ -44,8 +45,8 @@ POLICY_KEYS = (
 
 def load(path: Path, trust: bool) -> dict:
     try:
-        return ckpt_lib.read_checkpoint(path)
-    except ckpt_lib.CheckpointError as exc:
+        return policy_file.read_checkpoint(path)
+    except policy_file.CheckpointError as exc:
         if not trust or not str(exc).startswith("refused checkpoint"):
             hint = "" if trust else " (a file you made: --trust)"
             raise SystemExit(f"upgrade_checkpoint: {exc}{hint}") from None
@@ -61,7 +62,7 @@ def load(path: Path, trust: bool) -> dict:
         state["config"] = read_config(state["config"], str(path))
     except ReceivedError as exc:
         raise SystemExit(f"upgrade_checkpoint: {exc}") from None
-    state["format"] = ckpt_lib.FORMAT
+    state["format"] = policy_file.CHECKPOINT_FORMAT
     return state
 
 
@@ -74,10 +75,11 @@ def main() -> None:
     args = parser.parse_args()
     state = load(args.src, args.trust)
     if args.policy_only:
-        state = {"format": ckpt_lib.FORMAT, **{k: state[k] for k in POLICY_KEYS if k in state}}
+        state = {"format": policy_file.CHECKPOINT_FORMAT, **{k: state[k] for k in POLICY_KEYS if k in state}}
     ckpt_lib.save_checkpoint(args.dst, state)
-    ckpt_lib.read_checkpoint(args.dst)  # proves the result loads with weights_only=True
-    print(f"wrote {args.dst} ({args.dst.stat().st_size / 1024:.0f} kB, format {ckpt_lib.FORMAT})")
+    policy_file.read_checkpoint(args.dst)  # proves the result loads with weights_only=True
+    size_kb = args.dst.stat().st_size / 1024
+    print(f"wrote {args.dst} ({size_kb:.0f} kB, format {policy_file.CHECKPOINT_FORMAT})")
 
 
 if __name__ == "__main__":

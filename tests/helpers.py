@@ -31,7 +31,7 @@ from rlgrasp.envs.factory import env_factory
 from rlgrasp.envs.grasp_env import EnvConfig
 from rlgrasp.models.cnn import actor_norm, build_vision_actor
 from rlgrasp.models.spec import vision_spec
-from rlgrasp.train.checkpoint import FORMAT, load_checkpoint, read_checkpoint
+from rlgrasp.policy_file import CHECKPOINT_FORMAT, load_checkpoint, read_checkpoint
 from rlgrasp.train.legacy import nest_algo
 from rlgrasp.train.loop import Trainer, train
 
@@ -112,7 +112,7 @@ def make_student(
                 gain = 8.0 if i == len(weights) - 1 else 1.0
                 value.copy_(torch.randn(value.shape, generator=gen) * gain / value[0].numel() ** 0.5)
     ckpt = {
-        "format": FORMAT,
+        "format": CHECKPOINT_FORMAT,
         "kind": "vision",
         "actor": actor.state_dict(),
         "spec": spec,

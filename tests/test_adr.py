@@ -17,8 +17,8 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 from rlgrasp.adr import NOT_BOUNDARY, AdrState, draw_boundary, parse_settings
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.envs.randomization import PARAMS, Randomizer, Range
+from rlgrasp.policy_file import load_checkpoint
 from rlgrasp.train.adr_sync import RANGES_FILE, AdrSync
-from rlgrasp.train.checkpoint import load_checkpoint
 from rlgrasp.train.collectors import shut_down
 from rlgrasp.train.evaluate import periodic_evaluator
 from rlgrasp.train.loop import train

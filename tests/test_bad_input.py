@@ -27,7 +27,7 @@ from omegaconf import OmegaConf
 
 from rlgrasp.compose import compose_train
 from rlgrasp.config import validate_train
-from rlgrasp.train.checkpoint import FORMAT
+from rlgrasp.policy_file import CHECKPOINT_FORMAT
 from rlgrasp.train.loop import Trainer
 from rlgrasp.utils import markdown_table
 from tests.helpers import bad_input_files, demo_files, our_lines, run_entry
@@ -108,7 +108,7 @@ def _more_files(root: Path, run: Path, demos: Path) -> dict[str, str]:
     newer = root / "newer.pt"
     if not newer.exists():
         state = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
-        torch.save({**state, "format": FORMAT + 1}, newer)
+        torch.save({**state, "format": CHECKPOINT_FORMAT + 1}, newer)
     frameless = root / "frameless_demos" / "demos"
     frameless.mkdir(parents=True, exist_ok=True)
     meta = (demos / "demos.json").read_text().replace('"kept": 0', '"kept": 3')
@@ -157,6 +157,12 @@ BAD_ARM = (
 #: A DAgger depth student of the test's teacher.
 DEPTH_STUDENT = ["algo=distill", "cameras=wrist_depth", "model=cnn", "algo.teacher={teacher}"]
 # (entry point, what, arguments after BASE (placeholders filled by _fill), a fragment of the one line)
+#: What reading a checkpoint of the next format says.
+NEWER_FORMAT_LINE = (
+    f"has format {CHECKPOINT_FORMAT + 1}, this version reads up to format {CHECKPOINT_FORMAT} "
+    "(upgrade rlgrasp)"
+)
+
 TRAIN = [
     ("unknown key", ["algo.lrr=1"], "algo.lrr=1: unknown key 'lrr'; algo has _target_, name, loss, optim"),
     (
@@ -491,12 +497,12 @@ TRAIN = [
     (
         "resume a checkpoint of a newer format",
         ["resume={newer}"],
-        f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)",
+        NEWER_FORMAT_LINE,
     ),
     (
         "fine-tuning from a checkpoint of a newer format",
         ["algo.init_from={newer}"],
-        f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)",
+        NEWER_FORMAT_LINE,
     ),
     (
         "demonstrations without their frames",
@@ -608,7 +614,7 @@ EVAL = [
     (
         "a checkpoint of a newer format",
         ["ckpt={newer}"],
-        f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)",
+        NEWER_FORMAT_LINE,
     ),
     ("a name with a path", ["name=../x"], "name='../x': must be one folder name (no '/', '..' or absolute"),
     ("an absolute name", ["name=/tmp/x"], "name='/tmp/x': must be one folder name"),
@@ -640,7 +646,7 @@ EXPORT = [
     (
         "a checkpoint of a newer format",
         ["ckpt={newer}"],
-        f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)",
+        NEWER_FORMAT_LINE,
     ),
 ]
 ENJOY = [
@@ -673,7 +679,7 @@ ENJOY = [
     (
         "a checkpoint of a newer format",
         ["ckpt={newer}"],
-        f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)",
+        NEWER_FORMAT_LINE,
     ),
 ]
 SWEEP = [
@@ -764,7 +770,7 @@ DEMOS = [
     (
         "a policy checkpoint of a newer format",
         ["policy={newer}"],
-        f"has format {FORMAT + 1}, this version reads up to format {FORMAT} (upgrade rlgrasp)",
+        NEWER_FORMAT_LINE,
     ),
 ]
 TRAIN_SAC = [

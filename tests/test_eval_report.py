@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from rlgrasp.evaluation.report import band, build_report, expand_runs, main, read_scalars, training_evaluation
+from rlgrasp.policy_file import load_checkpoint
 from rlgrasp.stats import iqm, wilson_interval
-from rlgrasp.train.checkpoint import load_checkpoint, save_checkpoint
+from rlgrasp.train.checkpoint import save_checkpoint
 from rlgrasp.train.loop import train
 from tests.helpers import make_run
 

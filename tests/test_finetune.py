@@ -13,7 +13,7 @@ import torch
 from tensordict import TensorDict
 from torchrl.envs import ExplorationType, set_exploration_type
 
-from rlgrasp.train.checkpoint import load_checkpoint
+from rlgrasp.policy_file import load_checkpoint
 from rlgrasp.train.loop import Trainer, train
 from rlgrasp.train.warm_start import STD_KEY
 from rlgrasp.vision.teacher_term import TeacherImitation

@@ -41,8 +41,9 @@ from rlgrasp.evaluation.report import load_runs
 from rlgrasp.evaluation.source import EvaluationError, prepare
 from rlgrasp.evaluation.teacher import prepare_teacher
 from rlgrasp.export import ExportError, load_source, output_paths
+from rlgrasp.policy_file import CheckpointError, load_checkpoint, read_checkpoint
 from rlgrasp.received import PARTS, ReceivedError
-from rlgrasp.train.checkpoint import CheckpointError, load_checkpoint, read_checkpoint, save_checkpoint
+from rlgrasp.train.checkpoint import save_checkpoint
 from rlgrasp.train.loop import Trainer
 from rlgrasp.train.resume import prepare_run
 from rlgrasp.train.warm_start import warm_start

@@ -18,7 +18,7 @@ from rlgrasp.compose import compose_config, compose_eval
 from rlgrasp.evaluation.cli import evaluate
 from rlgrasp.evaluation.policies import CheckpointActor
 from rlgrasp.export import ExportError, check_folder_request, export, record, register_export_config
-from rlgrasp.train.checkpoint import CheckpointError, load_checkpoint, read_checkpoint
+from rlgrasp.policy_file import CheckpointError, load_checkpoint, read_checkpoint
 
 st = pytest.importorskip("safetensors.torch")
 

@@ -18,8 +18,8 @@ from rlgrasp.compose import compose_config, compose_train
 from rlgrasp.config import ConfigError
 from rlgrasp.demos.dataset import DemoError, load_demos
 from rlgrasp.evaluation import EvaluationError
+from rlgrasp.policy_file import CheckpointError
 from rlgrasp.received import PARTS, ReceivedError, memmap_entries, read_config
-from rlgrasp.train.checkpoint import CheckpointError
 from rlgrasp.train.loop import Trainer
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -274,7 +274,7 @@ def test_rlgrasp_parts_and_a_users_own_class_from_their_own_config_pass() -> Non
 
 def test_a_checkpoint_of_a_newer_format_is_refused_by_every_loader(tmp_path: Path) -> None:
     from rlgrasp.evaluation.source import load_checked_checkpoint
-    from rlgrasp.train.checkpoint import read_checkpoint
+    from rlgrasp.policy_file import read_checkpoint
 
     ckpt = torch.load(SHIPPED, weights_only=True)
     ckpt["format"] = 99

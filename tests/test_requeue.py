@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from rlgrasp.train import checkpoint as ckpt_lib
+from rlgrasp import policy_file
 from tests.procs import in_group, wait_for
 
 FRAMES = 4096
@@ -42,7 +42,7 @@ def test_sigusr2_requeues_the_job_which_resumes_in_its_dir(tmp_path: Path, scrip
     os.kill(task, signal.SIGUSR2)  # the task only: the controller has no handler and would die of it
     assert sweep.wait(timeout=600) == 0, sweep.output()[-3000:]
 
-    state = ckpt_lib.load_checkpoint(job)
+    state = policy_file.load_checkpoint(job)
     assert state["frames"] == FRAMES and state["generation"] == 1  # resumed once, in the same job dir
     log = (job / "train.log").read_text()
     stopped = int(re.search(r"SIGUSR2 at ([\d,]+) frames: saving a checkpoint", log)[1].replace(",", ""))

@@ -18,6 +18,7 @@ import torch
 from omegaconf import OmegaConf
 
 import rlgrasp
+from rlgrasp import policy_file
 from rlgrasp.compose import compose_train
 from rlgrasp.config import ConfigError, validate_train
 from rlgrasp.evaluation.source import EvaluationError, load_checked_checkpoint
@@ -64,8 +65,8 @@ def test_a_checkpoint_that_would_run_code_is_refused_and_runs_nothing(tmp_path: 
     state["payload"] = _Evil(str(marker))
     evil = tmp_path / "evil.pt"
     torch.save(state, evil, pickle_protocol=2)
-    with pytest.raises(ckpt_lib.CheckpointError, match="refused checkpoint"):
-        ckpt_lib.read_checkpoint(evil)
+    with pytest.raises(policy_file.CheckpointError, match="refused checkpoint"):
+        policy_file.read_checkpoint(evil)
     with pytest.raises(EvaluationError, match="refused checkpoint"):
         load_checked_checkpoint(evil)
     assert not marker.exists()
@@ -85,7 +86,7 @@ def test_resume_alone_continues_the_run_as_launched(run: Path) -> None:
 
 
 def test_resume_refuses_a_change_of_a_fixed_key_naming_both_values(run: Path) -> None:
-    saved = ckpt_lib.load_checkpoint(run)["config"]
+    saved = policy_file.load_checkpoint(run)["config"]
     cfg = compose_train([*SMOKE, f"paths.output_dir={run}", "env.control.mode=joint_delta"])
     with pytest.raises(
         ConfigError,
@@ -100,7 +101,7 @@ def test_resume_refuses_a_change_of_a_fixed_key_naming_both_values(run: Path) ->
 
 def test_resume_refuses_a_group_choice_that_equals_the_default(run: Path) -> None:
     """``robot=panda`` changes no key from the defaults, yet on an iiwa run it asks for another arm."""
-    saved = ckpt_lib.load_checkpoint(run)["config"]
+    saved = policy_file.load_checkpoint(run)["config"]
     saved["env"]["robot"] = "kuka_iiwa"
     for line, arm in ((["robot=panda"], None), ([], "kuka_iiwa"), (["robot=kuka_iiwa"], "kuka_iiwa")):
         overrides = [*SMOKE, f"paths.output_dir={run}", f"resume={run}", *line]
@@ -121,7 +122,7 @@ def test_resume_refuses_a_group_choice_that_equals_the_default(run: Path) -> Non
 def test_resume_may_switch_the_collector_and_logger_classes(run: Path) -> None:
     """collector=ray on a process run brings the Ray keys; back to process drops them again (the
     process backend would refuse them); logger=none replaces TensorBoard."""
-    saved = ckpt_lib.load_checkpoint(run)["config"]
+    saved = policy_file.load_checkpoint(run)["config"]
     cfg = compose_train([*SMOKE, f"paths.output_dir={run}", "collector=ray", "collector.ray.address=auto"])
     to_ray = merged_config(cfg, saved, {"collector._target_", "collector.ray.address"})
     assert to_ray.collector._target_ == "rlgrasp.train.collectors.RayCollector"
@@ -149,7 +150,7 @@ def test_a_checkpoint_with_string_backends_resumes(tmp_path: Path, run: Path) ->
     assert dict(merged.collector) == {"_target_": f"{COLLECTORS}.ProcessCollector", **collector}
     assert merged.logger == cfg.logger and merged.logger._target_ != f"{LOGGERS}.ConsoleLogger"
     for shipped in sorted((ROOT / "policies").glob("*.pt")):
-        config = ckpt_lib.read_checkpoint(shipped)["config"]
+        config = policy_file.read_checkpoint(shipped)["config"]
         assert config["collector"]["_target_"] == f"{COLLECTORS}.ProcessCollector"
         assert "backend" not in config["collector"] and "ray" not in config["collector"]
         assert config["logger"] == {"name": "tensorboard"}  # what it used, as a name; nothing to build
@@ -204,7 +205,7 @@ def test_a_truncated_last_falls_back_with_a_warning(tmp_path: Path, run: Path, c
     data = (run / "checkpoints" / "last.pt").read_bytes()
     (copy / "checkpoints" / "ckpt_0000000000.pt").write_bytes(data)
     (copy / "checkpoints" / "last.pt").write_bytes(data[:1000])  # a full disk
-    path, state = ckpt_lib.newest_readable(copy)
+    path, state = policy_file.newest_readable(copy)
     assert path.name == "ckpt_0000000000.pt" and state["frames"] == 0
     assert "last.pt" in caplog.text
     assert run_dir(str(copy / "checkpoints" / "ckpt_0000000000.pt"), "x", 0) == str(copy)
@@ -301,14 +302,14 @@ def test_stop_signal_saves_then_resume_auto_finishes_and_exits(tmp_path: Path, s
     assert proc.returncode == 0, out[-2000:]
     run = log.parent
     assert f"{signal.Signals(sig).name} at" in out
-    stopped = ckpt_lib.load_checkpoint(run)["frames"]
+    stopped = policy_file.load_checkpoint(run)["frames"]
     assert 1024 <= stopped < 4096  # saved on the signal, long before any interval checkpoint
     for expect_frames in (4096, 4096):  # resume=auto: continue; then: already finished
         t0 = time.monotonic()
         proc = _train(cmd, tmp_path)
         out, _ = proc.communicate(timeout=300)
         assert proc.returncode == 0, out[-2000:]
-        assert ckpt_lib.load_checkpoint(run)["frames"] == expect_frames
+        assert policy_file.load_checkpoint(run)["frames"] == expect_frames
         assert "finished at 4,096 frames" in out
     assert time.monotonic() - t0 < 60  # the finished run starts no workers and exits
     assert len(list((tmp_path / "outputs" / "train" / "smoke").iterdir())) == 1
@@ -341,7 +342,7 @@ def test_a_resume_keeps_the_launch_config_in_dot_hydra(tmp_path: Path) -> None:
     assert sorted(p.name for p in hydra.iterdir() if p.is_dir()) == ["resume_1"]
     assert "total_frames=32" in (hydra / "resume_1" / "overrides.yaml").read_text()
     assert {p.name for p in (hydra / "resume_1").iterdir()} == {"config.yaml", "hydra.yaml", "overrides.yaml"}
-    assert ckpt_lib.load_checkpoint(run)["frames"] == 32
+    assert policy_file.load_checkpoint(run)["frames"] == 32
 
 
 @pytest.mark.slow

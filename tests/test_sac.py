@@ -20,8 +20,8 @@ from rlgrasp.compose import compose_config, compose_train
 from rlgrasp.config import ConfigError, validate_train
 from rlgrasp.demos.cli import record_demos
 from rlgrasp.demos.dataset import DemoError, demo_transitions, load_demos
+from rlgrasp.policy_file import load_checkpoint
 from rlgrasp.train.algorithm import algorithm_class
-from rlgrasp.train.checkpoint import load_checkpoint
 from rlgrasp.train.loop import Trainer, train
 from rlgrasp.train.parts import build_parts
 from rlgrasp.train.resume import prepare_run

@@ -15,7 +15,7 @@ from hydra import compose, initialize_config_dir
 
 from rlgrasp.compose import compose_train
 from rlgrasp.config import CONFIG_DIR, register_configs
-from rlgrasp.train.checkpoint import load_checkpoint
+from rlgrasp.policy_file import load_checkpoint
 from rlgrasp.train.loop import train
 from rlgrasp.train.parts import build_parts
 

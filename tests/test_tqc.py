@@ -17,8 +17,8 @@ from rlgrasp.algos.registry import algorithms
 from rlgrasp.algos.tqc import TQC
 from rlgrasp.compose import compose_train
 from rlgrasp.config import ConfigError, validate_train
+from rlgrasp.policy_file import load_checkpoint
 from rlgrasp.train.algorithm import algorithm_class
-from rlgrasp.train.checkpoint import load_checkpoint
 from rlgrasp.train.loop import Trainer
 from rlgrasp.train.parts import build_parts
 from rlgrasp.train.resume import prepare_run

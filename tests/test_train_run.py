@@ -17,7 +17,7 @@ from omegaconf import OmegaConf
 from tensordict import TensorDict
 
 from rlgrasp.envs.grasp_env import EnvConfig
-from rlgrasp.train.checkpoint import load_checkpoint, policy_from_checkpoint, read_checkpoint
+from rlgrasp.policy_file import load_checkpoint, policy_from_checkpoint, read_checkpoint
 from rlgrasp.train.loop import Trainer, TrainingError, train
 from rlgrasp.train.parts import build_parts
 from rlgrasp.utils import flatten

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from rlgrasp.train.checkpoint import read_checkpoint
+from rlgrasp.policy_file import read_checkpoint
 from tests.helpers import make_run
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -11,7 +11,7 @@ from torchrl.objectives import BCLoss
 
 from rlgrasp.config import ConfigError
 from rlgrasp.models.cnn import SpatialSoftmax, actor_norm, average_weights, build_vision_actor
-from rlgrasp.train.checkpoint import CheckpointError
+from rlgrasp.policy_file import CheckpointError
 from rlgrasp.vision.augment import (
     augment,
     ground_bank,
@@ -365,7 +365,7 @@ SMALL_DISTILL = (
 @pytest.mark.full  # camera distillation on workers, resumed
 def test_distillation_trains_checkpoints_resumes_and_evaluates(tmp_path, train_cfg):
     from rlgrasp.algos.dagger.algorithm import distill
-    from rlgrasp.train.checkpoint import load_checkpoint, policy_from_checkpoint
+    from rlgrasp.policy_file import load_checkpoint, policy_from_checkpoint
 
     run = tmp_path / "run"
     with_aux = (

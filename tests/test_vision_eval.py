@@ -29,7 +29,7 @@ from rlgrasp.evaluation.source import prepare
 from rlgrasp.evaluation.teacher import prepare_teacher
 from rlgrasp.evaluation.views import beside, camera_view, depth_image, upscale
 from rlgrasp.export import ExportError, export, load_exported, record, register_export_config
-from rlgrasp.train.checkpoint import policy_from_checkpoint
+from rlgrasp.policy_file import policy_from_checkpoint
 from tests.helpers import STUDENT_MODEL, TEACHER, make_run, make_student
 
 ROOT = Path(__file__).resolve().parents[1]

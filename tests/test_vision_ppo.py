@@ -10,7 +10,7 @@ import pytest
 import torch
 from tensordict import TensorDict
 
-from rlgrasp.train.checkpoint import load_checkpoint, policy_from_checkpoint
+from rlgrasp.policy_file import load_checkpoint, policy_from_checkpoint
 from rlgrasp.train.loop import train
 from rlgrasp.train.parts import PRIVILEGED_KEY, build_parts
 

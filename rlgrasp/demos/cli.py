@@ -23,7 +23,7 @@ from rlgrasp.envs.factory import env_factory
 from rlgrasp.envs.part_config import env_setting
 from rlgrasp.evaluation.policies import PolicySource
 from rlgrasp.overrides import entry_point, unwritable
-from rlgrasp.train.checkpoint import CheckpointError, load_checkpoint
+from rlgrasp.policy_file import CheckpointError, load_checkpoint
 from rlgrasp.utils import Progress, WorkerDiedError, sigterm_as_interrupt
 
 register_configs()

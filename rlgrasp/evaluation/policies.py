@@ -21,7 +21,7 @@ from torchrl.envs import ExplorationType, set_exploration_type
 from rlgrasp.envs import expert_for
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.models.cnn import IMAGE_KEYS
-from rlgrasp.train.checkpoint import policy_from_checkpoint
+from rlgrasp.policy_file import policy_from_checkpoint
 
 POLICIES = ("checkpoint", "scripted", "random")
 

@@ -25,10 +25,10 @@ import numpy as np
 import yaml
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
+from rlgrasp.policy_file import CheckpointError, read_checkpoint
 from rlgrasp.received import ReceivedError, check_tree
 from rlgrasp.rundir import CHECKPOINTS
 from rlgrasp.stats import iqm, stratified_bootstrap_ci, wilson_interval
-from rlgrasp.train.checkpoint import CheckpointError, read_checkpoint
 from rlgrasp.utils import markdown_table, pyplot
 
 SUCCESS_TAGS = ("eval/success_rate", "charts/success_rate")

@@ -24,9 +24,8 @@ from rlgrasp.envs.robot import robot_label
 from rlgrasp.evaluation.policies import POLICIES, PolicySource, build_policy
 from rlgrasp.models.cnn import image_specs
 from rlgrasp.overrides import explain
+from rlgrasp.policy_file import CheckpointError, is_policy_folder, read_checkpoint
 from rlgrasp.received import ReceivedError, check_inside
-from rlgrasp.train.checkpoint import CheckpointError, read_checkpoint
-from rlgrasp.train.policy_folder import is_policy_folder
 
 CKPT_KINDS = ("best", "last")
 # What a checkpoint must hold for evaluation (see rlgrasp.train.checkpoint's docstring).

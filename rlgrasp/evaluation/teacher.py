@@ -24,7 +24,7 @@ from rlgrasp.evaluation.source import (
     resolve_checkpoint_path,
 )
 from rlgrasp.models.cnn import image_specs
-from rlgrasp.train.checkpoint import resolve_policy_path
+from rlgrasp.policy_file import resolve_policy_path
 
 #: Env keys a teacher must share with the student's env beyond the layout (same sizes, other meaning).
 SAME_ENV_KEYS = ACTION_SETTINGS

@@ -17,9 +17,9 @@ from omegaconf import DictConfig
 
 from rlgrasp.config import CONFIG_DIR, ConfigError, register_configs
 from rlgrasp.overrides import entry_point
+from rlgrasp.policy_file import CheckpointError
 from rlgrasp.received import ReceivedError
 from rlgrasp.rundir import remove_refused_start
-from rlgrasp.train.checkpoint import CheckpointError
 from rlgrasp.train.loop import TrainingError, train
 from rlgrasp.train.resume import command_line_keys
 

@@ -23,6 +23,7 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDictBase
 
+from rlgrasp import policy_file
 from rlgrasp.config import ConfigError
 from rlgrasp.rundir import CHECKPOINTS, ENV_ERRORS, RunLockedError, run_lock
 from rlgrasp.train import checkpoint as ckpt_lib
@@ -121,7 +122,7 @@ class Trainer:
         """The checkpoint (its layout is documented in ``rlgrasp.train.checkpoint``): the core's
         entries and the algorithm's own."""
         state = {
-            "format": ckpt_lib.FORMAT,
+            "format": policy_file.CHECKPOINT_FORMAT,
             "actor": self.actor.state_dict(),
             self.algo.name: self.algo.state_dict(),  # each algorithm's under its own key
             "frames": self.frames,
@@ -131,7 +132,7 @@ class Trainer:
             "rng": ckpt_lib.rng_state(),
             "config": self.config,
             "spec": self.parts.spec,
-            "versions": ckpt_lib.package_versions(),
+            "versions": policy_file.package_versions(),
             "run_dir": str(self.run_dir),
         }
         if self.parts.kind == "vision":  # how evaluation and export rebuild the policy
@@ -377,7 +378,7 @@ class Trainer:
             self.save(is_best)
         elif (
             not (self.ckpt_dir / "last.pt").exists()
-            or ckpt_lib.load_checkpoint(self.run_dir, user=self.config)["frames"] != self.frames
+            or policy_file.load_checkpoint(self.run_dir, user=self.config)["frames"] != self.frames
         ):
             self.save()
         result = self.evaluations.last or {}

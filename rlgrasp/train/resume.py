@@ -24,11 +24,11 @@ from hydra.core.global_hydra import GlobalHydra
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from omegaconf import DictConfig, OmegaConf
 
+from rlgrasp import policy_file
 from rlgrasp.compose import compose_train
 from rlgrasp.config import CONFIG_DIR, ConfigError, validate_train
 from rlgrasp.received import logger_name
 from rlgrasp.rundir import CHECKPOINTS
-from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.legacy import algorithm_state
 from rlgrasp.utils import flatten
 
@@ -72,7 +72,7 @@ def prepare_run(cfg: DictConfig, changed: Iterable[str] | None = None) -> tuple[
     """
     run_dir = Path(cfg.paths.output_dir)
     resume = cfg.resume or requeued_resume()
-    has_ckpts = bool(ckpt_lib.checkpoint_files(run_dir / CHECKPOINTS))
+    has_ckpts = bool(policy_file.checkpoint_files(run_dir / CHECKPOINTS))
     if resume == "auto":
         source = run_dir if has_ckpts else None
         if source is None:
@@ -94,9 +94,9 @@ def prepare_run(cfg: DictConfig, changed: Iterable[str] | None = None) -> tuple[
     # The file's config is data; a class of the user's own is one their own config names at that node.
     user = OmegaConf.to_container(cfg, resolve=False)
     if source.is_dir():
-        path, state = ckpt_lib.newest_readable(source, user=user)
+        path, state = policy_file.newest_readable(source, user=user)
     else:
-        path, state = source, ckpt_lib.read_checkpoint(source, user=user)
+        path, state = source, policy_file.read_checkpoint(source, user=user)
     if "rng" not in state or "frames" not in state or algorithm_state(state) is None:
         raise ConfigError(
             f"resume={resume}: {path} is a policy file (no training state to continue); resume takes a "

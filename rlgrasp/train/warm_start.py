@@ -17,7 +17,7 @@ from torch import nn
 
 from rlgrasp.envs.part_config import ACTION_SETTINGS, env_setting
 from rlgrasp.envs.robot import robot_label
-from rlgrasp.train.checkpoint import CheckpointError, load_checkpoint, resolve_policy_path
+from rlgrasp.policy_file import CheckpointError, load_checkpoint, resolve_policy_path
 from rlgrasp.utils import plain
 
 STD_KEY = "scale.state_independent_scale"  # the actor's state-independent std (TorchRL's module)

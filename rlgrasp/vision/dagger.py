@@ -17,7 +17,7 @@ from rlgrasp.envs.part_config import ACTION_SETTINGS, env_setting
 from rlgrasp.envs.robot import robot_label
 from rlgrasp.models.mlp import OBS_KEY
 from rlgrasp.models.spec import PRIVILEGED_KEY
-from rlgrasp.train.checkpoint import CheckpointError, load_checkpoint, policy_from_checkpoint
+from rlgrasp.policy_file import CheckpointError, load_checkpoint, policy_from_checkpoint
 
 LABEL_KEY = "teacher_action"
 

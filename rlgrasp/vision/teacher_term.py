@@ -21,7 +21,7 @@ from torchrl.envs import ExplorationType, set_exploration_type
 
 from rlgrasp.demos.bc import decayed_weight, mse_bc_loss
 from rlgrasp.models.spec import PRIVILEGED_KEY
-from rlgrasp.train.checkpoint import resolve_policy_path
+from rlgrasp.policy_file import resolve_policy_path
 from rlgrasp.vision.dagger import PrivilegedTeacher, load_teacher
 
 

@@ -23,11 +23,11 @@ import torch
 from omegaconf import DictConfig
 from torchrl.envs import ExplorationType, set_exploration_type
 
+from rlgrasp import policy_file
 from rlgrasp.config import ConfigError
 from rlgrasp.demos.bc import mse_bc_loss
 from rlgrasp.models.cnn import actor_norm, average_weights
 from rlgrasp.models.spec import PRIVILEGED_KEY
-from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.algorithm import Algorithm
 from rlgrasp.train.loop import train
 from rlgrasp.vision.augment import augment
@@ -48,7 +48,7 @@ class DAgger(Algorithm):
         a = cfg.algo
         if parts.kind != "vision":  # the same words as a camera student's spec gives
             raise ConfigError("env.camera=null: a camera policy needs a camera (e.g. cameras=wrist_depth)")
-        self.teacher, _ = load_teacher(ckpt_lib.resolve_policy_path(a.teacher), parts.spec, cfg.env)
+        self.teacher, _ = load_teacher(policy_file.resolve_policy_path(a.teacher), parts.spec, cfg.env)
         self.student = parts.actor
         # What acts, is evaluated and is exported: the student's weights averaged over its recent
         # updates (algo.optim.ema_decay; 0: the student itself).
