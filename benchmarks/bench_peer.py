@@ -6,9 +6,15 @@ Both run one after the other on the same machine, on the same wall-clock budget.
     python benchmarks/bench_peer.py --minutes 5 --seed 0
     python benchmarks/bench_peer.py --minutes 5 --only sb3 -- env.control.mode=ee_delta
     python benchmarks/bench_peer.py --minutes 5 --experiment grasp_sac
+    python benchmarks/bench_peer.py --algo tqc --minutes 60 -- total_frames=102400
+    python benchmarks/bench_peer.py --algo tqc --env-id panda_gym:PandaPush-v3 --minutes 60
 
 rlgrasp runs as ``scripts/train.py experiment=<experiment>`` and is read back from its TensorBoard.
-The SB3 algorithm follows the experiment's ``algo.name``: PPO for ``ppo``, SAC for ``sac``. It runs
+The SB3 algorithm follows the experiment's ``algo.name``: PPO for ``ppo``, SAC for ``sac``,
+sb3-contrib's TQC for ``tqc``; ``--algo`` names it and, without ``--experiment``, runs its experiment
+(``tqc``: ``panda_pick_place_tqc_her``, panda-gym's PandaPickAndPlace-v3 on RL Zoo's settings;
+``--env-id`` another env=gym id). With ``algo.her`` SB3 relabels with its ``HerReplayBuffer`` on the
+same goal env read as its Dict (``her_kwargs``). It runs
 over a ``SubprocVecEnv`` of the same env (SB3's layout: one process per env) behind ``VecNormalize``
 on observations only (rlgrasp normalizes observations, not rewards), with the keywords
 ``sb3_kwargs`` maps from the same composed config; ``unmatched`` names what SB3 cannot set alike.
@@ -18,9 +24,10 @@ rlgrasp's. Each side runs in its own process and its minutes count from that pro
 start-up is charged to both alike.
 
 Printed for each side: eval success against minutes, ``SPS`` (rlgrasp's console figure: frames/s
-from the end of the first update on, evaluations included) and frames/s from launch; then a table
-with the ratios rlgrasp/SB3. ``--record PAGE/ID`` writes the ratios into that row of
-docs/benchmarks/results.json and its page's table (benchmarks/results_file.py), met when the ratio
+from the end of the first update on, evaluations included) and frames/s from launch; both curves
+side by side at the frames they evaluated at; then a table with the ratios rlgrasp/SB3. ``--record
+PAGE/ID`` writes the ratios into that row of docs/benchmarks/results.json and its page's table
+(benchmarks/results_file.py), met when the ratio
 ``--target-on`` names reaches ``--target`` (SB3's time to the first 0.9: at most ``--target``):
 
     python benchmarks/bench_peer.py --minutes 5 --seed 0 --record peer/ppo-fps --target 2.5
@@ -77,18 +84,48 @@ def n_envs(cfg: Any) -> int:
     return collector_backend(cfg.collector).frames_per_batch // cfg.collector.steps_per_env
 
 
+#: The SB3 class each rlgrasp algorithm is compared with (TQC's is sb3-contrib's), and the experiment
+#: ``--algo`` runs when no ``--experiment`` is given.
+SB3_CLASSES = {"ppo": "PPO", "sac": "SAC", "tqc": "TQC"}
+EXPERIMENTS = {"ppo": "grasp_ppo", "sac": "grasp_sac", "tqc": "panda_pick_place_tqc_her"}
+CONTRIB_HINT = 'sb3-contrib is not installed (its TQC is the peer of algo=tqc): pip install -e ".[peer]"'
+
+
 def sb3_algo(cfg: Any) -> str:
     """The SB3 class the config's algorithm is compared with (the peer must learn the same way)."""
-    names = {"ppo": "PPO", "sac": "SAC"}
-    if cfg.algo.name not in names:
-        raise ValueError(f"algo.name={cfg.algo.name!r}: the SB3 side runs PPO or SAC only")
-    return names[cfg.algo.name]
+    if cfg.algo.name not in SB3_CLASSES:
+        raise ValueError(
+            f"algo.name={cfg.algo.name!r}: the SB3 side runs {', '.join(SB3_CLASSES.values())} only"
+        )
+    return SB3_CLASSES[cfg.algo.name]
+
+
+def sb3_class(cfg: Any) -> Any:
+    """The SB3 (or sb3-contrib) class ``sb3_algo`` names."""
+    import stable_baselines3
+
+    name = sb3_algo(cfg)
+    if name == "TQC":
+        import sb3_contrib
+
+        return sb3_contrib.TQC
+    return getattr(stable_baselines3, name)
+
+
+def off_policy(cfg: Any) -> bool:
+    return sb3_algo(cfg) in ("SAC", "TQC")
 
 
 def sb3_kwargs(cfg: Any) -> dict[str, Any]:
     """SB3 keywords for a composed rlgrasp training config (env, seed and device aside), for the
     class ``sb3_algo`` names; a ``ValueError`` for a config SB3 cannot run."""
-    return sac_kwargs(cfg) if sb3_algo(cfg) == "SAC" else ppo_kwargs(cfg)
+    if not off_policy(cfg):
+        return ppo_kwargs(cfg)
+    kwargs = sac_kwargs(cfg)
+    if sb3_algo(cfg) == "TQC":
+        kwargs["top_quantiles_to_drop_per_net"] = cfg.algo.loss.top_quantiles_to_drop_per_net
+        kwargs["policy_kwargs"]["n_quantiles"] = cfg.algo.loss.n_quantiles
+    return {**kwargs, **her_kwargs(cfg)}
 
 
 def ppo_kwargs(cfg: Any) -> dict[str, Any]:
@@ -166,6 +203,62 @@ def sac_kwargs(cfg: Any) -> dict[str, Any]:
     }
 
 
+def her_on(cfg: Any) -> bool:
+    """Whether the config relabels with HER (``algo.her.enabled``; PPO has no such key)."""
+    her = cfg.algo.get("her")
+    return bool(her is not None and her.enabled)
+
+
+def her_kwargs(cfg: Any) -> dict[str, Any]:
+    """SB3's ``HerReplayBuffer`` as rlgrasp's HER, on the same goal env read as its Dict (``env=gym``,
+    ``env.observation=dict``): ``relabel_ratio`` r as ``n_sampled_goal`` r / (1 - r) (0.8: 4), the same
+    strategy. SB3 draws goals only from finished episodes and refuses to sample before one has ended,
+    so it starts training once every env has finished one (``her_learning_starts``)."""
+    if not her_on(cfg):
+        return {}
+    from stable_baselines3 import HerReplayBuffer
+
+    from rlgrasp.envs.gym_env import TARGET
+
+    h = cfg.algo.her
+    if cfg.env.get("_target_") != TARGET:
+        raise ValueError(
+            "algo.her.enabled=true: the SB3 side relabels another package's goal env (env=gym, read as "
+            "its Dict); rlgrasp's own tasks keep their goals in the flat state"
+        )
+    if not 0 < h.relabel_ratio < 1:
+        raise ValueError(f"algo.her.relabel_ratio={h.relabel_ratio}: SB3 relabels a share in (0, 1)")
+    return {
+        "replay_buffer_class": HerReplayBuffer,
+        "replay_buffer_kwargs": {
+            "n_sampled_goal": n_sampled_goal(h.relabel_ratio),
+            "goal_selection_strategy": str(h.strategy),
+        },
+        "learning_starts": max(cfg.algo.replay.learning_starts, her_learning_starts(cfg)),
+    }
+
+
+def n_sampled_goal(ratio: float) -> int:
+    """SB3's ``n_sampled_goal`` nearest rlgrasp's ``relabel_ratio`` (SB3 relabels k / (k + 1))."""
+    return max(1, round(ratio / (1 - ratio)))
+
+
+def her_learning_starts(cfg: Any) -> int:
+    """Frames after which every env of the SB3 side has finished an episode (its envs step together)."""
+    from rlgrasp.envs.factory import episode_steps
+
+    return n_envs(cfg) * episode_steps(cfg.env)
+
+
+def sb3_env_cfg(cfg: Any) -> Any:
+    """The env node the SB3 side trains on: the run's, read as its Dict when HER relabels it (SB3's
+    ``HerReplayBuffer`` takes the goals from their keys)."""
+    from omegaconf import OmegaConf
+
+    env = OmegaConf.to_container(cfg.env, resolve=True)
+    return {**env, "observation": "dict"} if her_on(cfg) else env
+
+
 def vecnorm_kwargs(cfg: Any) -> dict[str, Any]:
     """``VecNormalize`` as rlgrasp's ``RunningNorm``: observations only, clipped, eps 1e-8."""
     return {
@@ -183,7 +276,9 @@ def unmatched(cfg: Any) -> list[str]:
         f"layout: {n_envs(cfg)} env processes (SubprocVecEnv steps one env per process); rlgrasp "
         f"{c.num_workers} workers x {c.envs_per_worker} envs"
     )
-    return [layout, *(sac_unmatched(cfg) if sb3_algo(cfg) == "SAC" else ppo_unmatched(cfg))]
+    if not off_policy(cfg):
+        return [layout, *ppo_unmatched(cfg)]
+    return [layout, *sac_unmatched(cfg), *her_unmatched(cfg)]
 
 
 def ppo_unmatched(cfg: Any) -> list[str]:
@@ -210,16 +305,44 @@ def ppo_unmatched(cfg: Any) -> list[str]:
     return notes
 
 
+def her_unmatched(cfg: Any) -> list[str]:
+    """HER's differences: which episodes give goals, when training starts, the share relabelled."""
+    if not her_on(cfg):
+        return []
+    h, starts = cfg.algo.her, cfg.algo.replay.learning_starts
+    notes = [
+        "HER: SB3's HerReplayBuffer draws goals only from finished episodes; rlgrasp from the steps "
+        "stored so far of the row's own episode, finished or not"
+    ]
+    if her_learning_starts(cfg) > starts:
+        notes.append(
+            f"algo.replay.learning_starts={starts}: SB3 cannot sample before an episode has ended, so it "
+            f"starts after {her_learning_starts(cfg)} frames (every env's first episode)"
+        )
+    k = n_sampled_goal(h.relabel_ratio)
+    if abs(k / (k + 1) - h.relabel_ratio) > 1e-9:
+        notes.append(
+            f"algo.her.relabel_ratio={h.relabel_ratio}: SB3 relabels n_sampled_goal / (n_sampled_goal + 1); "
+            f"n_sampled_goal={k} relabels {k / (k + 1):.3f}"
+        )
+    if cfg.model.obs_norm:
+        notes.append(
+            "VecNormalize normalizes each key of the Dict, the goals included; rlgrasp the flat vector"
+        )
+    return notes
+
+
 def sac_unmatched(cfg: Any) -> list[str]:
     """SAC's differences: the std, the rates, the critics' make-up, the warm-up, the batch timing."""
     from rlgrasp.train.collectors import collector_backend
 
-    a, m = cfg.algo, cfg.model
+    a, m, name = cfg.algo, cfg.model, sb3_algo(cfg)
     notes = [
         f"std: rlgrasp's actor has a state-independent std (a learned vector from model.init_log_std="
-        f"{m.init_log_std}, floor model.min_std={m.min_std}); SB3's SAC a state-dependent one (a linear "
+        f"{m.init_log_std}, floor model.min_std={m.min_std}); SB3's {name} a state-dependent one (a linear "
         "head, log-std clipped to [-20, 2]; its log_std_init applies only with gSDE)",
-        "init: rlgrasp's actor is orthogonal (gain sqrt(2), 0.01 on the head); SB3's SAC PyTorch's default",
+        f"init: rlgrasp's actor is orthogonal (gain sqrt(2), 0.01 on the head); SB3's {name} "
+        "PyTorch's default",
         "warm-up: SB3 acts uniformly at random until algo.replay.learning_starts frames and trains from "
         "the first batch past them; rlgrasp acts with its initial policy and trains from the batch that "
         "reaches them",
@@ -232,15 +355,15 @@ def sac_unmatched(cfg: Any) -> list[str]:
             f"temperature algo.optim.alpha_lr={a.optim.alpha_lr}"
         )
     if a.critic.layer_norm:
-        notes.append("algo.critic.layer_norm=true: SB3's SAC critics have no LayerNorm")
+        notes.append(f"algo.critic.layer_norm=true: SB3's {name} critics have no LayerNorm")
     if a.critic.activation != m.activation:
         notes.append(
-            f"activation: SB3's SAC has one for actor and critics (model.activation="
+            f"activation: SB3's {name} has one for actor and critics (model.activation="
             f"{m.activation}); rlgrasp's critics use algo.critic.activation={a.critic.activation}"
         )
     if a.optim.actor_every != 1:
         notes.append(
-            f"algo.optim.actor_every={a.optim.actor_every}: SB3's SAC steps the actor and temperature "
+            f"algo.optim.actor_every={a.optim.actor_every}: SB3's {name} steps the actor and temperature "
             "every gradient step"
         )
     per_batch = a.optim.utd_ratio * n_envs(cfg) * cfg.collector.steps_per_env
@@ -256,22 +379,26 @@ def sac_unmatched(cfg: Any) -> list[str]:
         )
     if m.get("distribution", "tanh_normal") == "normal":
         notes.append(
-            "model.distribution=normal: rlgrasp's SAC actor is an unsquashed Gaussian, SB3's "
+            f"model.distribution=normal: rlgrasp's actor is an unsquashed Gaussian, SB3's {name} "
             "squashes with tanh"
         )
     return notes
 
 
 # --- the SB3 side (its own process) ---------------------------------------------------------------
-def eval_policy(model: Any, vecnorm: Any) -> Any:
-    """SB3's deterministic action (PPO: the mean, clipped to the bounds; SAC: the mean, squashed
+def eval_policy(model: Any, vecnorm: Any, slices: dict[str, slice] | None = None) -> Any:
+    """SB3's deterministic action (PPO: the mean, clipped to the bounds; SAC and TQC: the mean, squashed
     into them) on VecNormalize's view of the observation, as the TensorDict module rlgrasp's
-    ``Evaluator`` rolls out."""
+    ``Evaluator`` rolls out. ``slices``: a goal env's keys in rlgrasp's flat observation, which SB3's
+    HER learner reads as the env's Dict (``rlgrasp.envs.gym_env``: the same values, split)."""
     import torch  # imports inside functions: SB3's env workers re-run this file's top level
     from tensordict.nn import TensorDictModule
 
     def act(obs: torch.Tensor) -> torch.Tensor:
-        action, _ = model.predict(vecnorm.normalize_obs(obs.numpy()), deterministic=True)
+        seen = obs.numpy()
+        if slices is not None:
+            seen = {key: seen[..., where] for key, where in slices.items()}
+        action, _ = model.predict(vecnorm.normalize_obs(seen), deterministic=True)
         return torch.as_tensor(action, dtype=torch.float32)
 
     return TensorDictModule(act, in_keys=["observation"], out_keys=["action"])
@@ -285,12 +412,20 @@ class PeriodicEval(BaseCallback):
     PPO's rollout is ``n_steps`` steps, SAC's ``train_freq`` steps, of every env. ``num_timesteps``
     counts the steps of all envs, rlgrasp's frames."""
 
-    def __init__(self, cfg: Any, evaluator: Any, vecnorm: Any, start: float, budget_s: float) -> None:
+    def __init__(
+        self,
+        cfg: Any,
+        evaluator: Any,
+        vecnorm: Any,
+        start: float,
+        budget_s: float,
+        slices: dict[str, slice] | None = None,
+    ) -> None:
         # the schedule and SPS training itself uses (imported here: see the module docstring)
         from rlgrasp.train.metrics import Due, Throughput
 
         super().__init__()
-        self.cfg, self.evaluator, self.vecnorm = cfg, evaluator, vecnorm
+        self.cfg, self.evaluator, self.vecnorm, self.slices = cfg, evaluator, vecnorm, slices
         self.start, self.budget_s = start, budget_s
         self.due, self.throughput = Due(cfg.eval.interval_frames, 0), Throughput()
         self.frames, self.over, self.batch_t0 = 0, False, time.perf_counter()
@@ -318,7 +453,7 @@ class PeriodicEval(BaseCallback):
             self.evaluate(self.cfg.eval.episodes)
 
     def evaluate(self, episodes: int) -> None:
-        result = self.evaluator.run(eval_policy(self.model, self.vecnorm), episodes)
+        result = self.evaluator.run(eval_policy(self.model, self.vecnorm, self.slices), episodes)
         success = result.get("success_rate", math.nan)
         self.evals.append((time.time(), self.frames, success, episodes))
         sps = self.sps[-1][2] if self.sps else math.nan
@@ -328,10 +463,19 @@ class PeriodicEval(BaseCallback):
         )
 
 
+def goal_slices(make_env: Any) -> dict[str, slice]:
+    """Where each of a goal env's Dict keys lies in rlgrasp's flat observation of it."""
+    env = make_env()
+    try:
+        return dict(env.unwrapped.obs_slices)
+    finally:
+        env.close()
+
+
 def run_sb3(cfg: Any, out_json: Path) -> None:
-    """Train SB3's PPO or SAC on ``cfg`` until its frames or time budget run out, then the final
-    evaluation, as ``Trainer.finish`` does; writes the curve to ``out_json``."""
-    import stable_baselines3
+    """Train SB3's PPO or SAC, or sb3-contrib's TQC (with HER where the config has it) on ``cfg`` until
+    its frames or time budget run out, then the final evaluation, as ``Trainer.finish`` does; writes the
+    curve to ``out_json``. The evaluation is rlgrasp's, on rlgrasp's flat env."""
     import torch  # imports inside functions: SB3's env workers re-run this file's top level
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
@@ -343,12 +487,13 @@ def run_sb3(cfg: Any, out_json: Path) -> None:
     torch.set_num_threads(cfg.collector.torch_threads)  # rlgrasp's learner threads (Trainer sets them)
     start = time.monotonic()  # the budget includes the workers' start-up, as in Trainer.run
     make_env = env_factory(cfg.env)
-    venv = VecNormalize(SubprocVecEnv([make_env] * n_envs(cfg), start_method="spawn"), **vecnorm_kwargs(cfg))
+    train_env = env_factory(sb3_env_cfg(cfg))
+    venv = VecNormalize(SubprocVecEnv([train_env] * n_envs(cfg), start_method="spawn"), **vecnorm_kwargs(cfg))
     evaluator = periodic_evaluator(make_env, cfg)
+    slices = goal_slices(make_env) if her_on(cfg) else None
     try:
-        algo = getattr(stable_baselines3, sb3_algo(cfg))
-        model = algo(
-            "MlpPolicy",
+        model = sb3_class(cfg)(
+            "MultiInputPolicy" if her_on(cfg) else "MlpPolicy",
             venv,
             seed=cfg.seed,
             device=str(resolve_device(cfg.device)),
@@ -357,7 +502,7 @@ def run_sb3(cfg: Any, out_json: Path) -> None:
         )
         venv.seed(worker_seed(cfg.seed, 0))  # env k seeded worker_seed + k (rlgrasp: per worker)
         budget_s = cfg.time_budget_min * 60 if cfg.time_budget_min else math.inf
-        callback = PeriodicEval(cfg, evaluator, venv, start, budget_s)
+        callback = PeriodicEval(cfg, evaluator, venv, start, budget_s, slices)
         model.learn(total_timesteps=cfg.total_frames, callback=callback)
         final = cfg.eval.final_episodes or cfg.eval.episodes
         last = callback.evals[-1] if callback.evals else None
@@ -471,7 +616,7 @@ def print_curves(results: dict[str, dict[str, Any]], args: argparse.Namespace) -
     """Each side's eval success against minutes, printed and written to one CSV."""
     names = {
         "rlgrasp": f"rlgrasp (scripts/train.py experiment={args.experiment})",
-        "sb3": f"Stable-Baselines3 {args.algo} (SubprocVecEnv + VecNormalize)",
+        "sb3": f"{args.sb3_name} (SubprocVecEnv + VecNormalize)",
     }
     rows = [("side", "seed", "minutes", "frames", "eval_success_rate", "episodes")]
     for side, r in results.items():
@@ -483,7 +628,26 @@ def print_curves(results: dict[str, dict[str, Any]], args: argparse.Namespace) -
     csv_path = args.out / f"peer_seed{args.seed}.csv"
     with open(csv_path, "w", newline="") as f:
         csv.writer(f).writerows(rows)
+    if len(results) == 2:
+        print_by_frames(results, args.seed)
     return csv_path
+
+
+def by_frames(results: dict[str, dict[str, Any]]) -> list[tuple[int, float | None, float | None]]:
+    """Both sides' eval success at each frame count either evaluated at (None where one did not): both
+    evaluate every ``eval.interval_frames`` on batches of one size, so the counts are the same."""
+    seen = {side: {frames: success for _, frames, success, _ in r["evals"]} for side, r in results.items()}
+    frames = sorted(set(seen["rlgrasp"]) | set(seen["sb3"]))
+    return [(f, seen["rlgrasp"].get(f), seen["sb3"].get(f)) for f in frames]
+
+
+def print_by_frames(results: dict[str, dict[str, Any]], seed: int) -> None:
+    """The two learning curves side by side, by frames."""
+    print(f"\nseed {seed}: eval success at the same frames")
+    print(f"{'frames':>10}{'rlgrasp':>9}{'sb3':>9}")
+    for frames, ours, theirs in by_frames(results):
+        cells = ["-" if v is None or math.isnan(v) else f"{v:.3f}" for v in (ours, theirs)]
+        print(f"{frames:>10,}{cells[0]:>9}{cells[1]:>9}")
 
 
 def report(results: dict[str, dict[str, Any]], args: argparse.Namespace) -> None:
@@ -561,7 +725,16 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--minutes", type=float, default=5.0, help="wall-clock budget of each side")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--only", choices=["rlgrasp", "sb3"], help="run one side only")
-    parser.add_argument("--experiment", default="grasp_ppo")
+    parser.add_argument(
+        "--algo",
+        choices=sorted(EXPERIMENTS),
+        help="the algorithm compared (its SB3 peer: PPO, SAC, or sb3-contrib's TQC); without "
+        "--experiment, its experiment: " + ", ".join(f"{k} {v}" for k, v in EXPERIMENTS.items()),
+    )
+    parser.add_argument("--experiment", help="the experiment both sides run (default: --algo's; grasp_ppo)")
+    parser.add_argument(
+        "--env-id", help="env.id for both sides, with an env=gym experiment (e.g. panda_gym:PandaPush-v3)"
+    )
     parser.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_peer")
     parser.add_argument("--sb3-child", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("overrides", nargs="*", help="training overrides for both sides, after --")
@@ -578,7 +751,34 @@ def parse_args() -> argparse.Namespace:
     args = parser.parse_args()
     if args.record and args.only:
         parser.error("--record compares both sides: not with --only")
+    args.experiment = args.experiment or EXPERIMENTS[args.algo or "ppo"]
     return args
+
+
+def checked_config(args: argparse.Namespace, sides: list[str]) -> Any:
+    """The experiment's config with the command line's overrides and ``--env-id`` (added to them), refused
+    in one line (a SystemExit) before either side runs: another algorithm than ``--algo``, ``--env-id``
+    without ``env=gym``, a missing sb3-contrib for TQC."""
+    from rlgrasp.compose import compose_train
+    from rlgrasp.envs.gym_env import TARGET
+
+    cfg = compose_train([f"experiment={args.experiment}", f"seed={args.seed}", *args.overrides])
+    if args.algo and cfg.algo.name != args.algo:
+        raise SystemExit(f"--algo {args.algo}: experiment={args.experiment} trains algo={cfg.algo.name}")
+    if args.env_id and cfg.env.get("_target_") != TARGET:
+        raise SystemExit(f"--env-id {args.env_id}: experiment={args.experiment} is not an env=gym experiment")
+    if args.env_id:  # an override of both sides from here on (the SB3 child gets it after --)
+        args.overrides = [*args.overrides, f"env.id={args.env_id}"]
+        cfg = compose_train([f"experiment={args.experiment}", f"seed={args.seed}", *args.overrides])
+    if "sb3" in sides and cfg.algo.name == "tqc" and importlib.util.find_spec("sb3_contrib") is None:
+        raise SystemExit(CONTRIB_HINT)
+    return cfg
+
+
+def sb3_name(cfg: Any) -> str:
+    """How the report names the SB3 side."""
+    name = "sb3-contrib TQC" if sb3_algo(cfg) == "TQC" else f"Stable-Baselines3 {sb3_algo(cfg)}"
+    return name + (" + HerReplayBuffer" if her_on(cfg) else "")
 
 
 def main() -> None:
@@ -591,13 +791,11 @@ def main() -> None:
     if args.sb3_child:
         sb3_child(args)
         return
-    from rlgrasp.compose import compose_train
-
-    cfg = compose_train([f"experiment={args.experiment}", f"seed={args.seed}", *args.overrides])
-    args.algo, notes = "", []
+    cfg = checked_config(args, sides)
+    args.sb3_name, notes = "", []
     if "sb3" in sides:  # refused before either side runs, not after rlgrasp's minutes
         try:
-            args.algo, notes = sb3_algo(cfg), unmatched(cfg)
+            args.sb3_name, notes = sb3_name(cfg), unmatched(cfg)
             sb3_kwargs(cfg)
         except ValueError as exc:
             raise SystemExit(f"the SB3 side cannot run this config: {exc}") from None

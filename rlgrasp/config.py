@@ -29,6 +29,7 @@ from omegaconf import MISSING, OmegaConf
 
 from rlgrasp.algos.common import positive
 from rlgrasp.algos.registry import algorithms, entry, unknown_name
+from rlgrasp.envs import gym_env
 from rlgrasp.envs.grasp_env import EnvConfig
 from rlgrasp.envs.randomization import Randomizer
 from rlgrasp.errors import ConfigError
@@ -526,3 +527,6 @@ def validate_train(cfg: Any) -> None:
     if problems:
         more = f" (and {len(problems) - 1} more: {'; '.join(problems[1:])})" if len(problems) > 1 else ""
         raise ConfigError(problems[0] + more)
+    if cfg.env.get("_target_") == gym_env.TARGET:  # another package's env: built once to check it
+        her = bool(OmegaConf.select(cfg, "algo.her.enabled", default=False))
+        gym_env.check_config(plain(cfg.env), her=her)

@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import functools
 import os
+import re
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -39,6 +40,8 @@ ENV_GROUPS = {"objects": ("{", "["), "randomization": ("{",), "robot": ("{",)}
 #: experiment's option set (Hydra merges a dict into a dict, and refuses one into a list:
 #: experiment=grasp_objects_ppo's objects are a list).
 NEUTRAL = {"objects": "cube", "randomization": "default", "robot": "panda"}
+#: The groups of rlgrasp's own env's parts (configs/env/grasp.yaml's defaults): env=gym has none of them.
+ENV_PARTS = ("task", "randomization", "objects", "robot", "cameras", "visual")
 #: Hydra's flags after which the command line is not one run's overrides (help, multirun, ...).
 _NOT_A_RUN = (
     "help",
@@ -113,6 +116,12 @@ def explain(exc: BaseException, overrides: Sequence[str] = (), root: str = "the 
             return line + _moved(cause.full_key, parent)
         return f"{shown}: {str(cause.msg).splitlines()[0]}" + _moved(cause.full_key, parent)
     lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+    part = re.match(r"Could not override '(\w+)'\. No match", lines[0]) if lines else None
+    if part and part.group(1) in ENV_PARTS:  # env=gym: rlgrasp's own env parts are env=grasp's groups
+        return (
+            f"{_shown(part.group(1), overrides)}: a part of rlgrasp's own env (env=grasp); another "
+            "package's env (env=gym) takes env.id and its own keywords (env.<key>)"
+        )
     return "; ".join(lines[:3]) or type(exc).__name__
 
 

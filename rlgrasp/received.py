@@ -43,7 +43,11 @@ from rlgrasp.algos.registry import alias_paths, class_paths
 PARTS: dict[str, dict[str, str]] = {
     # The class path rlgrasp's own env config writes (rlgrasp.envs.grasp_env.EnvConfig): a rebuilt config then
     # compares equal to the user's own on resume and is type-checked by EnvConfig.
-    "env": {"grasp": "rlgrasp.envs.PandaGraspEnv"},
+    "env": {
+        "grasp": "rlgrasp.envs.PandaGraspEnv",
+        # Another package's gymnasium env (configs/env/gym.yaml): its env.id is checked by _check_gym_id.
+        "gym": "rlgrasp.envs.gym_env.make_gym_env",
+    },
     "task": {
         # The class paths configs/task/*.yaml write (rlgrasp.envs.tasks re-exports each).
         "lift": "rlgrasp.envs.tasks.LiftTask",
@@ -95,6 +99,10 @@ NODES: dict[str, str] = {
 }
 #: Hydra's keys that make a node callable or change how it is called.
 INSTANTIATE_KEYS = ("_target_", "_args_", "_partial_", "_recursive_", "_convert_")
+#: The modules a received ``env=gym`` config's ``env.id`` may import (``module:id``): the packages of envs
+#: rlgrasp's extras install. Importing a module runs its code, so a file may not name any other (unless
+#: the user's own config's env.id names the same module).
+GYM_MODULES = ("panda_gym",)
 #: The env factories an older checkpoint's ``gym_factory`` may name (module:name), all of them ``grasp``.
 OLD_ENV_FACTORIES = {"rlgrasp.envs:PandaGraspEnv": "grasp", "rlgrasp.envs:GraspEnv": "grasp"}
 _MAX_DEPTH = 32
@@ -121,7 +129,28 @@ def read_config(config: Any, source: str, user: Mapping[str, Any] | None = None)
             data["logger"] = {"name": shorts.get(path) or _short_name("logger", node.get("_target_"))}
         elif "_target_" in node or path in shorts:
             node["_target_"] = _class_for(kind, path, node.get("_target_"), shorts.get(path), chosen, source)
+    _check_gym_id(data, user or {}, source)
     return data
+
+
+def _check_gym_id(data: Mapping[str, Any], user: Mapping[str, Any], source: str) -> None:
+    """An ``env=gym`` config's ``env.id`` may import only a module of ``GYM_MODULES`` (``panda_gym:...``)
+    or the one the user's own config's ``env.id`` names: gymnasium imports the module before it looks the
+    id up, and an import runs that module's code. An id without a module is looked up among the ids
+    already registered, which only code the user runs has registered."""
+    env = data.get("env")
+    if not isinstance(env, Mapping) or env.get("_target_") != PARTS["env"]["gym"]:
+        return
+    env_id = env.get("id")
+    if not isinstance(env_id, str):
+        raise ReceivedError(f"{source}: refused: config.env.id={str(env_id)[:120]!r} is not a gymnasium id")
+    module = env_id.rpartition(":")[0]
+    theirs = (user.get("env") or {}).get("id") if isinstance(user.get("env"), Mapping) else None
+    if module and module not in GYM_MODULES and module != str(theirs or "").rpartition(":")[0]:
+        raise ReceivedError(
+            f"{source}: refused: config.env.id={env_id[:120]!r} would import the module {module[:80]!r}; a "
+            f"received file may name {', '.join(GYM_MODULES)} (or the module your own config's env.id names)"
+        )
 
 
 def user_parts(user: Mapping[str, Any]) -> dict[str, str]:

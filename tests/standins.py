@@ -24,6 +24,28 @@ def pendulum(max_episode_steps: int = 50) -> Any:
     return gym.make("Pendulum-v1", max_episode_steps=max_episode_steps)
 
 
+class DictObservation(gym.ObservationWrapper):
+    """An env whose observation is a Dict of one ``state`` entry: a Dict without a goal env's
+    ``achieved_goal`` and ``desired_goal``, which HER must refuse (tests/test_gym_env.py)."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self.observation_space = gym.spaces.Dict({"state": env.observation_space})
+
+    def observation(self, observation: Any) -> dict[str, Any]:
+        return {"state": observation}
+
+
+def pendulum_dict(max_episode_steps: int = 50) -> Any:
+    """Pendulum-v1 observing ``{"state": ...}`` (``DictObservation``), registered below."""
+    return DictObservation(pendulum(max_episode_steps))
+
+
+#: ``env=gym env.id=tests.standins:rlgrasp_tests/PendulumDict-v0`` (importing this module registers it).
+PENDULUM_DICT = "rlgrasp_tests/PendulumDict-v0"
+gym.register(PENDULUM_DICT, entry_point="tests.standins:pendulum_dict")
+
+
 def crashing_grasp_env(crash_after: int = 100, **env_kwargs: Any) -> Any:
     """``PandaGraspEnv(**env_kwargs)`` whose ``step`` raises ``EnvCrash`` after ``crash_after`` steps."""
     env = PandaGraspEnv(**env_kwargs)

@@ -152,3 +152,119 @@ def test_sac_unmatched_names_the_differences(peer, train_cfg):
 def test_sac_with_demonstrations_is_refused(peer, train_cfg):
     with pytest.raises(ValueError, match="algo.demos"):
         peer["sb3_kwargs"](train_cfg("experiment=grasp_sac", "algo.demos=some/demos"))
+
+
+# --- TQC with HER on panda-gym (--algo tqc): sb3-contrib's TQC and SB3's HerReplayBuffer ------------
+@pytest.fixture
+def contrib():
+    """sb3-contrib and panda-gym, or the test skips (the `peer` and `panda` extras)."""
+    pytest.importorskip("panda_gym")
+    return pytest.importorskip("sb3_contrib")
+
+
+def test_sb3_gets_panda_pick_place_tqc_her_settings(peer, train_cfg, contrib) -> None:
+    """TQC: SAC's mapping with the quantiles; HER as SB3's HerReplayBuffer (0.8 relabelled: 4 sampled
+    goals, future) on the same goal env read as its Dict; sb3-contrib builds its TQC from them."""
+    from stable_baselines3 import HerReplayBuffer
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    from rlgrasp.envs.factory import env_factory
+
+    cfg = train_cfg("experiment=panda_pick_place_tqc_her", "algo.replay.buffer_frames=4096")
+    a, c = cfg.algo, cfg.collector
+    assert peer["sb3_algo"](cfg) == "TQC" and peer["sb3_class"](cfg) is contrib.TQC
+    kw = peer["sb3_kwargs"](cfg)
+    envs = peer["n_envs"](cfg)
+    assert kw["train_freq"] == (c.steps_per_env, "step") and kw["gradient_steps"] == envs * c.steps_per_env
+    assert (kw["batch_size"], kw["gamma"], kw["tau"], kw["learning_rate"]) == (2048, 0.95, 0.05, 1e-3)
+    assert kw["top_quantiles_to_drop_per_net"] == a.loss.top_quantiles_to_drop_per_net == 2
+    assert kw["replay_buffer_class"] is HerReplayBuffer
+    assert kw["replay_buffer_kwargs"] == {"n_sampled_goal": 4, "goal_selection_strategy": "future"}
+    assert kw["learning_starts"] == envs * 50  # every env's first episode ended: SB3 samples no other
+    assert peer["sb3_env_cfg"](cfg)["observation"] == "dict"
+
+    venv = VecNormalize(
+        DummyVecEnv([env_factory(peer["sb3_env_cfg"](cfg))] * envs), **peer["vecnorm_kwargs"](cfg)
+    )
+    assert not venv.norm_obs  # RL Zoo does not normalize this task's observations, nor does rlgrasp here
+    model = contrib.TQC("MultiInputPolicy", venv, seed=0, device="cpu", **kw)
+    assert model.critic.n_quantiles == a.loss.n_quantiles and model.critic.n_critics == a.loss.num_critics
+    for q in model.critic.q_networks:
+        widths = [layer.out_features for layer in q if isinstance(layer, torch.nn.Linear)]
+        assert widths == [*a.critic.hidden_sizes, a.loss.n_quantiles]
+    widths = [layer.out_features for layer in model.actor.latent_pi if isinstance(layer, torch.nn.Linear)]
+    assert widths == list(cfg.model.hidden_sizes) == [512, 512, 512]
+    assert float(model.log_ent_coef.detach().exp()) == pytest.approx(a.loss.alpha_init)
+    assert model.replay_buffer.n_sampled_goal == 4
+    venv.close()
+
+
+def test_tqc_her_unmatched_names_the_differences(peer, train_cfg, contrib) -> None:
+    notes = "\n".join(peer["unmatched"](train_cfg("experiment=panda_pick_place_tqc_her")))
+    for named in (
+        "SB3's TQC a state-dependent one",
+        "only from finished episodes",
+        "starts after 400 frames",
+    ):
+        assert named in notes, named
+    odd = "\n".join(
+        peer["unmatched"](train_cfg("experiment=panda_pick_place_tqc_her", "algo.her.relabel_ratio=0.7"))
+    )
+    assert "n_sampled_goal=2 relabels 0.667" in odd
+
+
+def test_her_on_rlgrasps_own_task_is_refused_for_the_sb3_side(peer, train_cfg) -> None:
+    with pytest.raises(ValueError, match="env=gym"):
+        peer["sb3_kwargs"](train_cfg("experiment=pick_place_sac_her"))
+
+
+def test_algo_chooses_the_experiment_and_env_id_needs_a_gym_one(peer) -> None:
+    from argparse import Namespace
+
+    assert peer["EXPERIMENTS"]["tqc"] == "panda_pick_place_tqc_her"
+    args = Namespace(experiment="grasp_sac", seed=0, overrides=[], algo="tqc", env_id=None)
+    with pytest.raises(SystemExit, match="--algo tqc: experiment=grasp_sac trains algo=sac"):
+        peer["checked_config"](args, ["rlgrasp"])
+    args = Namespace(experiment="grasp_sac", seed=0, overrides=[], algo=None, env_id="X-v0")
+    with pytest.raises(SystemExit, match="not an env=gym experiment"):
+        peer["checked_config"](args, ["rlgrasp"])
+
+
+def test_both_curves_are_printed_at_the_same_frames(peer, capsys) -> None:
+    results = {
+        "rlgrasp": {"evals": [(1.0, 1024, 0.25, 32), (2.0, 2048, 0.5, 100)]},
+        "sb3": {"evals": [(1.5, 1024, 0.125, 32), (3.0, 2048, 0.75, 32), (3.5, 2176, 0.75, 100)]},
+    }
+    assert peer["by_frames"](results) == [(1024, 0.25, 0.125), (2048, 0.5, 0.75), (2176, None, 0.75)]
+    peer["print_by_frames"](results, 0)
+    assert "     2,176        -    0.750" in capsys.readouterr().out
+
+
+@pytest.mark.full
+def test_the_tqc_her_side_runs_a_few_frames_on_reach(peer, train_cfg, contrib, tmp_path) -> None:
+    """The SB3 side end to end on tiny settings: sb3-contrib's TQC with HER on PandaReach-v3's Dict in
+    two env processes, evaluated by rlgrasp's Evaluator on the flat env (the SB3 policy reading the same
+    values as its Dict); one periodic and the final evaluation reach the curve file."""
+    import json
+
+    cfg = train_cfg(
+        "experiment=panda_pick_place_tqc_her",
+        "env.id=panda_gym:PandaReach-v3",
+        "collector.num_workers=1",
+        "collector.envs_per_worker=2",
+        "collector.steps_per_env=25",
+        "total_frames=300",
+        "algo.replay.buffer_frames=1000",
+        "algo.optim.batch_size=32",
+        "algo.optim.utd_ratio=0.1",
+        "model.hidden_sizes=[16,16]",
+        "algo.critic.hidden_sizes=[16,16]",
+        "eval.interval_frames=150",
+        "eval.episodes=2",
+        "eval.final_episodes=2",
+        "eval.num_envs=2",
+    )
+    out = tmp_path / "sb3.json"
+    peer["run_sb3"](cfg, out)
+    evals = json.loads(out.read_text())["evals"]
+    assert [frames for _, frames, _, _ in evals] == [150, 300] and all(0 <= s <= 1 for _, _, s, _ in evals)

@@ -45,9 +45,10 @@ def env_spec(make_env: EnvFactory) -> dict[str, Any]:
         space = env.action_space
         if isinstance(env.observation_space, gym.spaces.Dict):
             keys = ", ".join(env.observation_space.spaces)
+            key = getattr(env.unwrapped, "observation_key", "env.task.observation")  # env=gym: its own
             raise ConfigError(
-                f"env.task.observation=dict: the env observes a Dict ({keys}) and this learner reads one "
-                "vector; set env.task.observation=flat (the goal appended to the state)"
+                f"{key}=dict: the env observes a Dict ({keys}) and this learner reads one "
+                f"vector; set {key}=flat (the goal appended to the state)"
             )
         spec = {
             "obs_key": "observation",

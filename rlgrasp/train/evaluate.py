@@ -10,11 +10,10 @@ import math
 from typing import Any
 
 import torch
-from omegaconf import OmegaConf
 from tensordict import TensorDictBase
 from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
 
-from rlgrasp.envs.factory import env_factory
+from rlgrasp.envs.factory import env_factory, episode_steps
 from rlgrasp.train.collect import EnvFactory, make_batched_env
 from rlgrasp.utils import plain
 
@@ -125,6 +124,4 @@ def periodic_evaluator(make_env: EnvFactory, cfg: Any) -> Evaluator:
     if e.get("randomization") is not None:
         make_env = env_factory({**plain(cfg.env), "randomization": plain(e.randomization)})
     seed = cfg.seed * 1_000_003 + e.seed_offset
-    return Evaluator(
-        make_env, OmegaConf.select(cfg.env, "sim.max_episode_steps", default=50), e.episodes, e.num_envs, seed
-    )
+    return Evaluator(make_env, episode_steps(cfg.env), e.episodes, e.num_envs, seed)

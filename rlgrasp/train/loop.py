@@ -25,6 +25,7 @@ from tensordict import TensorDictBase
 
 from rlgrasp import policy_file
 from rlgrasp.config import ConfigError
+from rlgrasp.envs.factory import episode_steps
 from rlgrasp.rundir import CHECKPOINTS, ENV_ERRORS, RunLockedError, run_lock
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.adr_sync import AdrSync
@@ -84,7 +85,7 @@ class Trainer:
         except (ValueError, TypeError, OSError) as exc:  # the env refuses its keywords or object files
             raise ConfigError(f"env: {exc}".splitlines()[0]) from exc
         stagger = self.parts.collector.stagger_starts
-        full_length = OmegaConf.select(cfg.env, "sim.max_episode_steps") if stagger else None
+        full_length = episode_steps(cfg.env) if stagger else None
         self.adr = AdrSync.from_env_cfg(self.config["env"], full_length)
         self.algo: Algorithm = algorithm_class(cfg.algo)(cfg, self.parts, self.device)
         self.actor = self.algo.actor
@@ -348,7 +349,7 @@ class Trainer:
     def episode_metrics(self, batch: TensorDictBase) -> dict[str, float]:
         """Return, length and success of the episodes that ended in this batch (for the console too)."""
         stagger = self.parts.collector.stagger_starts
-        full_length = OmegaConf.select(self.cfg.env, "sim.max_episode_steps") if stagger else None
+        full_length = episode_steps(self.cfg.env) if stagger else None
         ep = finished_episodes(batch, full_length, self.parts.spec.get("reward_terms", ()))
         for key in ("charts/episodic_return", "charts/success_rate"):
             if key in ep:

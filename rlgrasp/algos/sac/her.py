@@ -10,6 +10,10 @@ stored: goal tasks end on success only with ``terminate_on_success``, which then
 own goal. The achieved goal is read from the observation's ``object_pos``, with the env's sensor noise (a
 few millimetres at most under the default randomization, against a 5 cm threshold).
 
+Another package's goal env (``env=gym``: panda-gym's, gymnasium-robotics') is relabelled the same way on
+its flat observation (``rlgrasp.envs.gym_env``: ``achieved_goal`` and ``desired_goal`` last, where its
+``obs_slices`` say), and paid by its own ``compute_reward``, whatever its scale (panda-gym: -1 / 0).
+
 Why not TorchRL's ``HERReplayBuffer`` (torchrl.data, 0.14): it takes an episode to be a run of adjacent
 storage rows ended by ``done``, which holds where one env writes whole episodes. SAC writes each collector
 batch flattened, ``[envs, steps]``: every env's segment in turn, so an episode's steps lie in many batches,
@@ -22,13 +26,17 @@ keeps each buffer row's episode as the list of its rows in the order written.
 
 from __future__ import annotations
 
+import weakref
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 import torch
 from tensordict import TensorDictBase
 
 from rlgrasp.envs.factory import EnvFactory
+from rlgrasp.envs.gym_env import GymEnv
 from rlgrasp.envs.tasks.goal import GoalTask
 from rlgrasp.errors import ConfigError
 from rlgrasp.models.mlp import OBS_KEY
@@ -39,17 +47,30 @@ EPISODE_KEY = "her_episode"
 
 @dataclass(frozen=True)
 class GoalLayout:
-    """Where a goal task's flat observation holds the achieved and the desired goal, and the distance
-    within which the goal is met."""
+    """Where a goal task's flat observation holds the achieved and the desired goal, and what a goal
+    pays: the distance within which it is met (rlgrasp's tasks), or the env's own ``compute_reward``
+    (``env_reward``: another package's goal env, vectorized over rows)."""
 
     achieved: slice
     desired: slice
-    distance_threshold: float
+    distance_threshold: float = 0.0
+    env_reward: Callable[[Any, Any, Any], Any] | None = None
+
+    @property
+    def size(self) -> int:
+        """The entries of one achieved goal."""
+        return self.achieved.stop - self.achieved.start
 
     def reward(self, achieved: torch.Tensor, desired: torch.Tensor) -> torch.Tensor:
-        """``GoalTask.compute_reward`` on tensors, shaped as ``next.reward`` (``[n, 1]``)."""
-        distance = torch.linalg.vector_norm(achieved - desired, dim=-1, keepdim=True)
-        return (distance < self.distance_threshold).to(torch.float32)
+        """What the goals pay, shaped as ``next.reward`` (``[n, 1]``): ``GoalTask.compute_reward`` on
+        tensors, or the env's own ``compute_reward``, given one empty info a row (the replay keeps no
+        infos; Stable-Baselines3's HER passes one dict a row too)."""
+        if self.env_reward is None:
+            distance = torch.linalg.vector_norm(achieved - desired, dim=-1, keepdim=True)
+            return (distance < self.distance_threshold).to(torch.float32)
+        infos = np.array([{} for _ in range(achieved.shape[0])], dtype=object)
+        paid = self.env_reward(achieved.cpu().numpy(), desired.cpu().numpy(), infos)
+        return torch.as_tensor(np.asarray(paid, dtype=np.float32)).reshape(-1, 1).to(achieved.device)
 
 
 def goal_layout(make_env: EnvFactory) -> GoalLayout:
@@ -60,6 +81,8 @@ def goal_layout(make_env: EnvFactory) -> GoalLayout:
     where the top cube happened to be has no base under it, so no relabelled reward would be the one
     its episode could have earned."""
     env = make_env()
+    if isinstance(env.unwrapped, GymEnv):
+        return _gym_layout(env.unwrapped)
     try:
         task = getattr(env.unwrapped, "task", None)
         name = type(task).__name__
@@ -82,6 +105,22 @@ def goal_layout(make_env: EnvFactory) -> GoalLayout:
         return GoalLayout(slices["object_pos"], slices["desired_goal"], float(task.distance_threshold))
     finally:
         env.close()
+
+
+def _gym_layout(env: GymEnv) -> GoalLayout:
+    """Another package's goal env (``env=gym``): its goals' slices, and its own ``compute_reward``,
+    which keeps the env open until the layout is dropped (panda-gym's is a method of the env's task).
+    An env without goals is refused in one line (``rlgrasp.config.validate_train`` says it first)."""
+    if not env.goal_env or not env.flat:
+        env.close()
+        raise ConfigError(
+            f"algo.her.enabled=true: env.id={env.env_id!r} observes no achieved_goal and desired_goal in "
+            "one vector with a compute_reward; HER relabels a goal env's with env.observation=flat"
+        )
+    slices = env.obs_slices
+    layout = GoalLayout(slices["achieved_goal"], slices["desired_goal"], env_reward=env.compute_reward)
+    weakref.finalize(layout, env.close)
+    return layout
 
 
 class Episodes:
@@ -151,9 +190,9 @@ class Hindsight:
         self.ratio = float(her_cfg.relabel_ratio)
         self.layout = layout
         self.episodes = Episodes(size)
-        # Each row's achieved goal after its step (3 floats a row): a goal is read from here, not
-        # gathered from the buffer's every key
-        self.achieved = torch.zeros(size, 3, device=device)
+        # Each row's achieved goal after its step (3 floats a row for a position): a goal is read from
+        # here, not gathered from the buffer's every key
+        self.achieved = torch.zeros(size, layout.size, device=device)
         self.paid = 0.0  # the share of the last minibatch's relabelled rows whose new goal was met
 
     def written(self, rows: torch.Tensor, transitions: TensorDictBase) -> None:

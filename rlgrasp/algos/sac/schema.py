@@ -252,10 +252,14 @@ def _her_checks(cfg: Any, camera: Any) -> list[Check]:
     goal entries; a camera learner's goal is also in its images' scene) and the sparse reward (the only
     one a relabelled goal's reward can be recomputed for: the dense terms read the arm and the grasp
     at that step, which the replay does not keep). That the task has goals, and the success rule HER
-    recomputes, is read from the env when the learner builds it (``rlgrasp.algos.sac.her.goal_layout``)."""
+    recomputes, is read from the env when the learner builds it (``rlgrasp.algos.sac.her.goal_layout``).
+    An env without rlgrasp's task part (``env=gym``) pays a relabelled goal with its own
+    ``compute_reward``, whatever its reward: its goals are checked with the env's other keys
+    (``rlgrasp.envs.gym_env.check_config``)."""
     h = cfg.algo.get("her")
     if h is None:  # a config written before the key
         return []
+    own_reward = "task" not in cfg.env
     reward = (cfg.env.get("task") or {}).get("reward")
     return [
         (
@@ -279,7 +283,7 @@ def _her_checks(cfg: Any, camera: Any) -> list[Check]:
         (
             "algo.her.enabled",
             h.enabled,
-            not h.enabled or reward == "sparse",
+            not h.enabled or own_reward or reward == "sparse",
             f"relabelled rewards are recomputed with a goal task's sparse rule; needs a goal task "
             f"(task=pick_place or task=push) with env.task.reward=sparse, not {reward!r}",
         ),
