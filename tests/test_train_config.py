@@ -184,3 +184,10 @@ def test_bad_override_fails_naming_the_key(override: str, error: type, names: li
     text = str(info.value) + str(info.value.__cause__ or "")
     for name in names:
         assert name in text, text
+
+
+def test_progress_line_shows_a_spent_time_budget_as_zero_left() -> None:
+    from rlgrasp.train.logger import progress_line
+
+    line = progress_line(100, 1000, 50.0, None, None, None, eta_s=-7.5)
+    assert line.endswith("ETA 0:00:00")

@@ -174,6 +174,6 @@ def progress_line(
         parts.append(f"success {success:.2f}")
     if eval_success is not None:
         parts.append(f"eval {eval_success:.2f}")
-    eta = int(eta_s) if math.isfinite(eta_s) else 0
+    eta = max(int(eta_s), 0) if math.isfinite(eta_s) else 0  # a spent time budget: 0, not negative
     parts.append(f"ETA {eta // 3600}:{eta % 3600 // 60:02d}:{eta % 60:02d}")
     return " | ".join(parts)
