@@ -243,3 +243,20 @@ def test_fine_goal_term_pays_for_precision_inside_the_success_radius() -> None:
     fine = GoalTask.TERM_SETS["dense"]["terms"]["place_fine"]["scale"]
     assert place(None, near, scale=fine) - place(None, edge, scale=fine) > 0.4
     assert place(None, near) - place(None, edge) < 0.2
+
+
+def test_stack_pays_more_for_letting_go_on_the_base_than_for_holding_there() -> None:
+    """Success needs the fingers off the cube: the dense set must not pay more for holding it."""
+    env = GraspEnv(task={"_target_": "rlgrasp.envs.tasks.StackTask", "reward": "dense"})
+    task = env.task
+    goal = np.array([0.6, 0.0, 0.075])
+    base = {
+        "desired_goal": goal,
+        "achieved_goal": goal.copy(),
+        "object_centre": goal.copy(),
+        "base_moved": 0.0,
+    }
+    held = {**base, "grasped": np.array([1.0]), "grasp_pos": goal.copy()}
+    released = {**base, "grasped": np.array([0.0]), "grasp_pos": goal + [0.0, 0.0, 0.06]}
+    assert task.reward(task, released) > task.reward(task, held)
+    env.close()
