@@ -85,8 +85,9 @@ class Trainer:
         except (ValueError, TypeError, OSError) as exc:  # the env refuses its keywords or object files
             raise ConfigError(f"env: {exc}".splitlines()[0]) from exc
         stagger = self.parts.collector.stagger_starts
-        full_length = episode_steps(cfg.env) if stagger else None
-        self.adr = AdrSync.from_env_cfg(self.config["env"], full_length)
+        # With staggered starts only episodes of full length count (read once: env=gym asks gym's registry)
+        self.full_length = episode_steps(cfg.env) if stagger else None
+        self.adr = AdrSync.from_env_cfg(self.config["env"], self.full_length)
         self.algo: Algorithm = algorithm_class(cfg.algo)(cfg, self.parts, self.device)
         self.actor = self.algo.actor
         torch.set_num_threads(self.algo.learner_threads)
@@ -348,9 +349,7 @@ class Trainer:
 
     def episode_metrics(self, batch: TensorDictBase) -> dict[str, float]:
         """Return, length and success of the episodes that ended in this batch (for the console too)."""
-        stagger = self.parts.collector.stagger_starts
-        full_length = episode_steps(self.cfg.env) if stagger else None
-        ep = finished_episodes(batch, full_length, self.parts.spec.get("reward_terms", ()))
+        ep = finished_episodes(batch, self.full_length, self.parts.spec.get("reward_terms", ()))
         for key in ("charts/episodic_return", "charts/success_rate"):
             if key in ep:
                 self.recent[key] = ep[key]
