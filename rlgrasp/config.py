@@ -46,68 +46,7 @@ CONFIG_DIR = os.environ.get("RLGRASP_CONFIG_DIR", str(Path(__file__).resolve().p
 
 # --- training ---------------------------------------------------------------------------------
 # --- algorithms: each one's schema and checks are its package's (rlgrasp.algos.<name>.schema),
-# found through rlgrasp.algos.registry. The flat keys of before (algo.lr, ...) are mapped by ALGO_KEYS
-# below: old checkpoints load (rlgrasp.train.legacy) and an old override names its new key.
-#: Where each flat ``algo`` key of before lives now (``algo.<key>`` -> ``algo.<path>``), for every
-#: algorithm of then; a key moves only where the algorithm's schema has the path (``teacher`` is PPO's
-#: ``terms.teacher.checkpoint``; DAgger's own ``algo.teacher`` did not move).
-ALGO_KEYS = {
-    **{k: f"loss.{k}" for k in ("gamma", "gae_lambda", "gae_every_epoch", "clip_epsilon", "entropy_coeff")},
-    **{k: f"loss.{k}" for k in ("critic_coeff", "loss_critic_type", "normalize_advantage")},
-    **{k: f"loss.{k}" for k in ("tau", "num_critics", "alpha_init", "target_entropy")},
-    **{k: f"optim.{k}" for k in ("lr", "adam_eps", "max_grad_norm", "epochs", "minibatch_size", "ema_decay")},
-    **{
-        k: f"optim.{k}"
-        for k in ("actor_lr", "critic_lr", "alpha_lr", "batch_size", "utd_ratio", "actor_every")
-    },
-    **{
-        k: f"schedule.{k}"
-        for k in ("anneal_lr", "min_lr_frac", "anneal_lr_frames", "target_kl", "desired_kl")
-    },
-    **{k: f"schedule.{k}" for k in ("critic_warmup_frames", "beta0", "beta_decay")},
-    **{k: f"replay.{k}" for k in ("buffer_frames", "learning_starts", "demo_ratio")},
-    "save_replay": "replay.save",
-    **{f"critic_{k}": f"critic.{k}" for k in ("hidden_sizes", "activation", "layer_norm", "privileged")},
-    **{f"bc_{k}": f"pretrain.{k}" for k in ("epochs", "lr", "minibatch_size", "only")},
-    **{f"demo_{k}": f"terms.imitation.{k}" for k in ("coeff", "decay", "minibatch_size")},
-    "bc_coeff": "terms.imitation.coeff",
-    "teacher": "terms.teacher.checkpoint",
-    **{f"teacher_{k}": f"terms.teacher.{k}" for k in ("coeff", "decay")},
-    **{f"rnd_{k}": f"terms.rnd.{k}" for k in ("coeff", "gamma", "features", "update_fraction")},
-    **{f"aux_{k}": f"terms.aux.{k}" for k in ("coeff", "parts")},
-    "augment": "augment.kind",
-    **{f"augment_{k}": f"augment.{k}" for k in ("grey", "shift")},
-    "image_shift": "augment.shift",
-}
-
-
-#: Where each flat ``env`` keyword of before the env took parts lives now (``env.<key>`` ->
-#: ``env.<path>``): old checkpoints load (``rlgrasp.train.legacy.nest_env``) and an old override
-#: names its new key. ``robot_urdf`` became ``env.robot: {name: <arm>, model: <file>}``.
-ENV_KEYS = {
-    "control_mode": "control.mode",
-    **{k: f"control.{k}" for k in ("ee_step", "ee_yaw", "yaw_step", "joint_step", "torque_fraction")},
-    "gravity_compensation": "control.gravity_compensation",
-    **{k: f"sim.{k}" for k in ("time_step", "substeps", "solver_iterations", "max_episode_steps")},
-    **{k: f"sim.{k}" for k in ("collision_model", "visual")},
-    "render_width": "sim.viewer.width",
-    "render_height": "sim.viewer.height",
-    **{f"camera_{k}": f"sim.viewer.{k}" for k in ("distance", "yaw", "pitch")},
-    "robot_urdf": "robot.model",
-}
-
-
-def moved_algo_key(key: str, algo_name: str | None = None) -> str | None:
-    """Today's path of a flat ``algo`` key of before (``lr`` -> ``optim.lr``); None for a key that
-    did not move (``demos``, ``init_from``, DAgger's ``teacher``: the algorithm ``algo_name``'s schema
-    has no such path) or never existed."""
-    from rlgrasp.algos.registry import entry, has_key
-
-    path = ALGO_KEYS.get(key)
-    found = entry(algo_name)
-    if path is None or found is None:
-        return path
-    return path if has_key(found.schema_class(), path) else None
+# found through rlgrasp.algos.registry; the flat keys of before are rlgrasp.legacy's.
 
 
 @dataclass

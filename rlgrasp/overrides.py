@@ -32,7 +32,8 @@ from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from rlgrasp.compose import compose_config
-from rlgrasp.config import CONFIG_DIR, ENV_KEYS, moved_algo_key
+from rlgrasp.config import CONFIG_DIR
+from rlgrasp.legacy import ENV_KEYS, moved_algo_key
 
 #: Groups whose files set one ``env`` key; a dict (or, for objects, a list) value is that key's value.
 ENV_GROUPS = {"objects": ("{", "["), "randomization": ("{",), "robot": ("{",)}

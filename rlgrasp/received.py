@@ -24,7 +24,8 @@ and ``read_memmap`` checks every tensor file's size against its declared shape b
 into memory itself (TensorDict's ``load_memmap`` opens files writable and grows them).
 
 Every refusal is a ``ReceivedError`` whose message is one line. This module imports nothing of
-rlgrasp's at import time but the algorithms' registry (strings, no torch), so every reader can use it.
+rlgrasp's at import time but the algorithms' registry and the older layouts' map (``rlgrasp.legacy``;
+strings, no torch), so every reader can use it.
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from rlgrasp.algos.registry import alias_paths, class_paths
+from rlgrasp.legacy import nest_config
 
 #: rlgrasp's own parts, by kind: the short name a file may choose -> the class rlgrasp builds it with.
 #: Adding a kind or a part is one entry here (and its node path in ``NODES``).
@@ -290,8 +292,6 @@ def _upgrade(config: dict[str, Any], source: str) -> tuple[dict[str, Any], dict[
     shorts: dict[str, str] = {}
     if isinstance(config.get("env"), dict) and "_target_" not in config["env"]:
         config["env"], shorts["env"] = _old_env(config["env"], source)
-    if isinstance(config.get("env"), dict):
-        config["env"] = _old_task(config["env"])
     collector = config.get("collector")
     if isinstance(collector, dict) and "backend" in collector and "_target_" not in collector:
         backend = collector.pop("backend")
@@ -308,10 +308,10 @@ def _upgrade(config: dict[str, Any], source: str) -> tuple[dict[str, Any], dict[
         tracker = logger.get("tracker")
         name = tracker if tracker in ("wandb", "mlflow") else logger["backend"]
         shorts["logger"] = name if name in PARTS["logger"] else "another"
+    # The env's and a flat algo's keys nested by role; the terms an algorithm builds by class get its
+    # schema's class (rlgrasp.legacy), which _class_for then reads back into the registry's.
+    config = nest_config(config)
     if isinstance(config.get("algo"), dict):
-        # A flat algo nested by role; the terms an algorithm builds by class get its schema's class
-        # (legacy.nest_algo), which _class_for then reads back into the registry's like any other.
-        config["algo"] = _old_algo(config["algo"])
         name = config["algo"].get("name")
         if "_target_" not in config["algo"] and isinstance(name, str) and name in PARTS["algo"]:
             shorts["algo"] = name  # written before algo._target_: the algorithm its name registers
@@ -333,22 +333,6 @@ def _old_env(env: dict[str, Any], source: str) -> tuple[dict[str, Any], str]:
         kind = type(extra).__name__
         raise ReceivedError(f"{source}: refused: config.env.kwargs is a {kind}, not a mapping")
     return {**env, **extra}, OLD_ENV_FACTORIES[factory]
-
-
-def _old_task(env: dict[str, Any]) -> dict[str, Any]:
-    """An env of before the task and the other parts: its reward keys under ``env.task``, its control
-    and simulation keywords under ``env.control`` and ``env.sim`` (``legacy.nest_env``; data only: the
-    task's class is rlgrasp's lift, written by rlgrasp's code)."""
-    from rlgrasp.train.legacy import nest_env  # lazy: it imports rlgrasp's config schemas (torch)
-
-    return nest_env(env)
-
-
-def _old_algo(algo: dict[str, Any]) -> dict[str, Any]:
-    """A flat ``algo`` of before, nested by role (``rlgrasp.train.legacy.nest_algo``; data only)."""
-    from rlgrasp.train.legacy import nest_algo  # lazy: it imports rlgrasp's config schemas (torch)
-
-    return nest_algo(algo)
 
 
 # --- folders ------------------------------------------------------------------------------------

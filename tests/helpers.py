@@ -29,10 +29,10 @@ from rlgrasp.compose import compose_train
 from rlgrasp.demos.dataset import layout_of, write_demos
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.envs.grasp_env import EnvConfig
+from rlgrasp.legacy import nest_algo
 from rlgrasp.models.cnn import actor_norm, build_vision_actor
 from rlgrasp.models.spec import vision_spec
 from rlgrasp.policy_file import CHECKPOINT_FORMAT, load_checkpoint, read_checkpoint
-from rlgrasp.train.legacy import nest_algo
 from rlgrasp.train.loop import Trainer, train
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -40,7 +40,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def ppo_algo(**keys: Any) -> Any:
     """PPO's ``algo`` node with ``keys`` over the schema's defaults, each named by its leaf
-    (``lr=1e-3`` sets ``optim.lr``, ``rnd_coeff`` ``terms.rnd.coeff``: ``rlgrasp.config.ALGO_KEYS``),
+    (``lr=1e-3`` sets ``optim.lr``, ``rnd_coeff`` ``terms.rnd.coeff``: ``rlgrasp.legacy.ALGO_KEYS``),
     so that a unit test of the update reads as a list of the settings it varies."""
     return OmegaConf.merge(OmegaConf.structured(PPOConfig), nest_algo({"name": "ppo", **keys}))
 

@@ -14,9 +14,9 @@ from omegaconf import OmegaConf
 
 from rlgrasp.algos.ppo.schema import PPOConfig
 from rlgrasp.compose import compose_train
+from rlgrasp.legacy import nest_algo
 from rlgrasp.policy_file import read_checkpoint
 from rlgrasp.train.algorithm import algorithm_class
-from rlgrasp.train.legacy import nest_algo
 from rlgrasp.train.loop import Trainer, TrainingError
 from tests.helpers import ROOT
 

@@ -104,7 +104,7 @@ def test_the_cached_client_fails_after_close_as_pybullet_does():
 def test_an_env_config_of_before_the_parts_is_read_into_them() -> None:
     """Checkpoints written when the env took flat keywords (policies/*.pt) build today's env."""
     from rlgrasp.envs.factory import env_factory
-    from rlgrasp.train.legacy import nest_env
+    from rlgrasp.legacy import nest_env
 
     old = {
         "_target_": "rlgrasp.envs.PandaGraspEnv",

@@ -14,8 +14,8 @@ from rlgrasp.compose import compose_train
 from rlgrasp.envs import GraspEnv
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.envs.tasks import TASKS, RewardConfigError, RewardTerms, goal_distance, task_name
+from rlgrasp.legacy import nest_task
 from rlgrasp.received import read_config
-from rlgrasp.train.legacy import nest_task
 
 USER_CONFIGS = Path(__file__).resolve().parent / "user_configs"
 GOAL_TASKS = ("pick_place", "push", "stack")

@@ -14,11 +14,10 @@ torch) is imported when the config is registered or validated.
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import importlib
 import pkgutil
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass
 from types import ModuleType
 from typing import Any
@@ -89,39 +88,6 @@ def class_paths() -> dict[str, str]:
 def alias_paths() -> dict[str, str]:
     """Older class path -> short name (``rlgrasp.received.ALIASES["algo"]``)."""
     return {alias: name for name, e in algorithms().items() for alias in e.aliases}
-
-
-def has_key(schema: type, path: str) -> bool:
-    """Whether the dataclass ``schema`` has the dotted key ``path`` (``optim.lr``)."""
-    node: Any = schema
-    for part in path.split("."):
-        fields = {f.name: f for f in dataclasses.fields(node)} if dataclasses.is_dataclass(node) else {}
-        if part not in fields:
-            return False
-        field = fields[part]
-        if field.default_factory is not dataclasses.MISSING:
-            node = type(field.default_factory())
-        else:
-            node = field.type if isinstance(field.type, type) else None
-    return True
-
-
-def term_targets(name: Any) -> Mapping[str, str]:
-    """The default ``_target_`` of each of an algorithm's ``algo.terms`` that is built by class (PPO's),
-    for a config written before the terms named one."""
-    found = entry(name)
-    if found is None:
-        return {}
-    schema = found.schema_class()
-    terms = next((f for f in dataclasses.fields(schema) if f.name == "terms"), None)
-    if terms is None or terms.default_factory is dataclasses.MISSING:
-        return {}
-    default = terms.default_factory()
-    return {
-        f.name: getattr(default, f.name)._target_
-        for f in dataclasses.fields(default)
-        if hasattr(getattr(default, f.name), "_target_")
-    }
 
 
 def lazy_attributes(package: str, module: str) -> Callable[[str], Any]:

@@ -23,10 +23,10 @@ from rlgrasp.config import ConfigError
 from rlgrasp.envs.cameras import GROUND_MASK_KEY, CameraSpec
 from rlgrasp.envs.part_config import env_setting
 from rlgrasp.envs.tasks import task_name
+from rlgrasp.legacy import nest_task
 from rlgrasp.models.cnn import IMAGE_KEYS
 from rlgrasp.models.spec import PRIVILEGED_KEY
 from rlgrasp.received import ReceivedError, check_tree, read_memmap
-from rlgrasp.train.legacy import nest_task
 
 FORMAT = 1
 META = "demos.json"

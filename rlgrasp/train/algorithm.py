@@ -99,7 +99,7 @@ class Algorithm:
         return {}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Restore what ``state_dict`` saved (``rlgrasp.train.legacy.algorithm_state`` finds it in a
+        """Restore what ``state_dict`` saved (``rlgrasp.legacy.algorithm_state`` finds it in a
         checkpoint of any age)."""
 
     def save_extra(self, run_dir: Any) -> None:

@@ -11,13 +11,13 @@ writes it, for every algorithm):
   ``sac`` (a subclass's under its own name): its loss's critics, target critics and temperature, the
   optimizers, the gradient steps owed (the replay buffer is in the run directory's ``replay/``,
   ``rlgrasp.algos.sac.replay_files``); ``distill``: ``student``, ``aux``, ``optimizer``. Checkpoints
-  written before kept PPO's and DAgger's at the top level (``rlgrasp.train.legacy.algorithm_state``)
+  written before kept PPO's and DAgger's at the top level (``rlgrasp.legacy.algorithm_state``)
 - ``frames``, ``updates``: counters; ``generation``: how many times the run was resumed
 - ``best_eval_success``, ``last_eval``: evaluation bookkeeping (``last_eval`` may be None)
 - ``rng``: python / numpy / torch RNG states of the learner, as tensors and plain values
 - ``config``: the resolved training config as a plain dict (``config["env"]`` is the env's
   ``_target_`` node, which ``rlgrasp.envs.factory.env_factory`` builds); an older checkpoint's is
-  read in today's shape (``rlgrasp.train.legacy``)
+  read in today's shape (``rlgrasp.legacy``)
 - ``spec``: ``obs_key``, ``obs_dim``, ``action_dim``, ``action_low``, ``action_high``
 - ``versions``: python, torch, torchrl, tensordict, gymnasium, pybullet, rlgrasp
 - ``run_dir``: the run directory it was written in

@@ -26,6 +26,7 @@ from tensordict import TensorDictBase
 from rlgrasp import policy_file
 from rlgrasp.config import ConfigError
 from rlgrasp.envs.factory import episode_steps
+from rlgrasp.legacy import algorithm_state
 from rlgrasp.rundir import CHECKPOINTS, ENV_ERRORS, RunLockedError, run_lock
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.adr_sync import AdrSync
@@ -34,7 +35,6 @@ from rlgrasp.train.batches import Batches
 from rlgrasp.train.collect import read_env_errors
 from rlgrasp.train.collectors import begin_shutdown, shut_down
 from rlgrasp.train.evaluations import CallbackStop, EvalCallback, Evaluations, Stopped, TrainingError
-from rlgrasp.train.legacy import algorithm_state
 from rlgrasp.train.logger import log, progress_line, setup_text_log
 from rlgrasp.train.metrics import Due, Phases, Throughput, finished_episodes
 from rlgrasp.train.parts import build_parts
@@ -417,7 +417,7 @@ def train(cfg: DictConfig, on_eval: EvalCallback | None = None, changed: set[str
 
 
 def _algorithm_state(state: dict[str, Any]) -> dict[str, Any]:
-    """The algorithm's part of a checkpoint (an older one's mapped by ``rlgrasp.train.legacy``)."""
+    """The algorithm's part of a checkpoint (an older one's mapped by ``rlgrasp.legacy``)."""
     found = algorithm_state(state)
     if found is None:
         raise KeyError("the checkpoint holds no training state of its algorithm")

@@ -27,9 +27,9 @@ from omegaconf import DictConfig, OmegaConf
 from rlgrasp import policy_file
 from rlgrasp.compose import compose_train
 from rlgrasp.config import CONFIG_DIR, ConfigError, validate_train
+from rlgrasp.legacy import algorithm_state
 from rlgrasp.received import logger_name
 from rlgrasp.rundir import CHECKPOINTS
-from rlgrasp.train.legacy import algorithm_state
 from rlgrasp.utils import flatten
 
 log = logging.getLogger("rlgrasp.train")
