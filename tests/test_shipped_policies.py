@@ -19,6 +19,7 @@ CASES = [
     ("grasp_ppo_kuka_iiwa.pt", "cube", 18, 15),  # the checkpoint rebuilds its arm
     ("grasp_ppo_xarm6.pt", "cube", 17, 14),
     ("grasp_vision_depth.pt", "cube", 17, 14),  # a wrist depth camera student of grasp_ppo.pt
+    ("pick_place_sac.pt", "cube", 19, 16),  # a goal task: the checkpoint rebuilds its task and goal
 ]
 
 
