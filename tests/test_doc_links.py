@@ -57,3 +57,15 @@ def test_links_between_pages_and_their_anchors_resolve():
             if not dest.is_file() or (anchor and not generated and anchor not in _anchors(dest)):
                 broken.append(f"{page.relative_to(ROOT)}: {target}")
     assert not broken, "links that do not resolve:\n" + "\n".join(broken)
+
+
+def test_the_newcomer_path_is_the_readme_as_written() -> None:
+    """benchmarks/newcomer.py times the README's own commands: each one it runs is in the README
+    verbatim, so the timed path and the page cannot drift apart."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("newcomer", ROOT / "benchmarks" / "newcomer.py")
+    newcomer = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(newcomer)
+    assert newcomer.missing_from_readme(newcomer.COMMANDS) == []
+    assert newcomer.missing_from_readme(["python scripts/train.py experiment=nowhere"]) != []
