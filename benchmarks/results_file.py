@@ -7,7 +7,9 @@ the figures it printed and calls ``record``, which fills in the date, the machin
 line, writes the file and rewrites that page's table (``results_table.py --write`` for one page).
 
 The row keeps its target and its section: what the figure is measured against, and where the page
-tells its story, are for a person to write.
+tells its story, are for a person to write. ``record`` marks the row ``"recorded": true`` and drops
+its ``"historical"`` mark (a figure once copied by hand): the table then shows it without
+"(historical)".
 """
 
 from __future__ import annotations
@@ -103,8 +105,10 @@ def record(
     today: datetime.date | None = None,
 ) -> dict:
     """Write one row's figure (``measured``, ``met``), today's date, this machine and the command
-    (default: this script's own command line) into ``results``, then rewrite ``page``'s table in
-    ``folder``. Returns the row as written."""
+    (default: this script's own command line) into ``results``, marked recorded, then rewrite
+    ``page``'s table in ``folder``. Returns the row as written."""
+    if load is not None and load not in results_table.LOADS:
+        raise ValueError(f"load {load!r}: one of {results_table.LOADS} or None")
     data = json.loads(results.read_text())
     row = find_row(data["pages"], page, row_id)
     row.update(
@@ -114,9 +118,11 @@ def record(
             "machine": machine(load),
             "command": list(command) if command is not None else [script_command()],
             "met": met,
+            "recorded": True,
         }
     )
     row.pop("command_note", None)  # a note on the old command ("arguments not recorded")
+    row.pop("historical", None)  # the figure is no longer one copied by hand
     results_table.render([row])  # refuses a '|' or a line break before anything is written
     results.write_text(json.dumps(data, indent=1) + "\n")
     results_table.write({page: data["pages"][page]}, folder)
@@ -135,6 +141,6 @@ def add_options(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--record-load",
-        choices=["alone", "shared"],
+        choices=results_table.LOADS,
         help="with --record: whether the machine ran nothing else (the machine column)",
     )

@@ -19,6 +19,11 @@ label and a row (`PAGE/ID`), rendered between `<!-- results-summary: NAME -->` a
 `<!-- /results-summary -->` in the files of `SUMMARY_FILES`, so that a figure is typed once. No cell
 holds more than `MAX_CELL` characters: a row's long command list goes below its page's table, and a
 row's earlier figures (`earlier`) with it.
+
+Each row says where its figure came from, with exactly one mark: `"recorded": true` on a row a
+script wrote with `--record` (its machine cell as `results_file.machine()` writes it, its command a
+`python benchmarks/` line), `"historical": true` on a figure copied by hand from its page's section
+(the machine as its author described it), which the table shows as "(historical)".
 """
 
 from __future__ import annotations
@@ -44,6 +49,20 @@ SUMMARY = re.compile(
 SUMMARY_FILES = {"readme": ("README.md", "docs/index.md"), "algorithms": ("docs/algorithms.md",)}
 #: The most characters a table cell may hold; longer text goes below the table.
 MAX_CELL = 300
+#: A row's mark of where its figure came from; each row carries exactly one, set to true.
+MARKS = ("recorded", "historical")
+#: What a script's ``--record-load`` may say about the machine (the machine cell's last part).
+LOADS = ("alone", "shared")
+#: The machine cell of a recorded row, as results_file.machine() writes it: CPU model, cores[, load].
+RECORDED_MACHINE = re.compile(rf"[^,\s][^|]*, [1-9][0-9]* cores(, ({'|'.join(LOADS)}))?")
+#: How every command of a recorded row starts (results_file.script_command()).
+RECORDED_COMMAND = "python benchmarks/"
+#: The line under a table with historical rows.
+HISTORICAL_LEGEND = (
+    "**(historical)**: a figure copied by hand from the section the target links to, with the command"
+    " given there and the machine as its author described it; a row without the mark was written by"
+    " its benchmark script's `--record` ([how](index.md#recording-a-row))."
+)
 
 
 def load(path: Path = RESULTS) -> dict[str, list[dict]]:
@@ -72,14 +91,42 @@ def _command(row: dict) -> str:
     return text
 
 
+def origin(row: dict) -> str:
+    """Where the row's figure came from: "recorded" (a script's ``--record`` wrote it) or
+    "historical" (copied by hand). A ``ValueError`` for a row with no mark, both, a mark not set to
+    true, or a recorded mark on a machine or command that ``--record`` would not have written."""
+    marks = [m for m in MARKS if m in row]
+    name = row.get("id", row.get("target"))
+    if len(marks) != 1 or row[marks[0]] is not True:
+        raise ValueError(f"row {name!r}: needs exactly one of {MARKS} set to true, has {marks}")
+    if marks[0] == "recorded":
+        if not RECORDED_MACHINE.fullmatch(row["machine"]):
+            raise ValueError(
+                f"row {name!r} is marked recorded, but its machine {row['machine']!r} is not "
+                "'CPU model, N cores[, alone|shared]' as --record writes it"
+            )
+        commands = row.get("command") or []
+        if not commands or not all(c.startswith(RECORDED_COMMAND) for c in commands):
+            raise ValueError(
+                f"row {name!r} is marked recorded, but its command {commands!r} is not "
+                f"'{RECORDED_COMMAND}...' as --record writes it"
+            )
+    return marks[0]
+
+
 def render(rows: list[dict]) -> str:
     """The Markdown table of one page: one line per row, the target linked to the page's section.
     A command list longer than a cell may hold, and a row's earlier figures, follow the table."""
     lines = ["| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
     below = []
+    historical = False
     for row in rows:
         for key in ("target", "measured", "date", "machine", "met"):
             _cell(row[key], MAX_CELL)
+        machine = row["machine"]
+        if origin(row) == "historical":
+            machine = _cell(f"{machine} (historical)", MAX_CELL)
+            historical = True
         target = f"[{row['target']}]({row['section']})" if row.get("section") else row["target"]
         command = _command(row)
         if len(command) > MAX_CELL:
@@ -88,9 +135,11 @@ def render(rows: list[dict]) -> str:
             below.append(f"- **{row['id']}**, the commands: {_command(row)}")
         if row.get("earlier"):
             below.append(f"- **{row['id']}**, the figures before and beside it: {_cell(row['earlier'])}")
-        cells = (target, row["measured"], row["date"], row["machine"], command, row["met"])
+        cells = (target, row["measured"], row["date"], machine, command, row["met"])
         lines.append("| " + " | ".join(_cell(c) for c in cells) + " |")
     text = "\n".join(lines) + "\n"
+    if historical:
+        text += f"\n{HISTORICAL_LEGEND}\n"
     if below:
         text += "\nThe rows' long text:\n\n" + "\n".join(below) + "\n"
     return text
@@ -165,9 +214,14 @@ def compare(pages: dict[str, list[dict]]) -> list[str]:
             problems.append(f"{name}: no page {path.relative_to(ROOT)}")
             continue
         blocks = {m["name"]: m["body"] for m in BLOCK.finditer(path.read_text())}
+        try:
+            table = render(rows)
+        except ValueError as exc:  # a row without its mark, or a cell that would break the table
+            problems.append(f"{RESULTS.relative_to(ROOT)}, page {name}: {exc}")
+            continue
         if name not in blocks:
             problems.append(f"{path.relative_to(ROOT)}: no '<!-- results-table: {name} -->' block")
-        elif blocks[name] != render(rows):
+        elif blocks[name] != table:
             problems.append(f"{path.relative_to(ROOT)}: the table differs from {RESULTS.relative_to(ROOT)}")
     for path in sorted(PAGES.glob("*.md")):
         for m in BLOCK.finditer(path.read_text()):
@@ -177,11 +231,12 @@ def compare(pages: dict[str, list[dict]]) -> list[str]:
 
 
 def write(pages: dict[str, list[dict]], folder: Path = PAGES) -> None:
-    """Rewrite each page's table from its rows (the other text of the page is left as it is)."""
-    for name, rows in pages.items():
+    """Rewrite each page's table from its rows (the other text of the page is left as it is).
+    Every table is rendered first: a row that cannot be (``ValueError``) leaves every page as it was."""
+    tables = {name: render(rows) for name, rows in pages.items()}
+    for name, table in tables.items():
         path = page_path(name, folder)
         text = path.read_text()
-        table = render(rows)
 
         def fill(m: re.Match, name: str = name, table: str = table) -> str:
             return m[1] + table + m[4] if m["name"] == name else m[0]
@@ -206,7 +261,11 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"{name}/{row.get('id', '?')}: {row['target']}")
         return 0
     if args.write:
-        write(pages)
+        try:
+            write(pages)
+        except ValueError as exc:  # a row without its mark, or a cell that would break the table
+            print(f"{RESULTS.relative_to(ROOT)}: {exc}; no page written", file=sys.stderr)
+            return 1
         write_summaries(pages, load_summaries())
         return 0
     if args.check:

@@ -58,7 +58,7 @@ def test_a_changed_figure_is_caught(table):
 def test_cells_cannot_break_the_table(table):
     with pytest.raises(ValueError):
         row = {"target": "a | b", "measured": "1", "date": "2026-01-01", "machine": "m", "met": "met"}
-        table["render"]([row])
+        table["render"]([dict(row, historical=True)])
 
 
 def test_file_is_valid_json_with_pages():
@@ -117,6 +117,8 @@ def test_record_writes_the_row_and_the_page(results_file, copies, monkeypatch):
     assert "command_note" not in written  # the command is now recorded with its arguments
     assert (written["date"], written["met"]) == ("2030-01-02", "missed")
     assert written["machine"].endswith(f"{os.cpu_count()} cores, alone")
+    assert "historical" in collector_before_row(before) and "recorded" not in collector_before_row(before)
+    assert written["recorded"] is True and "historical" not in written  # the mark changes with the row
     collector_before = next(r for r in before["throughput"] if r["id"] == "collector")
     assert (written["target"], written["section"]) == (collector_before["target"], "#collection-speed")
     for name in before:  # every other row as it was
@@ -129,6 +131,15 @@ def test_record_writes_the_row_and_the_page(results_file, copies, monkeypatch):
     assert text.endswith("<!-- /results-table -->\n\nafter\n") and "old table" not in text
     assert "| 0.80 (800 against 1,000 raw frames/s) | 2030-01-02 |" in text
     assert "`python benchmarks/bench_collect.py --seconds 5 'experiment=a b'`" in text
+    collector_line = next(line for line in text.splitlines() if "| 0.80 (800 against" in line)
+    assert f"| {written['machine']} |" in collector_line and "(historical)" not in collector_line
+    others = [line for line in text.splitlines() if line.startswith("| [") and line != collector_line]
+    assert others and all(" (historical) | " in line for line in others)  # still copied by hand
+    assert "**(historical)**:" in text  # the legend, while the page has historical rows
+
+
+def collector_before_row(pages: dict) -> dict:
+    return next(r for r in pages["throughput"] if r["id"] == "collector")
 
 
 def test_record_refuses_unknown_rows_and_broken_cells(results_file, copies):
@@ -308,8 +319,106 @@ def test_no_cell_over_the_limit(table):
                     shown = re.sub(r"\]\([^)\s]+\)$", "", cell).lstrip("[")
                     assert len(shown) <= limit, f"a cell of {len(shown)} characters: {shown[:80]}..."
     row = {"target": "t", "measured": "x" * (limit + 1), "date": "2026-01-01", "machine": "m", "met": "met"}
+    row["historical"] = True
     with pytest.raises(ValueError, match="more than"):
         table["render"]([row])
     long = dict(row, measured="1", id="r", command=["python a.py " + "x" * limit])
     rendered = table["render"]([long])
     assert "1 commands, below the table (r)" in rendered and "- **r**, the commands:" in rendered
+
+
+# --- where a row's figure came from: written by --record, or copied by hand ("historical") ---------
+#: The machine cell results_file.machine() writes, spelled out here apart from results_table's own.
+MACHINE_FORM = re.compile(r"[^,]+, [1-9][0-9]* cores(, (alone|shared))?")
+
+
+def test_every_row_is_recorded_or_historical(table):
+    """Each row carries exactly one mark, set to true, and its page's table shows which."""
+    for name, rows in table["load"]().items():
+        rendered = table["render"](rows)
+        for row in rows:
+            marks = [m for m in ("recorded", "historical") if m in row]
+            assert len(marks) == 1 and row[marks[0]] is True, f"{name}/{row['id']}: marks {marks}"
+            assert table["origin"](row) == marks[0]
+            shown = f"| {row['machine']} (historical) |" in rendered
+            assert shown == (marks[0] == "historical"), f"{name}/{row['id']}"
+        has_historical = any(row.get("historical") for row in rows)
+        assert ("**(historical)**:" in rendered) == has_historical, name
+
+
+def test_a_recorded_row_is_one_record_could_have_written(table):
+    """A row marked recorded has the machine cell machine() writes and a benchmark script's command."""
+    for name, rows in table["load"]().items():
+        for row in rows:
+            if row.get("recorded"):
+                assert MACHINE_FORM.fullmatch(row["machine"]), f"{name}/{row['id']}: {row['machine']!r}"
+                assert all(c.startswith("python benchmarks/") for c in row["command"]), row["command"]
+
+
+def test_origin_refuses_a_row_without_one_true_mark(table, results_file, tmp_path):
+    origin = table["origin"]
+    row = {
+        "id": "r",
+        "target": "t",
+        "measured": "1",
+        "date": "2026-01-01",
+        "machine": results_file["machine"]("alone", tmp_path / "missing", 2),
+        "command": ["python benchmarks/bench_env.py --steps 10"],
+        "met": "met",
+    }
+    assert MACHINE_FORM.fullmatch(row["machine"]) and table["RECORDED_MACHINE"].fullmatch(row["machine"])
+    assert origin(dict(row, recorded=True)) == "recorded"
+    assert origin(dict(row, historical=True)) == "historical"
+    for bad in (
+        row,
+        dict(row, recorded=True, historical=True),
+        dict(row, historical="yes"),
+        dict(row, recorded=False),
+    ):
+        with pytest.raises(ValueError, match="exactly one of"):
+            origin(bad)
+        with pytest.raises(ValueError, match="exactly one of"):
+            table["render"]([bad])
+
+
+def test_a_hand_typed_row_cannot_pass_for_recorded(table, results_file, tmp_path):
+    """The machine cells typed by hand ("reference, alone") and commands that are not a benchmark
+    script's are refused under a recorded mark; what machine() writes is accepted with any load."""
+    origin = table["origin"]
+    for pages in table["load"]().values():
+        for row in pages:  # every hand-typed row in the file would be refused if marked recorded
+            if row.get("historical") and not MACHINE_FORM.fullmatch(row["machine"]):
+                recorded = {k: v for k, v in row.items() if k != "historical"} | {"recorded": True}
+                with pytest.raises(ValueError, match="is not 'CPU model"):
+                    origin(recorded)
+    cpuinfo = tmp_path / "cpuinfo"
+    cpuinfo.write_text("model name\t: Intel(R) Core(TM) i7-8550U CPU @ 1.80GHz\n")
+    base = {"id": "r", "machine": "", "command": ["python benchmarks/bench_env.py"], "recorded": True}
+    for load in (None, "alone", "shared"):
+        assert origin(dict(base, machine=results_file["machine"](load, cpuinfo, 8))) == "recorded"
+    good = dict(base, machine=results_file["machine"]("alone", cpuinfo, 8))
+    for commands in (
+        [],
+        ["python scripts/train.py seed=0"],
+        ["python benchmarks/a.py", "scontrol requeue 1"],
+    ):
+        with pytest.raises(ValueError, match="its command"):
+            origin(dict(good, command=commands))
+    with pytest.raises(ValueError, match="load 'nice 19'"):
+        results_file["record"](
+            "throughput", "collector", "1", "met", load="nice 19", results=tmp_path / "absent.json"
+        )
+
+
+def test_an_unmarked_row_fails_check_and_write(table, tmp_path):
+    pages = table["load"]()
+    pages["peer"] = [{k: v for k, v in r.items() if k != "historical"} for r in pages["peer"]]
+    problems = table["compare"](pages)
+    assert any("page peer" in p and "exactly one of" in p for p in problems), problems
+    for name in pages:  # --write renders every page before it writes one: none is touched
+        (tmp_path / f"{name}.md").write_text(
+            f"<!-- results-table: {name} -->\nold\n<!-- /results-table -->\n"
+        )
+    with pytest.raises(ValueError, match="exactly one of"):
+        table["write"](pages, tmp_path)
+    assert all("\nold\n" in (tmp_path / f"{name}.md").read_text() for name in pages)
