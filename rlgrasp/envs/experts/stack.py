@@ -14,6 +14,11 @@ from rlgrasp.envs.experts.pick_place import PickPlaceExpert
 
 #: m below the cube's top at which the fingertips close: a 4 cm cube's bottom stays below them.
 STACK_FINGER_REACH = 0.02
+#: m off the base's centre (horizontally) at which the cube is lowered and let go. 2 cm, not 1: the
+#: expert succeeds as often (175 against 176 of 200 on `default`), and its demonstrations then let
+#: go where a learner's placing reaches; at 1 cm a learned policy held the cube 2-3 cm off its place
+#: to the episode's end, waiting for the alignment the expert showed it (docs/tasks.md).
+ALIGNED = 0.02
 
 
 class StackExpert(PickPlaceExpert):
@@ -24,7 +29,7 @@ class StackExpert(PickPlaceExpert):
         *args: Any,
         finger_reach: float = STACK_FINGER_REACH,
         clearance: float = 0.03,
-        aligned: float = 0.01,
+        aligned: float = ALIGNED,
         release_steps: int = 3,
         retreat: float = 0.1,
         drop: float = 0.003,
