@@ -1,7 +1,7 @@
 """LeRobot datasets: rlgrasp's demonstrations written as one, read by LeRobot's own loader, and read
 back into a folder ``algo.demos=`` loads, frames and actions equal; a malformed dataset refused in one
 line. The checks against LeRobot's loader skip where lerobot is not installed (it pins an older torch
-than this project: docs/demonstrations.md#lerobot-datasets)."""
+than this project: docs/sparse.md#lerobot-datasets)."""
 
 from __future__ import annotations
 
@@ -230,3 +230,20 @@ def test_the_command_line_refuses_an_existing_target_in_one_line(
     assert caught.value.code == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("error: ") and "\n" not in err
+
+
+def test_the_command_line_imports_a_dataset_without_rlgrasp_meta_against_the_env_it_composes(
+    recorded: Path, exported: Path, tmp_path: Path, capsys
+) -> None:
+    """Without ``meta/rlgrasp.json`` the env comes from the command line (here the demos config's
+    default, the recording's); env overrides for a dataset that records its env are refused."""
+    with pytest.raises(SystemExit) as caught:
+        main(["import", str(exported), str(tmp_path / "x"), "robot=xarm6"])
+    assert caught.value.code == 2 and "records its env" in capsys.readouterr().err
+    theirs = tmp_path / "theirs"
+    shutil.copytree(exported, theirs)
+    (theirs / "meta/rlgrasp.json").unlink()
+    main(["import", str(theirs), str(tmp_path / "mine")])
+    layout = _layout()
+    original, imported = load_demos(recorded, layout).frames, load_demos(tmp_path / "mine", layout).frames
+    _equal(original, imported)

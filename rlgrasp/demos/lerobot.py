@@ -19,6 +19,8 @@ against the env the command line composes, its widths and images checked against
 
     python scripts/demos_lerobot.py export demos/cube/demos datasets/cube
     python scripts/demos_lerobot.py import datasets/cube demos/cube_lerobot [robot=... task=...]
+
+The guide: docs/sparse.md#lerobot-datasets.
 """
 
 from __future__ import annotations
