@@ -75,6 +75,8 @@ def export_demos(src: str | Path, dst: str | Path, fps: int | None = None, task:
     ``meta/info.json``. ``fps`` defaults to the recording env's control rate, ``task`` to its task's
     name. The folder appears whole or not at all."""
     src, dst = Path(src).expanduser(), Path(dst).expanduser()
+    if not src.exists():
+        raise LeRobotError(f"{src}: no such demonstrations folder (record one with rlgrasp-demos)")
     meta = _meta(src)
     demos = load_demos(src, meta)  # read as received data, checked against its own layout
     frames = demos.frames
@@ -172,6 +174,8 @@ def import_dataset(src: str | Path, out: str | Path, meta: dict[str, Any] | None
     from ``meta`` (``layout_of`` an env, with ``env``: its config). The dataset is only read."""
     src, out = Path(src).expanduser(), Path(out).expanduser()
     source = f"lerobot dataset {src}"
+    if not src.is_dir():
+        raise LeRobotError(f"{source}: no such folder")
     try:
         check_tree(src, source)
     except ReceivedError as exc:
@@ -378,6 +382,8 @@ def main(argv: list[str] | None = None) -> None:
         if args.command == "export":
             export_demos(args.src, args.dst, args.fps, args.task)
         else:
+            if not Path(args.src).is_dir():
+                raise LeRobotError(f"lerobot dataset {args.src}: no such folder")
             recorded = (Path(args.src) / SIDECAR).is_file()
             if recorded and args.overrides:
                 raise LeRobotError(
