@@ -163,16 +163,16 @@ def peer_table(cfg: Any, batch: Any, args: argparse.Namespace) -> None:
 
 
 #: The parts of a gradient step that ``--profile`` times, each by the method that does it (on the
-#: learner, its TorchRL loss, its optimizers, its target updater). "augment" runs inside "augment +
-#: encode"; what no part names (the losses' backward, above all) is the step's remainder.
+#: learner, its loss, its optimizers). "augment" runs inside "augment + encode"; what no part names
+#: (the losses' backward, above all) is the step's remainder.
 STEP_PARTS = (
     ("sample the minibatch", "", "_sample"),
     ("augment + encode the images", "", "_inputs"),
     ("  of it: augment", "", "_augmented"),
-    ("critics' loss (forward)", "loss", "qvalue_v2_loss"),
+    ("critics' loss (forward)", "loss", "critic_loss"),
     ("actor's loss (forward)", "loss", "actor_loss"),
     ("optimizer steps", "optimizers", "step"),
-    ("target critics' update", "target_update", "step"),
+    ("target critics' update", "loss", "soft_update"),
 )
 
 
