@@ -214,7 +214,7 @@ def test_the_critics_are_independent_and_read_the_actors_normalizer(tmp_path: Pa
     torch.testing.assert_close(after[[0, 2]], before[[0, 2]])
 
 
-@pytest.mark.parametrize("run", [SAC_RUN, TQC_RUN], ids=["sac", "tqc"])
+@pytest.mark.parametrize("run", [SAC_RUN, TQC_RUN, CAMERA_RUN], ids=["sac", "tqc", "camera"])
 def test_a_checkpoint_of_torchrls_losses_loads_and_resumes(tmp_path: Path, run: list[str]) -> None:
     """A learner state as the code before wrote it (TorchRL's loss state dict, Adam over its
     parameters in its order) loads into the new learner: the same critics, targets, temperature and
@@ -227,6 +227,7 @@ def test_a_checkpoint_of_torchrls_losses_loads_and_resumes(tmp_path: Path, run: 
         "actor": torch.optim.Adam(trainable(reference.actor_network_params)),
         "critic": torch.optim.Adam(trainable(reference.qvalue_network_params)),
         "alpha": torch.optim.Adam([reference.log_alpha]),
+        **({"encoder": torch.optim.Adam(old._encoder().parameters())} if old.images else {}),
     }
     batch = _minibatch(old)
     loss = reference.qvalue_v2_loss(batch)[0] + reference.actor_loss(batch)[0]
@@ -247,11 +248,14 @@ def test_a_checkpoint_of_torchrls_losses_loads_and_resumes(tmp_path: Path, run: 
     for name, p in new.loss.target_critics.named_parameters():
         assert torch.equal(p, reference.target_qvalue_network_params[("module", *name.split("."))]), name
     assert torch.equal(new.loss.log_alpha, reference.log_alpha) and new.owed == 0.25
-    moments = new.optimizers["critic"].state_dict()["state"]
-    old_moments = optimizers["critic"].state_dict()["state"]
-    for i, p in enumerate(new.optimizers["critic"].param_groups[0]["params"]):
-        assert moments[i]["exp_avg"].shape == p.shape
-        assert torch.equal(moments[i]["exp_avg"], old_moments[i]["exp_avg"])
+    for part in ("critic", "actor"):  # the moments by position: the parameters in TorchRL's order
+        moments, old_moments = (
+            new.optimizers[part].state_dict()["state"],
+            optimizers[part].state_dict()["state"],
+        )
+        for i, p in enumerate(new.optimizers[part].param_groups[0]["params"]):
+            assert moments[i]["exp_avg"].shape == p.shape
+            assert torch.equal(moments[i]["exp_avg"], old_moments[i]["exp_avg"])
     new.store(_transitions(new, 64))
     assert all(math.isfinite(v) for v in new._step().values())
 
