@@ -23,12 +23,21 @@ the most time (``torch.profiler``). Like training's learner, it keeps glibc's fr
 (``rlgrasp.utils.keep_freed_memory``); ``--malloc-defaults`` times it with the allocator as it starts:
 
     python benchmarks/bench_update.py --threads 2 --steps 20 --profile experiment=grasp_vision_sac_rgb_demos
+
+``--peer sb3`` adds, per thread count, Stable-Baselines3's gradient step on the same shapes
+(``peer_step.py``: SB3's SAC, sb3-contrib's TQC for ``algo=tqc``; the keywords ``bench_peer.sb3_kwargs``
+maps, a replay of as many random transitions) timed in the same process, the two sides alternating over
+``--rounds`` rounds of ``--steps`` steps each, and the ratio of their medians: on a loaded machine the
+absolute ms move from run to run, the ratio much less:
+
+    python benchmarks/bench_update.py --threads 1 2 --steps 50 --peer sb3 experiment=grasp_tqc
 """
 
 from __future__ import annotations
 
 import argparse
 import copy
+import statistics
 import sys
 import time
 from pathlib import Path
@@ -128,17 +137,42 @@ def sac_step_ms(cfg: Any, batch: Any, threads: int, steps: int) -> float:
     return step_ms(warm_sac(cfg, batch, threads), steps)
 
 
+def peer_table(cfg: Any, batch: Any, args: argparse.Namespace) -> None:
+    """Per thread count: rlgrasp's gradient step and SB3's on the same shapes (``peer_step``), each
+    the median over ``--rounds`` rounds that alternate the two, and their ratio."""
+    from peer_step import peer_model, peer_step_ms
+
+    a, spec = cfg.algo, build_parts(cfg).spec
+    print(
+        f"\npeer: SB3 {a.name.upper()} on the same shapes (obs {spec['obs_dim']}, action "
+        f"{len(spec['action_low'])}, minibatch {a.optim.batch_size}, {a.loss.num_critics} critics "
+        f"{list(a.critic.hidden_sizes)}), {batch.numel():,} random transitions; median of {args.rounds} "
+        f"rounds of {args.steps} steps"
+    )
+    print("| torch threads | rlgrasp ms per step | SB3 ms per step | rlgrasp / SB3 |\n|---|---|---|---|")
+    for threads in args.threads:
+        ours = warm_sac(cfg, batch, threads)
+        torch.manual_seed(0)
+        peer = peer_model(cfg, spec["obs_dim"], len(spec["action_low"]), batch.numel())
+        times: dict[str, list[float]] = {"ours": [], "peer": []}
+        for _ in range(args.rounds):
+            times["ours"].append(step_ms(ours, args.steps))
+            times["peer"].append(peer_step_ms(peer, args.steps, a.optim.batch_size))
+        mine, theirs = (statistics.median(times[k]) for k in ("ours", "peer"))
+        print(f"| {threads} | {mine:.1f} | {theirs:.1f} | {mine / theirs:.2f} |", flush=True)
+
+
 #: The parts of a gradient step that ``--profile`` times, each by the method that does it (on the
-#: learner, its TorchRL loss, its optimizers, its target updater). "augment" runs inside "augment +
-#: encode"; what no part names (the losses' backward, above all) is the step's remainder.
+#: learner, its loss, its optimizers). "augment" runs inside "augment + encode"; what no part names
+#: (the losses' backward, above all) is the step's remainder.
 STEP_PARTS = (
     ("sample the minibatch", "", "_sample"),
     ("augment + encode the images", "", "_inputs"),
     ("  of it: augment", "", "_augmented"),
-    ("critics' loss (forward)", "loss", "qvalue_v2_loss"),
+    ("critics' loss (forward)", "loss", "critic_loss"),
     ("actor's loss (forward)", "loss", "actor_loss"),
     ("optimizer steps", "optimizers", "step"),
-    ("target critics' update", "target_update", "step"),
+    ("target critics' update", "loss", "soft_update"),
 )
 
 
@@ -242,6 +276,8 @@ def sac_table(cfg: Any, batch: Any, args: argparse.Namespace) -> None:
         f"The ceiling gives the learner and each of the {workers} workers a core of its own; on 2 cores "
         "they share them, and a worker also runs the actor and TorchRL's bookkeeping."
     )
+    if args.peer:
+        peer_table(cfg, batch, args)
     if args.profile:
         sac_profile(cfg, batch, args.threads[-1], args.steps)
 
@@ -257,6 +293,10 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=50, help="SAC: timed gradient steps per thread count")
     parser.add_argument("--env-steps", type=int, default=500, help="SAC: timed steps of one env")
     parser.add_argument("--profile", action="store_true", help="SAC: where a step goes (last thread count)")
+    parser.add_argument(
+        "--peer", choices=["sb3"], help="SAC/TQC: also time SB3's step on the same shapes, and the ratio"
+    )
+    parser.add_argument("--rounds", type=int, default=3, help="--peer: alternating rounds per side")
     parser.add_argument(
         "--malloc-defaults",
         action="store_true",

@@ -437,7 +437,7 @@ def test_the_actor_may_train_the_encoder_and_the_critic_then_reads_its_features_
     assert not for_critic[FEATURES_KEY].requires_grad and not for_actor[FEATURES_KEY].requires_grad
     assert for_actor[ACTOR_FEATURES_KEY].requires_grad
     encoder = vision_net(sac.actor).encoders
-    loss_qvalue, _ = sac.loss.qvalue_v2_loss(for_critic)
+    loss_qvalue = sac.loss.critic_loss(for_critic)
     loss_qvalue.backward()  # the critics' loss leaves the encoder alone
     assert all(p.grad is None for p in encoder.parameters())
     loss_actor, _ = sac.loss.actor_loss(for_actor)

@@ -1,6 +1,7 @@
-"""TQC (``rlgrasp.algos.tqc``): its loss is TorchRL's ``TQCLoss`` with the configured quantiles, an
-update moves the critics and the actor, a checkpoint round-trips and resumes, and a setting that would
-drop every quantile is refused in one line before any worker starts."""
+"""TQC (``rlgrasp.algos.tqc``): its target keeps the configured quantiles (its losses equal TorchRL's
+``TQCLoss``: tests/test_losses.py), an update moves the critics and the actor, a checkpoint
+round-trips and resumes, and a setting that would drop every quantile is refused in one line before
+any worker starts."""
 
 from __future__ import annotations
 
@@ -11,7 +12,6 @@ from pathlib import Path
 import pytest
 import torch
 from tensordict import TensorDict
-from torchrl.objectives import TQCLoss
 
 from rlgrasp.algos.registry import algorithms
 from rlgrasp.algos.tqc import TQC
@@ -81,38 +81,22 @@ def test_tqc_is_registered_and_composes_from_its_own_files() -> None:
     validate_train(cfg)
 
 
-def test_the_loss_is_torchrls_tqc_loss_with_the_configured_quantiles(tmp_path: Path) -> None:
-    """Our loss against a ``TQCLoss`` built here with the same networks and settings: the same critic
-    and actor losses on a fixed batch (each under the same seed: both sample actions), and a target
-    that keeps (n_quantiles - drop) x num_critics atoms."""
+def test_the_target_keeps_the_configured_quantiles(tmp_path: Path) -> None:
+    """The pooled target keeps (n_quantiles - drop) x num_critics atoms per transition (the losses
+    themselves are held equal to TorchRL's ``TQCLoss`` in tests/test_losses.py)."""
     tqc = _tqc(tmp_path, "algo.loss.num_critics=3")
-    reference = TQCLoss(
-        tqc._loss_actor(),
-        tqc._qvalue(len(tqc.parts.spec["action_low"])),
-        num_qvalue_nets=3,
-        top_quantiles_to_drop_per_net=1,
-        alpha_init=tqc.cfg.algo.loss.alpha_init,
-        target_entropy=tqc._target_entropy(len(tqc.parts.spec["action_low"])),
-    )
-    reference.make_value_estimator(gamma=tqc.cfg.algo.loss.gamma)
-    reference.load_state_dict(tqc.loss.state_dict())  # the same weights, target critics and temperature
     batch = _batch(tqc, 16).reshape(-1)
-    assert tqc.loss.compute_target(batch.clone()).shape == (16, (5 - 1) * 3)
-    for method in ("qvalue_v2_loss", "actor_loss"):
-        torch.manual_seed(1)
-        ours = getattr(tqc.loss, method)(batch.clone())[0]
-        torch.manual_seed(1)
-        theirs = getattr(reference, method)(batch.clone())[0]
-        assert torch.isfinite(ours) and torch.allclose(ours, theirs, rtol=1e-5, atol=1e-6), method
+    assert tqc.loss.target(batch).shape == (16, (5 - 1) * 3)
+    assert torch.isfinite(tqc.loss.critic_loss(batch)) and torch.isfinite(tqc.loss.actor_loss(batch)[0])
 
 
 def test_an_update_moves_the_critics_and_the_actor(tmp_path: Path) -> None:
     tqc = _tqc(tmp_path, "algo.replay.learning_starts=32")
-    critics = [p.detach().clone() for p in tqc.loss.qvalue_network_params.values(True, True)]
+    critics = [p.detach().clone() for p in tqc.loss.critics.parameters()]
     actor = [p.detach().clone() for p in tqc.actor.parameters()]
     metrics = tqc.update(_batch(tqc, 64), 64)
     assert metrics["charts/gradient_steps"] == 0.5 * 64  # grasp_sac's ratio
-    after = list(tqc.loss.qvalue_network_params.values(True, True))
+    after = list(tqc.loss.critics.parameters())
     assert any(not torch.equal(a, b) for a, b in zip(critics, after))
     assert any(not torch.equal(a, b) for a, b in zip(actor, tqc.actor.parameters()))
     assert all(torch.isfinite(torch.tensor(v)) for v in metrics.values())

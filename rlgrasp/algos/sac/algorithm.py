@@ -1,11 +1,13 @@
 """Soft actor-critic on the training core (``algo=sac``), with demonstrations in the replay (RLPD).
 
-TorchRL provides the loss (``SACLoss``: twin or ensemble critics, the entropy temperature learned
-towards a target entropy, target critics), the target-network updater (``SoftUpdate``) and the
-replay buffers. This module adds what they lack for rlgrasp: the update-to-data ratio kept across
-batches of any size, symmetric sampling of demonstrations beside online data (Ball et al. 2023:
-each minibatch half and half), critics that read the actor's running observation normalizer, and a
-replay buffer that a resumed run continues with.
+TorchRL provides the replay buffers and the actor's TanhNormal policy. The losses (twin or ensemble
+critics, the entropy temperature learned towards a target entropy, target critics and their soft
+update) are ``rlgrasp.algos.sac.losses``' on the batched critics of ``rlgrasp.algos.sac.critics``:
+TorchRL's ``SACLoss`` formulas without its per-call parameter swaps, which cost a CPU learner about
+as much as the arithmetic (why, there). This module adds what rlgrasp needs around them: the
+update-to-data ratio kept across batches of any size, symmetric sampling of demonstrations beside
+online data (Ball et al. 2023: each minibatch half and half), critics that read the actor's running
+observation normalizer, and a replay buffer that a resumed run continues with.
 
 With a camera (``cameras=wrist_depth`` and the like) it learns from pixels the DrQ-v2 way (Yarats et
 al. 2021): the camera actor's image encoders are trained by the critics' loss alone, the actor gets
@@ -27,20 +29,20 @@ from typing import Any
 
 import torch
 from tensordict import TensorDictBase
-from tensordict.nn import TensorDictModule
 from torch import nn
 from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.envs import ExplorationType, set_exploration_type
-from torchrl.objectives import SACLoss, SoftUpdate
 
+from rlgrasp.algos.sac.critics import CriticEnsemble
 from rlgrasp.algos.sac.her import EPISODE_KEY, Hindsight, goal_layout
+from rlgrasp.algos.sac.losses import SoftActorCriticLoss
 from rlgrasp.algos.sac.replay_files import ReplayFiles
 from rlgrasp.config import ConfigError
 from rlgrasp.demos.bc import mse_bc_loss
 from rlgrasp.demos.dataset import demo_transitions, demos_for
 from rlgrasp.envs.cameras import GROUND_MASK_KEY
 from rlgrasp.models.cnn import head_actor, image_specs, vision_net
-from rlgrasp.models.mlp import ACTIVATIONS, OBS_KEY, RunningNorm
+from rlgrasp.models.mlp import OBS_KEY
 from rlgrasp.models.spec import PRIVILEGED_KEY
 from rlgrasp.train.algorithm import Algorithm, finite_or_raise
 from rlgrasp.train.logger import log
@@ -66,51 +68,6 @@ ACTOR_FEATURES_KEY = "actor_image_features"
 STORED_DTYPES = {"rgb": torch.uint8, "depth": torch.float16, GROUND_MASK_KEY: torch.uint8}
 
 
-class QNet(nn.Module):
-    """Q(s, a): an MLP on the normalized observation and the action, LayerNorm after each hidden
-    layer when asked (RLPD: what keeps critics stable at several updates per frame).
-
-    The normalizer is the actor's, held by reference and not as a submodule: ``SACLoss`` copies a
-    critic's parameters and buffers into its ensemble, and a copied normalizer would stop following
-    the running statistics the actor (and so the deployed policy) uses."""
-
-    def __init__(
-        self,
-        norm: RunningNorm,
-        in_dim: int,
-        hidden: list[int],
-        activation: str,
-        layer_norm: bool,
-        outputs: int = 1,
-    ) -> None:
-        super().__init__()
-        object.__setattr__(self, "norm", norm)  # a reference, not a submodule (see above)
-        layers: list[nn.Module] = []
-        width = in_dim
-        for size in hidden:
-            layers += [
-                nn.Linear(width, size),
-                *([nn.LayerNorm(size)] if layer_norm else []),
-                ACTIVATIONS[activation](),
-            ]
-            width = size
-        layers.append(nn.Linear(width, outputs))  # Q, or a distributional critic's atoms
-        self.mlp = nn.Sequential(*layers)
-
-    def forward(self, observation: torch.Tensor, *rest: torch.Tensor) -> torch.Tensor:
-        """Q of the observation and the rest of the inputs (image features, if any, then the action)."""
-        return self.mlp(torch.cat([self.norm(observation), *rest], dim=-1))
-
-
-def build_qvalue(
-    norm: RunningNorm, in_keys: list[Any], in_dim: int, critic_cfg: Any, outputs: int = 1
-) -> TensorDictModule:
-    """A Q-network as ``algo.critic`` describes it, with ``outputs`` values per state and action."""
-    c = critic_cfg
-    net = QNet(norm, in_dim, list(c.hidden_sizes), c.activation, c.layer_norm, outputs)
-    return TensorDictModule(net, in_keys=in_keys, out_keys=["state_action_value"])
-
-
 class SAC(Algorithm):
     """SAC, optionally with demonstrations sampled beside online data (RLPD). A subclass changes the
     loss (``_make_loss``) and what a critic outputs (``critic_outputs``): TQC (``rlgrasp.algos.tqc``)."""
@@ -131,8 +88,6 @@ class SAC(Algorithm):
         self.object_map = self._object_map()
         act_dim = len(parts.spec["action_low"])
         self.loss = self._make_loss(act_dim)
-        self.loss.make_value_estimator(gamma=a.loss.gamma)
-        self.target_update = SoftUpdate(self.loss, tau=a.loss.tau)
         self.optimizers = self._optimizers(a.optim)
         if self.images:
             _check_replay_memory(a.replay, parts.spec, self.transition_keys)
@@ -148,18 +103,19 @@ class SAC(Algorithm):
         self.saved = 0
         self.replay_sequence = 0  # the newest replay file's number: the checkpoint names it
 
-    def _make_loss(self, act_dim: int) -> SACLoss:
-        """TorchRL's ``SACLoss`` on the actor and the critics' template. A subclass may return another
-        loss of its interface (``qvalue_v2_loss``, ``actor_loss``, ``alpha_loss``): TQC's."""
+    def _make_loss(self, act_dim: int) -> SoftActorCriticLoss:
+        """SAC's losses on the actor and the critics (``rlgrasp.algos.sac.losses``). A subclass may
+        return another loss of its interface (``critic_loss``, ``actor_loss``, ``alpha_loss``,
+        ``soft_update``): TQC's."""
         loss = self.cfg.algo.loss
-        return SACLoss(
+        critics, keys = self._critics(act_dim)
+        return SoftActorCriticLoss(
             self._loss_actor(),
-            self._qvalue(act_dim).to(self.device),
-            num_qvalue_nets=loss.num_critics,
-            loss_function="l2",
+            critics,
+            keys,
+            gamma=loss.gamma,
             alpha_init=loss.alpha_init,
             target_entropy=self._target_entropy(act_dim),
-            delay_qvalue=True,
         )
 
     def _target_entropy(self, act_dim: int) -> float:
@@ -170,13 +126,13 @@ class SAC(Algorithm):
         """Adam for the actor, the critics and the temperature; with a camera, for the encoders too,
         which learn from the loss ``algo.encoder.trained_by`` names (at the critics' rate)."""
         optimizers = {
-            "actor": torch.optim.Adam(_trainable(self.loss.actor_network_params), lr=optim.actor_lr),
-            "critic": torch.optim.Adam(_trainable(self.loss.qvalue_network_params), lr=optim.critic_lr),
-            "alpha": torch.optim.Adam([self.loss.log_alpha], lr=optim.alpha_lr),
+            "actor": _adam(_trainable(self.loss.actor), optim.actor_lr),
+            "critic": _adam(_trainable(self.loss.critics), optim.critic_lr),
+            "alpha": _adam([self.loss.log_alpha], optim.alpha_lr),
         }
         if self.images:
             params = [*self._encoder().parameters(), *self._aux_parameters()]
-            optimizers["encoder"] = torch.optim.Adam(params, lr=optim.critic_lr)
+            optimizers["encoder"] = _adam(params, optim.critic_lr)
         return optimizers
 
     def _her(self) -> Hindsight | None:
@@ -224,18 +180,28 @@ class SAC(Algorithm):
         after its encoders, reading their features (``_inputs``)."""
         return head_actor(self.actor, ACTOR_FEATURES_KEY) if self.images else self.actor
 
-    def _qvalue(self, act_dim: int) -> TensorDictModule:
-        """The critics' template: on the state and the action; with a camera, on the state (the
-        privileged one with ``algo.critic.privileged``), the images' features and the action."""
-        a, spec, out = self.cfg.algo, self.parts.spec, self.critic_outputs
-        if not self.images:
-            return build_qvalue(self.norm, [OBS_KEY, "action"], spec["obs_dim"] + act_dim, a.critic, out)
-        features = sum(e.project[0].out_features for e in self._encoder().values())
-        if a.critic.privileged:
-            key, norm, dim = PRIVILEGED_KEY, self.parts.norms[PRIVILEGED_KEY], spec["privileged_dim"]
-        else:
-            key, norm, dim = OBS_KEY, self.norm, spec["obs_dim"]
-        return build_qvalue(norm, [key, FEATURES_KEY, "action"], dim + features + act_dim, a.critic, out)
+    def _critics(self, act_dim: int) -> tuple[CriticEnsemble, list[Any]]:
+        """The critics (``algo.loss.num_critics`` of them, ``critic_outputs`` values each) and the
+        minibatch entries they read before the action: the state; with a camera, the state (the
+        privileged one with ``algo.critic.privileged``) and the images' features."""
+        a, spec = self.cfg.algo, self.parts.spec
+        keys, norm, dim = [OBS_KEY], self.norm, spec["obs_dim"]
+        if self.images:
+            features = sum(e.project[0].out_features for e in self._encoder().values())
+            if a.critic.privileged:
+                keys, norm, dim = [PRIVILEGED_KEY], self.parts.norms[PRIVILEGED_KEY], spec["privileged_dim"]
+            keys, dim = [*keys, FEATURES_KEY], dim + features
+        c = a.critic
+        critics = CriticEnsemble(
+            norm,
+            a.loss.num_critics,
+            dim + act_dim,
+            list(c.hidden_sizes),
+            c.activation,
+            c.layer_norm,
+            self.critic_outputs,
+        )
+        return critics.to(self.device), keys
 
     @property
     def critic_outputs(self) -> int:
@@ -365,11 +331,11 @@ class SAC(Algorithm):
         ``actor_every`` steps) and the temperature, then the target critics' soft update."""
         a = self.cfg.algo
         for_critic, for_actor = self._inputs(self._sample())
-        loss_qvalue, _ = self.loss.qvalue_v2_loss(for_critic)
-        loss_actor, actor_info = self.loss.actor_loss(for_actor)
+        loss_qvalue = self.loss.critic_loss(for_critic)
+        loss_actor, log_prob = self.loss.actor_loss(for_actor)
         loss_bc = self._bc_loss(for_critic)
         loss_actor = loss_actor + a.terms.imitation.coeff * loss_bc if loss_bc is not None else loss_actor
-        loss_alpha = self.loss.alpha_loss(actor_info["log_prob"]).mean()
+        loss_alpha = self.loss.alpha_loss(log_prob)
         loss_aux = None
         if self.aux is not None:  # on features that carry gradient: it trains the encoders too
             loss_aux = self.aux.loss_of(for_critic[ACTOR_FEATURES_KEY], for_critic)
@@ -391,12 +357,12 @@ class SAC(Algorithm):
         if actor_step:
             self.optimizers["actor"].step()
             self.optimizers["alpha"].step()
-        self.target_update.step()
+        self.loss.soft_update(a.loss.tau)
         metrics = {
             "loss_qvalue": float(loss_qvalue.detach()),
             "loss_actor": float(loss_actor.detach()),
             "alpha": float(self.loss.log_alpha.detach().exp()),
-            "entropy": float(-actor_info["log_prob"].mean()),
+            "entropy": float(-log_prob.mean()),
         }
         if loss_bc is not None:
             metrics["loss_bc"] = float(loss_bc.detach())
@@ -468,7 +434,7 @@ class SAC(Algorithm):
         )
 
     def trained_parameters(self) -> list[torch.nn.Parameter]:
-        critics = _trainable(self.loss.qvalue_network_params)
+        critics = _trainable(self.loss.critics)
         return [*self.actor.parameters(), *critics, *self._aux_parameters()]
 
     def state_dict(self) -> dict[str, Any]:
@@ -483,6 +449,9 @@ class SAC(Algorithm):
         }
 
     def load_state_dict(self, saved: dict[str, Any]) -> None:
+        """A checkpoint's learner state; one written with TorchRL's ``SACLoss`` (``TQCLoss``) too: its
+        critics are renamed onto ours (``SoftActorCriticLoss.load_state_dict``), and the optimizers'
+        state, which follows the parameters' order, loads as it is."""
         self.loss.load_state_dict(saved["loss"])
         for key, opt in self.optimizers.items():
             opt.load_state_dict(saved["optimizers"][key])
@@ -596,9 +565,18 @@ def _available_memory() -> int | None:
     return None
 
 
-def _trainable(params: TensorDictBase) -> list[torch.Tensor]:
-    """The tensors a loss's parameters hold that take gradients (not the normalizer's statistics)."""
-    return [p for p in params.values(True, True) if p.requires_grad]
+def _trainable(module: nn.Module) -> list[torch.nn.Parameter]:
+    """The parameters of ``module`` that take gradients (not the normalizer's statistics), in the
+    order TorchRL's loss listed them (the optimizers' saved state follows it)."""
+    return [p for p in module.parameters() if p.requires_grad]
+
+
+def _adam(params: list[torch.nn.Parameter], lr: float) -> torch.optim.Adam:
+    """Adam as one fused kernel over all its parameters (CPU and CUDA): the per-parameter loop of the
+    default implementation took about a tenth of a CPU gradient step at rlgrasp's sizes. A checkpoint
+    written before keeps its unfused setting when loaded (``Optimizer.load_state_dict`` restores it):
+    the same update, a little slower."""
+    return torch.optim.Adam(params, lr=lr, fused=True)
 
 
 def _buffer(frames: int, batch_size: int, device: torch.device) -> TensorDictReplayBuffer:

@@ -1,6 +1,6 @@
 """SAC's config schema (``algo=sac``: ``configs/algo/sac.yaml`` names ``sac_schema``) and its checks.
 
-Keys grouped by role: loss (``SACLoss``'s keywords and the target critics' soft update), optim (Adam
+Keys grouped by role: loss (the losses' settings and the target critics' soft update), optim (Adam
 for each part, and the update-to-data ratio), replay, critic (the Q-networks), pretrain and terms
 (with demonstrations: RLPD, behaviour cloning), augment and encoder (a camera learner's).
 """
@@ -25,7 +25,7 @@ from rlgrasp.algos.registry import Check
 
 @dataclass
 class SACLossConfig:
-    """``SACLoss`` keywords, and the target critics' soft update."""
+    """The losses' settings (``rlgrasp.algos.sac.losses``), and the target critics' soft update."""
 
     gamma: float = 0.95
     num_critics: int = 2  # the target is the minimum over them (RLPD: an ensemble, e.g. 10)

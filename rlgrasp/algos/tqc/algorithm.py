@@ -1,19 +1,19 @@
-"""TQC on the training core: SAC (``rlgrasp.algos.sac``) with TorchRL's ``TQCLoss``.
+"""TQC on the training core: SAC (``rlgrasp.algos.sac``) with quantile critics and TQC's losses
+(``rlgrasp.algos.tqc.losses``).
 
-Everything but the loss and the critics' width is SAC's: the update-to-data ratio, the replay and
-its files, demonstrations (RLPD), a camera learner's encoders, checkpoints and resume. ``TQCLoss``
-has ``SACLoss``'s interface (``qvalue_v2_loss``, ``actor_loss``, ``alpha_loss``, the same parameter
+Everything but the losses and the critics' width is SAC's: the update-to-data ratio, the replay and
+its files, demonstrations (RLPD), a camera learner's encoders, checkpoints and resume. The loss has
+SAC's interface (``critic_loss``, ``actor_loss``, ``alpha_loss``, ``soft_update``, the same parameter
 names and target critics), so SAC's step runs it unchanged: each critic outputs ``n_quantiles``
 atoms, the target pools every target critic's atoms, drops the top ``top_quantiles_to_drop_per_net``
 x ``num_critics`` and regresses each critic onto the rest with the quantile Huber loss; the actor
-maximizes the mean of all atoms.
+maximizes the mean of all atoms. Checkpoints written with TorchRL's ``TQCLoss`` load as SAC's do.
 """
 
 from __future__ import annotations
 
-from torchrl.objectives import TQCLoss
-
 from rlgrasp.algos.sac import SAC
+from rlgrasp.algos.tqc.losses import TruncatedQuantileLoss
 
 
 class TQC(SAC):
@@ -25,15 +25,16 @@ class TQC(SAC):
     def critic_outputs(self) -> int:
         return int(self.cfg.algo.loss.n_quantiles)
 
-    def _make_loss(self, act_dim: int) -> TQCLoss:
-        """TorchRL's ``TQCLoss`` (its temperature, target critics and entropy target as SAC's)."""
+    def _make_loss(self, act_dim: int) -> TruncatedQuantileLoss:
+        """TQC's losses (its temperature, target critics and entropy target as SAC's)."""
         loss = self.cfg.algo.loss
-        return TQCLoss(
+        critics, keys = self._critics(act_dim)
+        return TruncatedQuantileLoss(
             self._loss_actor(),
-            self._qvalue(act_dim).to(self.device),
-            num_qvalue_nets=loss.num_critics,
-            top_quantiles_to_drop_per_net=loss.top_quantiles_to_drop_per_net,
+            critics,
+            keys,
+            gamma=loss.gamma,
             alpha_init=loss.alpha_init,
             target_entropy=self._target_entropy(act_dim),
-            delay_qvalue=True,
+            drop_per_critic=loss.top_quantiles_to_drop_per_net,
         )

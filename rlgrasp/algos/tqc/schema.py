@@ -12,7 +12,7 @@ from rlgrasp.algos.sac import schema as sac
 
 @dataclass
 class TQCLossConfig(sac.SACLossConfig):
-    """``TQCLoss`` keywords: SAC's, and the quantiles. The defaults are sb3-contrib's (25 quantiles a
+    """TQC's loss settings: SAC's, and the quantiles. The defaults are sb3-contrib's (25 quantiles a
     critic, 2 critics, the top 2 of each critic's share dropped: 46 of the 50 pooled atoms kept); the
     paper's 5 critics cost 2.5 times the critics' compute on a CPU for a bias a third of the drop
     already controls."""
