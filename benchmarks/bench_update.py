@@ -44,6 +44,8 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout, uninstalled
+sys.path.insert(1, str(Path(__file__).resolve().parent))  # results_file, peer_step
+import results_file
 import torch
 
 from rlgrasp.algos.ppo.learner import PPOLearner
@@ -137,9 +139,10 @@ def sac_step_ms(cfg: Any, batch: Any, threads: int, steps: int) -> float:
     return step_ms(warm_sac(cfg, batch, threads), steps)
 
 
-def peer_table(cfg: Any, batch: Any, args: argparse.Namespace) -> None:
+def peer_table(cfg: Any, batch: Any, args: argparse.Namespace) -> list[tuple[int, float, float]]:
     """Per thread count: rlgrasp's gradient step and SB3's on the same shapes (``peer_step``), each
-    the median over ``--rounds`` rounds that alternate the two, and their ratio."""
+    the median over ``--rounds`` rounds that alternate the two, and their ratio. Returns
+    ``(threads, rlgrasp ms, SB3 ms)`` per thread count."""
     from peer_step import peer_model, peer_step_ms
 
     a, spec = cfg.algo, build_parts(cfg).spec
@@ -150,6 +153,7 @@ def peer_table(cfg: Any, batch: Any, args: argparse.Namespace) -> None:
         f"rounds of {args.steps} steps"
     )
     print("| torch threads | rlgrasp ms per step | SB3 ms per step | rlgrasp / SB3 |\n|---|---|---|---|")
+    rows = []
     for threads in args.threads:
         ours = warm_sac(cfg, batch, threads)
         torch.manual_seed(0)
@@ -160,6 +164,17 @@ def peer_table(cfg: Any, batch: Any, args: argparse.Namespace) -> None:
             times["peer"].append(peer_step_ms(peer, args.steps, a.optim.batch_size))
         mine, theirs = (statistics.median(times[k]) for k in ("ours", "peer"))
         print(f"| {threads} | {mine:.1f} | {theirs:.1f} | {mine / theirs:.2f} |", flush=True)
+        rows.append((threads, mine, theirs))
+    return rows
+
+
+def record_peer(rows: list[tuple[int, float, float]], args: argparse.Namespace) -> None:
+    """``--record PAGE/ID``: the ratio per thread count into results.json, met when rlgrasp's step
+    costs no more than SB3's at every one."""
+    parts = [f"{t} thread{'s' if t > 1 else ''}: {m:.1f} / {p:.1f} ms ({m / p:.2f})" for t, m, p in rows]
+    text = ", ".join(parts)
+    met = results_file.met_of([m <= p for _, m, p in rows])
+    results_file.record(*args.record, f"rlgrasp / SB3 per gradient step, {text}", met, load=args.record_load)
 
 
 #: The parts of a gradient step that ``--profile`` times, each by the method that does it (on the
@@ -277,7 +292,9 @@ def sac_table(cfg: Any, batch: Any, args: argparse.Namespace) -> None:
         "they share them, and a worker also runs the actor and TorchRL's bookkeeping."
     )
     if args.peer:
-        peer_table(cfg, batch, args)
+        rows = peer_table(cfg, batch, args)
+        if args.record:
+            record_peer(rows, args)
     if args.profile:
         sac_profile(cfg, batch, args.threads[-1], args.steps)
 
@@ -297,6 +314,7 @@ def main() -> None:
         "--peer", choices=["sb3"], help="SAC/TQC: also time SB3's step on the same shapes, and the ratio"
     )
     parser.add_argument("--rounds", type=int, default=3, help="--peer: alternating rounds per side")
+    results_file.add_options(parser)  # with --peer: the ratios into results.json
     parser.add_argument(
         "--malloc-defaults",
         action="store_true",
@@ -304,6 +322,8 @@ def main() -> None:
     )
     parser.add_argument("overrides", nargs="*", help="Hydra overrides (default experiment=grasp_ppo)")
     args = parser.parse_args()
+    if args.record and not args.peer:
+        parser.error("--record needs --peer sb3: the row holds rlgrasp's step against SB3's")
     if not args.malloc_defaults:
         keep_freed_memory()
 
