@@ -15,9 +15,9 @@ from rlgrasp.envs.experts.pick_place import PickPlaceExpert
 #: m below the cube's top at which the fingertips close: a 4 cm cube's bottom stays below them.
 STACK_FINGER_REACH = 0.02
 #: m off the base's centre (horizontally) at which the cube is lowered and let go. 2 cm, not 1: the
-#: expert succeeds as often (175 against 176 of 200 on `default`), and its demonstrations then let
-#: go where a learner's placing reaches; at 1 cm a learned policy held the cube 2-3 cm off its place
-#: to the episode's end, waiting for the alignment the expert showed it (docs/tasks.md).
+#: expert succeeds as often (175 against 176 of 200 on `default`) and its episodes show letting go
+#: from where a learner's placing reaches (2-3 cm off). That alone did not teach a learner to let go
+#: (docs/tasks.md, what bounds stack).
 ALIGNED = 0.02
 
 
