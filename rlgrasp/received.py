@@ -128,7 +128,7 @@ def read_config(config: Any, source: str, user: Mapping[str, Any] | None = None)
     for path, node in _built_nodes(data):
         kind = _node_kind(path)
         if kind == "logger":  # a record of what it used; the user's own logger is the one built
-            data["logger"] = {"name": shorts.get(path) or _short_name("logger", node.get("_target_"))}
+            data["logger"] = {"name": shorts.get(path) or _logger_name(node)}
         elif "_target_" in node or path in shorts:
             node["_target_"] = _class_for(kind, path, node.get("_target_"), shorts.get(path), chosen, source)
     _check_gym_id(data, user or {}, source)
@@ -167,6 +167,16 @@ def logger_name(config: Mapping[str, Any]) -> str | None:
     if not isinstance(node, Mapping):
         return None
     return node.get("name") or _short_name("logger", node.get("_target_"))
+
+
+def _logger_name(node: Mapping[str, Any]) -> str:
+    """The short name of the logger a config's ``logger`` node used: its class's, or, in a config
+    already read (a policy-only file keeps the record, ``{"name": ...}``), the record's own when it is
+    one of rlgrasp's names, so that reading a read config changes nothing."""
+    recorded = node.get("name")
+    if "_target_" not in node and recorded in (*PARTS["logger"], "another"):
+        return str(recorded)
+    return _short_name("logger", node.get("_target_"))
 
 
 def _short_name(kind: str, target: Any) -> str:

@@ -283,3 +283,14 @@ def test_a_checkpoint_of_a_newer_format_is_refused_by_every_loader(tmp_path: Pat
         read_checkpoint(tmp_path / "future.pt")
     with pytest.raises(EvaluationError, match="has format 99, this version reads up to format 2"):
         load_checked_checkpoint(tmp_path / "future.pt")
+
+
+def test_reading_a_read_config_keeps_its_logger_record() -> None:
+    """A policy-only file keeps the config as read (its logger a record, ``{"name": ...}``); read again,
+    the record stays what it was, and a name that is not rlgrasp's is recorded as "another"."""
+    from rlgrasp.received import read_config
+
+    once = read_config({"logger": {"_target_": "rlgrasp.train.logger.TensorBoardLogger"}}, "test")
+    assert once["logger"] == {"name": "tensorboard"}
+    assert read_config(once, "test")["logger"] == {"name": "tensorboard"}
+    assert read_config({"logger": {"name": "os.system"}}, "test")["logger"] == {"name": "another"}
