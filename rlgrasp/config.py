@@ -29,15 +29,15 @@ from omegaconf import MISSING, OmegaConf
 
 from rlgrasp.algos.common import positive
 from rlgrasp.algos.registry import algorithms, entry, unknown_name
+from rlgrasp.collector_schema import CollectorConfig, RayCollectorConfig
 from rlgrasp.envs import gym_env
 from rlgrasp.envs.grasp_env import EnvConfig
 from rlgrasp.envs.randomization import Randomizer
 from rlgrasp.errors import ConfigError
+from rlgrasp.logger_schema import LoggerConfig, MlflowLoggerConfig, WandbLoggerConfig
 from rlgrasp.models.cnn import POOLINGS, CNNConfig
 from rlgrasp.models.mlp import MLPConfig
 from rlgrasp.rundir import register_resolvers
-from rlgrasp.train.collector_schema import CollectorConfig, RayCollectorConfig
-from rlgrasp.train.logger import LoggerConfig, MlflowLoggerConfig, WandbLoggerConfig
 from rlgrasp.utils import plain
 
 #: The Hydra config tree (``configs/`` next to the package in a source checkout).

@@ -20,8 +20,8 @@ import torch
 from hydra.utils import instantiate
 from torchrl.collectors import BaseCollector, Collector
 
+from rlgrasp.collector_schema import CollectorConfig, RayCollectorConfig, RayConfig  # noqa: F401
 from rlgrasp.train.collect import EnvFactory, make_batched_env, worker_seed
-from rlgrasp.train.collector_schema import CollectorConfig, RayCollectorConfig, RayConfig  # noqa: F401
 from rlgrasp.utils import guard_spawned_children
 
 log = logging.getLogger("rlgrasp.train")
@@ -29,7 +29,7 @@ log = logging.getLogger("rlgrasp.train")
 
 class CollectorBackend:
     """``num_workers`` workers (0: in-process), each stepping ``envs_per_worker`` envs for
-    ``steps_per_env`` steps per batch; the keys of ``rlgrasp.train.collector_schema.CollectorConfig``."""
+    ``steps_per_env`` steps per batch; the keys of ``rlgrasp.collector_schema.CollectorConfig``."""
 
     def __init__(
         self,

@@ -218,7 +218,7 @@ class TrackedLogger(TensorBoardLogger):
 
 
 class WandbLogger(TrackedLogger):
-    """``logger=wandb``: TensorBoard plus a W&B run (keys: ``rlgrasp.train.logger.WandbLoggerConfig``)."""
+    """``logger=wandb``: TensorBoard plus a W&B run (keys: ``rlgrasp.logger_schema.WandbLoggerConfig``)."""
 
     kind = "wandb"
 
@@ -242,7 +242,8 @@ class WandbLogger(TrackedLogger):
 
 
 class MlflowLogger(TrackedLogger):
-    """``logger=mlflow``: TensorBoard plus an MLflow run (keys: ``MlflowLoggerConfig``, train/logger.py)."""
+    """``logger=mlflow``: TensorBoard plus an MLflow run (its keys:
+    ``rlgrasp.logger_schema.MlflowLoggerConfig``)."""
 
     kind = "mlflow"
 
