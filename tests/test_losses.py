@@ -15,11 +15,12 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.objectives import SACLoss, SoftUpdate, TQCLoss
 
 from rlgrasp.algos.sac import SAC
-from rlgrasp.algos.sac.critics import CriticEnsemble, build_qvalue
+from rlgrasp.algos.sac.critics import CriticEnsemble
 from rlgrasp.algos.sac.losses import TORCHRL_PREFIXES
 from rlgrasp.algos.tqc import TQC
 from rlgrasp.compose import compose_train
 from rlgrasp.train.parts import build_parts
+from tests.sac_reference import build_qvalue
 
 TINY = [
     "logger=none",

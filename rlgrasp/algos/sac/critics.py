@@ -12,18 +12,16 @@ The stacked parameters keep the shapes and names TorchRL gave them (``mlp.<i>.we
 checkpoint written with ``SACLoss`` maps onto them by renaming alone (``rlgrasp.algos.sac.losses``), and
 its optimizer state, which follows the parameters' order, loads as it is.
 
-``QNet`` is the single critic of that earlier layout: the template TorchRL's losses copied, kept as
-the reference the tests hold these critics and their losses against.
+The single critic of that earlier layout, the template TorchRL's losses copied, is the reference the
+tests hold these critics and their losses against (``tests/sac_reference.py``).
 """
 
 from __future__ import annotations
 
 import copy
-from typing import Any
 
 import torch
 import torch.nn.functional as F
-from tensordict.nn import TensorDictModule
 from torch import nn
 
 from rlgrasp.models.mlp import ACTIVATIONS, RunningNorm
@@ -110,43 +108,3 @@ class CriticEnsemble(nn.Module):
         """A copy without gradients (the target critics) that reads the same normalizer."""
         twin = copy.deepcopy(self, memo={id(self.norm): self.norm})
         return twin.requires_grad_(False)
-
-
-class QNet(nn.Module):
-    """One critic as TorchRL's ``SACLoss`` took it (a template it copied into its ensemble): the
-    layout checkpoints written before ``CriticEnsemble`` name, and the tests' reference."""
-
-    def __init__(
-        self,
-        norm: RunningNorm,
-        in_dim: int,
-        hidden: list[int],
-        activation: str,
-        layer_norm: bool,
-        outputs: int = 1,
-    ) -> None:
-        super().__init__()
-        object.__setattr__(self, "norm", norm)  # a reference, not a submodule
-        layers: list[nn.Module] = []
-        width = in_dim
-        for size in hidden:
-            layers += [
-                nn.Linear(width, size),
-                *([nn.LayerNorm(size)] if layer_norm else []),
-                ACTIVATIONS[activation](),
-            ]
-            width = size
-        layers.append(nn.Linear(width, outputs))
-        self.mlp = nn.Sequential(*layers)
-
-    def forward(self, observation: torch.Tensor, *rest: torch.Tensor) -> torch.Tensor:
-        return self.mlp(torch.cat([self.norm(observation), *rest], dim=-1))
-
-
-def build_qvalue(
-    norm: RunningNorm, in_keys: list[Any], in_dim: int, critic_cfg: Any, outputs: int = 1
-) -> TensorDictModule:
-    """A ``QNet`` as ``algo.critic`` describes it, as a TorchRL loss reads it (the tests' reference)."""
-    c = critic_cfg
-    net = QNet(norm, in_dim, list(c.hidden_sizes), c.activation, c.layer_norm, outputs)
-    return TensorDictModule(net, in_keys=in_keys, out_keys=["state_action_value"])
