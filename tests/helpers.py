@@ -57,7 +57,7 @@ def make_run(
     cfg = compose_train([f"paths.output_dir={run}", *over])
     trainer = Trainer(cfg)
     trainer.parts.norm.update(torch.randn(64, trainer.parts.spec["obs_dim"]) * 0.3)
-    trainer.frames, trainer.updates = frames, 2
+    trainer.frames, trainer.algo.updates = frames, 2
     if obs_dim is not None:
         trainer.parts.spec["obs_dim"] = obs_dim
     trainer.save(is_best=True)

@@ -17,6 +17,7 @@ from rlgrasp.compose import compose_train
 from rlgrasp.legacy import nest_algo
 from rlgrasp.policy_file import read_checkpoint
 from rlgrasp.train.algorithm import algorithm_class
+from rlgrasp.train.callbacks import Callback
 from rlgrasp.train.loop import Trainer, TrainingError
 from tests.helpers import ROOT
 
@@ -107,6 +108,55 @@ def test_a_stop_signal_saves_and_returns(algo: str, tmp_path: Path) -> None:
     trainer.run()
     saved = torch.load(tmp_path / "run" / "checkpoints" / "last.pt", weights_only=True)
     assert 0 < saved["frames"] < 320
+
+
+class Recorder(Callback):
+    """A callback beside the loop: what the Trainer called, in order, and its own checkpoint entry."""
+
+    def __init__(self) -> None:
+        self.calls: list[str] = []
+        self.batches = 0
+
+    def on_batch_end(self, host, metrics) -> None:
+        self.batches += 1
+        self.calls.append("batch")
+        metrics["recorder/batches"] = self.batches
+
+    def state_dict(self) -> dict:
+        return {"recorder": {"batches": self.batches}}
+
+    def load_state_dict(self, state) -> None:
+        self.calls.append("load")
+        self.batches = state.get("recorder", {}).get("batches", 0)
+
+    def on_save(self, run_dir) -> None:
+        self.calls.append("save")
+
+    def close(self) -> None:
+        self.calls.append("close")
+
+
+def test_a_callback_is_called_beside_the_loop_and_its_state_resumes(tmp_path: Path) -> None:
+    """Each batch's hook adds to the logged metrics, each checkpoint holds the callback's entry and is
+    followed by ``on_save``, the run closes it however it ends, and a resume hands its entry back."""
+    trainer = _trainer("ppo", tmp_path / "run")
+    recorder = Recorder()
+    trainer.callbacks.append(recorder)
+    logged: list[dict] = []
+    scalars = trainer.logger.scalars
+    trainer.logger.scalars = lambda metrics, frames: (logged.append(dict(metrics)), scalars(metrics, frames))
+    trainer.run()
+    assert recorder.batches == 5 and recorder.calls.count("batch") == 5  # 320 frames of 64
+    assert recorder.calls[-2:] == ["save", "close"]
+    assert [m["recorder/batches"] for m in logged if "recorder/batches" in m] == [1, 2, 3, 4, 5]
+    saved = read_checkpoint(tmp_path / "run" / "checkpoints" / "last.pt")
+    assert saved["recorder"] == {"batches": 5}
+
+    again = Recorder()
+    resumed = Trainer(trainer.cfg, resumed=saved)
+    resumed.callbacks.append(again)
+    resumed.load_state_dict(saved)
+    assert again.calls == ["load"] and again.batches == 5
 
 
 def test_every_algorithm_is_named_by_its_target_and_an_unknown_one_is_refused() -> None:

@@ -21,6 +21,7 @@ from torchrl.collectors import BaseCollector
 
 from rlgrasp.adr import BOUNDS, NOT_BOUNDARY, AdrState
 from rlgrasp.envs.randomization import Randomizer
+from rlgrasp.train.callbacks import Callback
 from rlgrasp.train.logger import log
 from rlgrasp.train.metrics import finished_mask
 
@@ -31,8 +32,9 @@ RANGES_FILE = "adr_ranges.yaml"
 _ENV_CALL = "env.base_env._env.call"
 
 
-class AdrSync:
-    """The ADR state of one run and its traffic with the collector."""
+class AdrSync(Callback):
+    """The ADR state of one run and its traffic with the collector; beside the loop, its curves, its
+    state in each checkpoint and its ranges file."""
 
     def __init__(self, randomizer: Randomizer, full_length: int | None = None) -> None:
         assert randomizer.adr is not None
@@ -83,6 +85,20 @@ class AdrSync:
         out = {f"adr/{name}/{BOUNDS[b]}": r[b] for name, r in self.state.ranges.items() for b in (0, 1)}
         out["adr/entropy"] = self.state.entropy()
         return out
+
+    # --- the loop's hooks (rlgrasp.train.callbacks) --------------------------------------------
+    def on_batch_end(self, host: Any, metrics: dict[str, float]) -> None:
+        metrics.update(self.scalars())
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"adr": self.state.state_dict()}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        if "adr" in state:
+            self.state.load_state_dict(state["adr"])
+
+    def on_save(self, run_dir: Path) -> None:
+        self.write_ranges(run_dir)  # the ranges reached so far, for rlgrasp-eval
 
     def write_ranges(self, run_dir: Path) -> Path:
         """Every range of the run as it is now, ADR's and the others, as a file ``randomization=``

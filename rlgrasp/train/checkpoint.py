@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from rlgrasp.errors import ConfigError
 from rlgrasp.policy_file import NUMBERED
 
 
@@ -103,6 +104,30 @@ def set_rng_state(state: dict[str, Any]) -> None:
     torch.set_rng_state(state["torch"])
 
 
+def numbered_path(ckpt_dir: str | os.PathLike, frames: int) -> Path:
+    """``ckpt_<frames>.pt``: written after ``last.pt``, so its presence says ``last.pt`` holds these
+    frames (frames only grow, and the newest numbered file is never pruned)."""
+    return Path(ckpt_dir) / f"ckpt_{frames:010d}.pt"
+
+
+def check_algorithm(state: dict[str, Any], name: str) -> None:
+    """``ConfigError`` unless the checkpoint was trained by algorithm ``name`` (or does not say)."""
+    saved = (state.get("config") or {}).get("algo", {}).get("name")
+    if saved is not None and saved != name:
+        raise ConfigError(
+            f"algo: the checkpoint was trained with algo={saved}, not algo={name}; "
+            f"resume it with algo={saved}, or start a new run (algo.init_from=<checkpoint> to warm start)"
+        )
+
+
+def restore_rng(state: dict[str, Any]) -> None:
+    """The RNG state a checkpoint saved (``set_rng_state``); ``ConfigError`` when it is unreadable."""
+    try:
+        set_rng_state(state["rng"])
+    except (KeyError, TypeError, ValueError, AttributeError, RuntimeError) as exc:
+        raise ConfigError(f"checkpoint's rng state is unreadable ({type(exc).__name__}: {exc})") from None
+
+
 def write_checkpoints(
     ckpt_dir: str | os.PathLike, state: dict[str, Any], keep_last: int, is_best: bool
 ) -> Path:
@@ -112,7 +137,7 @@ def write_checkpoints(
     numbered ones to resume from."""
     ckpt_dir = Path(ckpt_dir)
     save_checkpoint(ckpt_dir / "last.pt", state)
-    numbered = save_checkpoint(ckpt_dir / f"ckpt_{state['frames']:010d}.pt", state)
+    numbered = save_checkpoint(numbered_path(ckpt_dir, state["frames"]), state)
     if is_best:
         save_checkpoint(ckpt_dir / "best.pt", state)
     olds = sorted(p for p in ckpt_dir.glob("ckpt_*.pt") if NUMBERED.search(p.name))

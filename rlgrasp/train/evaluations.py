@@ -21,6 +21,7 @@ from omegaconf import DictConfig
 
 from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
+from rlgrasp.train.callbacks import Callback
 from rlgrasp.train.eval_process import EvalProcessError, background_evaluator
 from rlgrasp.train.evaluate import EnvFactory, periodic_evaluator, summarize
 from rlgrasp.train.logger import log
@@ -62,7 +63,7 @@ class Host(Protocol):
     def stop_requested(self) -> bool: ...
 
 
-class Evaluations:
+class Evaluations(Callback):
     """The evaluations of one run and what they decide: ``last`` (the latest result, saved in every
     checkpoint), ``best_success`` (which checkpoint is ``best.pt``)."""
 
@@ -90,7 +91,7 @@ class Evaluations:
         self.last = state.get("last_eval")
 
     # --- the loop's hooks ---------------------------------------------------------------------
-    def on_batch_end(self, host: Host) -> None:
+    def on_batch_end(self, host: Host, metrics: dict[str, float]) -> None:
         """Log the background evaluation's figures as soon as they have arrived, so a curve against
         the wall clock shows them when they were known; what depends on them (``last``, ``best.pt``,
         ``on_eval``) waits for ``on_eval_due`` or ``on_loop_end``, at a fixed point of the loop."""

@@ -38,6 +38,14 @@ def setup_text_log(run_dir: Path, name: str = TEXT_LOG) -> None:
         logging.basicConfig(level=logging.INFO, format="[%(asctime)s][%(levelname)s] %(message)s")
 
 
+def final_metrics(result: dict[str, float]) -> dict[str, float]:
+    """The final evaluation as the hparams table's metrics (NaN where the env reports none)."""
+    return {
+        "hparam/eval_success_rate": float(result.get("success_rate", float("nan"))),
+        "hparam/eval_mean_reward": result.get("mean_reward", float("nan")),
+    }
+
+
 class ConsoleLogger:
     """``logger=none``: the progress line on the console (and in ``train.log``), no curves; the base
     of every logger.

@@ -7,15 +7,12 @@ the same for every algorithm (``rlgrasp.train.algorithm``: PPO, SAC, DAgger).
 
 from __future__ import annotations
 
-import contextlib
-import copy
 import math
 import random
-import signal
 import time
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any
 
 import numpy as np
 import torch
@@ -27,15 +24,17 @@ from rlgrasp import policy_file
 from rlgrasp.config import ConfigError
 from rlgrasp.envs.factory import episode_steps
 from rlgrasp.legacy import algorithm_state
-from rlgrasp.rundir import CHECKPOINTS, ENV_ERRORS, RunLockedError, run_lock
+from rlgrasp.rundir import CHECKPOINTS, ENV_ERRORS
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.adr_sync import AdrSync
-from rlgrasp.train.algorithm import Algorithm, NonFiniteError, algorithm_class
+from rlgrasp.train.algorithm import Algorithm, algorithm_class
 from rlgrasp.train.batches import Batches
+from rlgrasp.train.callbacks import Callback
 from rlgrasp.train.collect import read_env_errors
-from rlgrasp.train.collectors import begin_shutdown, shut_down
-from rlgrasp.train.evaluations import CallbackStop, EvalCallback, Evaluations, Stopped, TrainingError
-from rlgrasp.train.logger import log, progress_line, setup_text_log
+from rlgrasp.train.collectors import begin_shutdown
+from rlgrasp.train.evaluations import EvalCallback, Evaluations, Stopped, TrainingError
+from rlgrasp.train.lifecycle import guarded
+from rlgrasp.train.logger import final_metrics, log, progress_line, setup_text_log
 from rlgrasp.train.metrics import Due, Phases, Throughput, finished_episodes
 from rlgrasp.train.parts import build_parts
 from rlgrasp.train.preemption import StopSignals
@@ -92,8 +91,9 @@ class Trainer:
         self.actor = self.algo.actor
         torch.set_num_threads(self.algo.learner_threads)
         keep_freed_memory()  # the learner's per-step tensors reuse the heap (rlgrasp.utils)
-        # Beside the loop: periodic and final evaluations, their curves, last and best, best.pt.
+        # Beside the loop: periodic and final evaluations, their curves, last and best, best.pt; ADR.
         self.evaluations = Evaluations(cfg, self.parts.make_env, self.actor, self.algo, on_eval)
+        self.callbacks: list[Callback] = [c for c in (self.evaluations, self.adr) if c is not None]
 
         # --- counters, possibly resumed
         self.frames, self.generation = 0, 0
@@ -115,10 +115,6 @@ class Trainer:
         """The algorithm's update count (saved in checkpoints as ``updates``)."""
         return self.algo.updates
 
-    @updates.setter
-    def updates(self, value: int) -> None:
-        self.algo.updates = value
-
     # --- checkpoint state ---------------------------------------------------------------------
     def state_dict(self) -> dict[str, Any]:
         """The checkpoint (its layout is documented in ``rlgrasp.train.checkpoint``): the core's
@@ -130,7 +126,6 @@ class Trainer:
             "frames": self.frames,
             "updates": self.algo.updates,
             "generation": self.generation,
-            **self.evaluations.state_dict(),  # best_eval_success, last_eval
             "rng": ckpt_lib.rng_state(),
             "config": self.config,
             "spec": self.parts.spec,
@@ -139,19 +134,14 @@ class Trainer:
         }
         if self.parts.kind == "vision":  # how evaluation and export rebuild the policy
             state["kind"] = "vision"
-        if self.adr is not None:
-            state["adr"] = self.adr.state.state_dict()
+        for callback in self.callbacks:  # best_eval_success, last_eval; adr
+            state.update(callback.state_dict())
         return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Continue from a checkpoint: weights, the algorithm's state, RNG, counters; the generation
         moves on."""
-        saved = (state.get("config") or {}).get("algo", {}).get("name")
-        if saved is not None and saved != self.algo.name:
-            raise ConfigError(
-                f"algo: the checkpoint was trained with algo={saved}, not algo={self.algo.name}; "
-                f"resume it with algo={saved}, or start a new run (algo.init_from=<checkpoint> to warm start)"
-            )
+        ckpt_lib.check_algorithm(state, self.algo.name)
         try:
             self.actor.load_state_dict(state["actor"])
             self.algo.updates = state["updates"]
@@ -160,100 +150,60 @@ class Trainer:
             raise ConfigError(
                 f"checkpoint does not fit the model: {str(exc).splitlines()[-1].strip()[:200]}"
             ) from exc
-        try:
-            ckpt_lib.set_rng_state(state["rng"])
-        except (KeyError, TypeError, ValueError, AttributeError, RuntimeError) as exc:
-            raise ConfigError(f"checkpoint's rng state is unreadable ({type(exc).__name__}: {exc})") from None
+        ckpt_lib.restore_rng(state)
         self.frames = state["frames"]
         self.generation = state.get("generation", 0) + 1
-        self.evaluations.load_state_dict(state)
-        if self.adr is not None and "adr" in state:
-            self.adr.state.load_state_dict(state["adr"])
+        for callback in self.callbacks:
+            callback.load_state_dict(state)
 
     def save(self, is_best: bool = False) -> None:
+        """A checkpoint, after what goes with it (a replay file: a checkpoint on disk always has it)."""
         with self.phases("checkpoints"):
-            self._save(is_best)
-
-    def _save(self, is_best: bool) -> None:
-        # What the checkpoint goes with first (a replay file): a checkpoint on disk always has it.
-        self.algo.save_extra(self.run_dir)
-        path = ckpt_lib.write_checkpoints(
-            self.ckpt_dir, self.state_dict(), self.cfg.checkpoint.keep_last, is_best
-        )
-        log.info("checkpoint %s", path)
-        if self.adr is not None:  # the ranges reached so far, for rlgrasp-eval
-            self.adr.write_ranges(self.run_dir)
+            self.algo.save_extra(self.run_dir)
+            state, keep = self.state_dict(), self.cfg.checkpoint.keep_last
+            log.info("checkpoint %s", ckpt_lib.write_checkpoints(self.ckpt_dir, state, keep, is_best))
+            for callback in self.callbacks:
+                callback.on_save(self.run_dir)
 
     # --- the run --------------------------------------------------------------------------------
     def run(self) -> float:
-        """Train; returns the final evaluation success rate (NaN if the env has none)."""
-        with contextlib.ExitStack() as cleanup:
-            try:
-                cleanup.enter_context(run_lock(self.run_dir))
-            except RunLockedError as exc:
-                self.logger.close()
-                raise ConfigError(str(exc)) from None
-            cleanup.callback(self.logger.close)
-            cleanup.callback(self.evaluations.close)
-            log.info(
-                "run dir %s | %s | device %s | %d frames per batch (%s) | %s",
-                self.run_dir,
-                self.algo.name,
-                self.device,
-                self.parts.frames_per_batch,
-                type(self.parts.collector).__name__,
-                self.parts.spec,
-            )
-            self.start = time.monotonic()  # the time budget includes the workers' start-up
-            self.phases.mark("start-up")  # from the launch: the interpreter, imports, env spec, networks
-            cleanup.enter_context(self.signals)
-            if self.updates == 0 and self.frames == 0:
-                self.algo.start(self.logger.scalars)
-            self.frames_at_start = self.frames
-            try:
-                # a finished run, or an algorithm that learns without env frames (bc_only), starts no workers
-                if self.frames < self.cfg.total_frames and self.algo.collects:
-                    with self._collector() as batches:
-                        self._loop(batches)
-                        with self.phases("shutdown"):
-                            batches.close()  # a batch in flight (a time budget's end) arrives
-                            begin_shutdown(batches.collector)  # the workers end during the final eval
-                        return self.finish()
-                return self.finish()
-            except (KeyboardInterrupt, Stopped):
-                stopped_by = self.signals.received
-                why = signal.Signals(stopped_by).name if stopped_by else "interrupted"
-                log.warning("%s at %s frames: saving a checkpoint", why, f"{self.frames:,}")
-                self.save()
-                return float((self.evaluations.last or {}).get("success_rate", float("nan")))
-            except NonFiniteError as exc:
-                raise TrainingError(
-                    f"{exc} at {self.frames:,} frames; stopped without saving, the last good checkpoint "
-                    f"is {self.ckpt_dir / 'last.pt'}"
-                ) from exc
-            except CallbackStop as stop:
-                raise stop.raised from None
-            except (TrainingError, ConfigError):
-                raise
-            except Exception as exc:  # noqa: BLE001 - any other fault: keep the work, say what happened
-                self._fault(exc)
+        """Train; returns the final evaluation success rate (NaN if the env has none). How a run
+        ends other than by its budget (a signal, a NaN, a fault) is ``rlgrasp.train.lifecycle``'s."""
+        with guarded(self) as ending:
+            return self.fit()
+        return ending.success  # a stop signal ended it, after a checkpoint
 
-    def _fault(self, exc: Exception) -> NoReturn:
-        """An unexpected exception in the loop (a tracker that stopped answering, a full disk, a bug):
-        save what can be saved, then ``TrainingError`` in one line naming the cause and where to
-        resume from. Nothing new is saved before the first batch (there is nothing to lose)."""
-        cause = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"[:300]
-        if self.frames == self.frames_at_start:
-            raise TrainingError(f"{cause} at {self.frames:,} frames (before the first update)") from exc
-        try:
-            self.save()
-            kept = f"checkpoint saved; resume with resume={self.run_dir}"
-        except Exception as save_exc:  # noqa: BLE001 - e.g. the same full disk
-            kept = (
-                f"the checkpoint could not be saved ({type(save_exc).__name__}); "
-                f"the last good one is in {self.ckpt_dir}"
+    def begin(self) -> None:
+        """Say what runs, and start the clock: the time budget includes the workers' start-up."""
+        log.info(
+            "run dir %s | %s | device %s | %d frames per batch (%s) | %s",
+            self.run_dir,
+            self.algo.name,
+            self.device,
+            self.parts.frames_per_batch,
+            type(self.parts.collector).__name__,
+            self.parts.spec,
+        )
+        self.start = time.monotonic()
+        self.phases.mark("start-up")  # from the launch: the interpreter, imports, env spec, networks
+        self.frames_at_start = self.frames
+
+    def fit(self) -> float:
+        """The algorithm's start (e.g. cloning demonstrations), the loop, the final evaluation and
+        checkpoint. A finished run, or an algorithm that learns without env frames (bc_only), starts
+        no workers."""
+        if self.updates == 0 and self.frames == 0:
+            self.algo.start(self.logger.scalars)
+        if self.frames < self.cfg.total_frames and self.algo.collects:
+            opened = self.parts.open_batches(
+                self.algo.behaviour, self.generation, self.error_dir, self.adr, self.phases
             )
-        raise TrainingError(f"{cause} at {self.frames:,} frames; {kept}") from exc
+            with opened as batches:
+                self._loop(batches)
+                with self.phases("shutdown"):
+                    batches.close()  # a batch in flight (a time budget's end) arrives
+                    begin_shutdown(batches.collector)  # the workers end during the final eval
+        return self.finish()
 
     def stop_requested(self) -> bool:
         return self.signals.received is not None
@@ -261,29 +211,6 @@ class Trainer:
     def _check_stop(self) -> None:
         if self.stop_requested():
             raise Stopped
-
-    @contextlib.contextmanager
-    def _collector(self) -> Iterator[Batches]:
-        """The collector's batches (``rlgrasp.train.batches``); its workers are shut down however the
-        loop ends."""
-        behaviour = copy.deepcopy(self.algo.behaviour)
-        with self.phases("first batch"):  # the workers' start-up: spawned, imports, envs built
-            collector = self.parts.make_collector(self.generation, str(self.error_dir), behaviour)
-        backend = self.parts.collector
-        batches = Batches(
-            collector,
-            self.algo.behaviour,
-            behaviour,
-            backend.collects_ahead,
-            self.adr,
-            timeout_s=None if backend.in_process else backend.worker_timeout_s,
-        )
-        try:
-            yield batches
-        finally:
-            with self.phases("shutdown"):
-                batches.close()
-                shut_down(collector)
 
     def _loop(self, batches: Batches) -> None:
         cfg = self.cfg
@@ -304,12 +231,11 @@ class Trainer:
             metrics = {"time/collect_s": time.perf_counter() - t0, **self.episode_metrics(batch)}
             with self.phases("updates"):
                 metrics.update(self.update(batch))
-            if self.adr is not None:
-                metrics.update(self.adr.scalars())
             metrics["charts/SPS"] = sps = throughput(batch.numel(), t0)
             with self.phases("logging"):
+                for callback in self.callbacks:  # ADR's curves; a background evaluation's figures
+                    callback.on_batch_end(self, metrics)
                 self.logger.scalars(metrics, self.frames)
-                self.evaluations.on_batch_end(self)
 
             is_best = False
             if eval_due(self.frames) and self.frames < cfg.total_frames:  # the final eval runs at the end
@@ -358,17 +284,9 @@ class Trainer:
     def progress(self, sps: float, budget_left_s: float) -> str:
         """The console's progress line (the logger shows it every ``logger.console_interval_s``)."""
         eta = min((self.cfg.total_frames - self.frames) / max(sps, 1e-9), budget_left_s)
-        last = self.evaluations.last
-        eval_success = last.get("success_rate") if last else None
-        return progress_line(
-            self.frames,
-            self.cfg.total_frames,
-            sps,
-            self.recent.get("charts/success_rate"),
-            self.recent.get("charts/episodic_return"),
-            eval_success,
-            eta,
-        )
+        seen, last_eval = self.recent.get, (self.evaluations.last or {}).get("success_rate")
+        success, ret = seen("charts/success_rate"), seen("charts/episodic_return")
+        return progress_line(self.frames, self.cfg.total_frames, sps, success, ret, last_eval, eta)
 
     def finish(self) -> float:
         """Final evaluation (unless the last one is current) and checkpoint; hparams; the result."""
@@ -378,21 +296,14 @@ class Trainer:
             self.save(is_best)
         elif (
             not (self.ckpt_dir / "last.pt").exists()
-            or policy_file.load_checkpoint(self.run_dir, user=self.config)["frames"] != self.frames
+            or not ckpt_lib.numbered_path(self.ckpt_dir, self.frames).exists()
         ):
             self.save()
         result = self.evaluations.last or {}
-        success = float(result.get("success_rate", float("nan")))
-        self.logger.hparams(
-            flatten(self.config),
-            {
-                "hparam/eval_success_rate": success,
-                "hparam/eval_mean_reward": result.get("mean_reward", float("nan")),
-            },
-        )
+        self.logger.hparams(flatten(self.config), final_metrics(result))
         log.info("finished at %s frames: eval %s", f"{self.frames:,}", result)
         log.info(self.phases.line())
-        return success
+        return float(result.get("success_rate", float("nan")))
 
 
 def train(cfg: DictConfig, on_eval: EvalCallback | None = None, changed: set[str] | None = None) -> float:

@@ -1,10 +1,14 @@
 """What a training run is made of, built from its config in one place: the env factory, the env's
-spec, the actor and critic, and the collector backend. Training, the benchmark scripts and the tests
-all build them here."""
+spec, the actor and critic, the collector backend and the batches it gives. Training, the benchmark
+scripts and the tests all build them here."""
 
 from __future__ import annotations
 
+import contextlib
+import copy
+from collections.abc import Iterator
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import torch
@@ -14,8 +18,10 @@ from rlgrasp.envs.factory import env_factory
 from rlgrasp.models.cnn import actor_norm, build_vision_actor
 from rlgrasp.models.mlp import OBS_KEY, RunningNorm, build_critic, build_models
 from rlgrasp.models.spec import PRIVILEGED_KEY, vision_spec
+from rlgrasp.train.batches import Batches
 from rlgrasp.train.collect import EnvFactory, env_spec
-from rlgrasp.train.collectors import CollectorBackend, collector_backend
+from rlgrasp.train.collectors import CollectorBackend, collector_backend, shut_down
+from rlgrasp.train.metrics import Phases
 
 
 @dataclass
@@ -45,6 +51,25 @@ class Parts:
         """The configured collector running ``policy`` (default ``actor``); ``generation`` shifts
         the seeds on resume."""
         return self.collector.build(self.make_env, policy or self.actor, self.cfg.seed, generation, error_dir)
+
+    @contextlib.contextmanager
+    def open_batches(
+        self, learner: torch.nn.Module, generation: int, error_dir: Path, env_sync: Any, phases: Phases
+    ) -> Iterator[Batches]:
+        """The collector's batches (``rlgrasp.train.batches``), run by a copy of ``learner`` that
+        takes its weights between batches; the workers are shut down however the loop ends."""
+        behaviour = copy.deepcopy(learner)
+        with phases("first batch"):  # the workers' start-up: spawned, imports, envs built
+            collector = self.make_collector(generation, str(error_dir), behaviour)
+        backend = self.collector
+        timeout_s = None if backend.in_process else backend.worker_timeout_s
+        batches = Batches(collector, learner, behaviour, backend.collects_ahead, env_sync, timeout_s)
+        try:
+            yield batches
+        finally:
+            with phases("shutdown"):
+                batches.close()
+                shut_down(collector)
 
 
 def build_parts(cfg: Any, device: torch.device | str = "cpu") -> Parts:
