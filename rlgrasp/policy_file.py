@@ -19,22 +19,21 @@ unpickler:
 - ``README.md``: a model card whose YAML block the Hugging Face Hub reads (``rlgrasp.policy_folder``
   writes all three).
 
-Either is checked as received (``rlgrasp.received``): no symlink followed out of its folder, its
-config read as data, every tensor finite, and a folder's tensors checked against the model its
-``config.json`` builds, so a missing, extra or misshapen tensor is one line naming it.
+Either is checked as received, by the rules of ``rlgrasp.received``: no symlink followed out of its
+folder, its config read as data, its state's types and every tensor finite (``check_state``). What
+is the format's stays here: a folder's tensors are checked against the model its ``config.json``
+builds, so a missing, extra or misshapen tensor is one line naming it.
 """
 
 from __future__ import annotations
 
-import json
 import logging
-import math
 import os
 import pickle
 import re
 import sys
 import zipfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -46,7 +45,16 @@ from tensordict.nn import TensorDictModuleBase
 from rlgrasp.config import CONFIG_DIR
 from rlgrasp.models.cnn import build_vision_actor
 from rlgrasp.models.mlp import OBS_KEY, RunningNorm, build_actor
-from rlgrasp.received import ReceivedError, check_finite, check_inside, check_tree, read_config
+from rlgrasp.received import FOLDER_CONFIG as CONFIG
+from rlgrasp.received import (
+    ReceivedError,
+    check_finite,
+    check_inside,
+    check_state,
+    check_tree,
+    read_config,
+    read_policy_meta,
+)
 from rlgrasp.rundir import CHECKPOINTS
 
 #: The newest ``.pt`` checkpoint format this rlgrasp reads (and training writes).
@@ -55,19 +63,11 @@ NUMBERED = re.compile(r"ckpt_(\d+)\.pt$")
 log = logging.getLogger("rlgrasp.train")
 
 WEIGHTS = "model.safetensors"
-
-CONFIG = "config.json"
 CARD = "README.md"
-#: ``config.json``'s ``format``, and the newest ``format_version`` this rlgrasp reads.
-FOLDER_FORMAT = "rlgrasp-policy"
-FORMAT_VERSION = 1
-KINDS = ("state", "vision")
 #: The entries of a checkpoint's state a folder keeps besides the weights, the config and the spec.
 RECORDS = ("frames", "updates", "best_eval_success", "last_eval", "versions")
 #: How to get the optional package a folder needs (pyproject.toml's ``policy`` extra).
 INSTALL = 'pip install -e ".[policy]" (or pip install safetensors)'
-#: A config.json larger than this is no policy's (the shipped ones are a few kB).
-_MAX_CONFIG_BYTES = 4 << 20
 
 
 class CheckpointError(ValueError):
@@ -93,16 +93,18 @@ def safetensors_torch() -> Any:
 def read_policy_folder(folder: str | os.PathLike, user: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """The checkpoint dict a policy folder holds, as ``read_checkpoint`` returns a ``.pt`` file's
     (``format``, ``actor``, ``config`` read as data, ``spec``, counters, ``kind`` for a camera policy);
-    ``ReceivedError`` names the file, key or tensor that is wrong and what is allowed."""
+    ``ReceivedError`` names the file, key or tensor that is wrong and what is allowed.
+
+    Its plain data is read as received first (``rlgrasp.received.read_policy_meta``), then its tensors
+    against the model that data builds, then the whole state as a ``.pt`` file's is (``check_state``)."""
     folder = Path(folder)
     source = f"policy folder {folder}"
     try:
         safetensors_torch()
     except ImportError as exc:
         raise ReceivedError(f"{source}: {exc}") from None
-    check_tree(folder, source)  # no link anywhere in it: nothing read outside the folder
-    meta = _read_json(folder / CONFIG, source)
-    config = read_config(meta["config"], f"{source}: {CONFIG}", user)
+    meta = read_policy_meta(folder, source, user)
+    config = meta["config"]
     spec = meta["spec"]
     state: dict[str, Any] = {
         "format": CHECKPOINT_FORMAT,
@@ -113,42 +115,8 @@ def read_policy_folder(folder: str | os.PathLike, user: Mapping[str, Any] | None
     }
     expected = expected_tensors(spec, config.get("model"), meta["kind"], source)
     state["actor"] = _read_tensors(folder / WEIGHTS, expected, source)
+    check_state(state, source)
     return state
-
-
-def _read_json(path: Path, source: str) -> dict[str, Any]:
-    """``config.json`` as plain data: a mapping of this format, no NaN, with the keys a reader needs."""
-    if not path.is_file():
-        raise ReceivedError(f"{source}: {CONFIG} is missing")
-    if path.stat().st_size > _MAX_CONFIG_BYTES:
-        raise ReceivedError(f"{source}: refused: {CONFIG} is larger than {_MAX_CONFIG_BYTES:,} bytes")
-
-    def no_constant(name: str) -> Any:
-        raise ValueError(f"{name} is not a JSON number")
-
-    try:
-        meta = json.loads(path.read_text(encoding="utf-8"), parse_constant=no_constant)
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise ReceivedError(f"{source}: unreadable {CONFIG} ({_one_line(exc)})") from None
-    if not isinstance(meta, dict) or meta.get("format") != FOLDER_FORMAT:
-        got = meta.get("format") if isinstance(meta, dict) else type(meta).__name__
-        raise ReceivedError(f"{source}: refused: {CONFIG} has format {got!r}, not {FOLDER_FORMAT!r}")
-    version = meta.get("format_version")
-    if not isinstance(version, int) or isinstance(version, bool) or not 1 <= version <= FORMAT_VERSION:
-        raise ReceivedError(
-            f"{source}: refused: {CONFIG} has format_version {version!r}; this rlgrasp reads 1 to "
-            f"{FORMAT_VERSION} (a newer one: upgrade rlgrasp)"
-        )
-    for key, kind in (("config", dict), ("spec", dict), ("kind", str)):
-        if not isinstance(meta.get(key), kind):
-            raise ReceivedError(f"{source}: refused: {CONFIG} has no {key} {kind.__name__}")
-    if meta["kind"] not in KINDS:
-        raise ReceivedError(f"{source}: refused: {CONFIG} kind={meta['kind']!r}: must be one of {KINDS}")
-    check_spec(meta["spec"], f"{source}: {CONFIG}")
-    for key in ("obs_dim", "action_dim", "action_low", "action_high"):
-        if key not in meta["spec"]:
-            raise ReceivedError(f"{source}: refused: {CONFIG} has no spec.{key}")
-    return meta
 
 
 def expected_tensors(
@@ -285,70 +253,10 @@ def _read_folder(
     """A policy folder's checkpoint dict (above), checked as a file's is."""
     try:
         state = read_policy_folder(path, user)
-        check_state(state, f"policy folder {path}")
     except ReceivedError as exc:
         raise CheckpointError(str(exc)) from None
     state["actor"] = {k: v.to(map_location) for k, v in state["actor"].items()}
     return state
-
-
-#: The counters a checkpoint may hold, each a whole number.
-_COUNTERS = ("format", "frames", "updates", "generation")
-
-
-def check_state(state: dict[str, Any], source: str) -> None:
-    """The parts of a checkpoint that readers index into, in the types they expect, and every
-    floating tensor finite (a diverged run's NaN weights would fail in the first step of a worker)."""
-    if not isinstance(state["actor"], Mapping) or not all(
-        isinstance(k, str) and isinstance(v, torch.Tensor) for k, v in state["actor"].items()
-    ):
-        raise ReceivedError(f"{source}: refused: its actor is not a mapping of names to tensors")
-    if not isinstance(state["config"].get("env"), Mapping):  # every reader builds or compares the env
-        env = state["config"].get("env")
-        raise ReceivedError(f"{source}: refused: config.env is {env!r:.40}, not the env's mapping")
-    for key in _COUNTERS:
-        value = state.get(key, 0)
-        if not isinstance(value, int) or isinstance(value, bool) or value < 0:
-            raise ReceivedError(f"{source}: refused: {key}={state[key]!r} is not a whole number >= 0")
-    spec = state.get("spec")
-    if spec is not None:
-        check_spec(spec, source)
-    for key, tensor in _tensors(state, ""):
-        if not key.startswith("rng"):
-            check_finite(tensor, key, source)
-
-
-def check_spec(spec: Any, source: str) -> None:
-    """``spec``'s sizes are whole numbers and its bounds one number per action."""
-    if not isinstance(spec, Mapping):
-        raise ReceivedError(f"{source}: refused: spec is a {type(spec).__name__}, not a mapping")
-    for key in ("obs_dim", "action_dim"):
-        value = spec.get(key)
-        if key in spec and (not isinstance(value, int) or isinstance(value, bool) or value < 1):
-            raise ReceivedError(f"{source}: refused: spec.{key}={value!r} is not a whole number >= 1")
-    for key in ("action_low", "action_high"):
-        if key not in spec:
-            continue
-        value = spec[key]
-        values = value.tolist() if isinstance(value, torch.Tensor) else value
-        numbers = isinstance(values, list) and all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in values
-        )
-        if not numbers or len(values) != spec.get("action_dim", len(values)):
-            raise ReceivedError(
-                f"{source}: refused: spec.{key} holds not {spec.get('action_dim')} finite numbers"
-            )
-
-
-def _tensors(node: Any, path: str) -> Iterator[tuple[str, torch.Tensor]]:
-    if isinstance(node, torch.Tensor):
-        yield path, node
-    elif isinstance(node, Mapping):
-        for key, value in node.items():
-            yield from _tensors(value, f"{path}.{key}" if path else str(key))
-    elif isinstance(node, (list, tuple)):
-        for i, value in enumerate(node):
-            yield from _tensors(value, f"{path}[{i}]")
 
 
 def unpickler_reason(exc: BaseException) -> str:

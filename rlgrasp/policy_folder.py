@@ -20,13 +20,12 @@ from rlgrasp.export import dumps
 from rlgrasp.policy_file import (
     CARD,
     CONFIG,
-    FOLDER_FORMAT,
-    FORMAT_VERSION,
     RECORDS,
     WEIGHTS,
     package_versions,
     safetensors_torch,
 )
+from rlgrasp.received import FOLDER_FORMAT, FORMAT_VERSION
 
 #: What ``config.json``'s ``interface`` keeps of ``rlgrasp.export.describe`` (the env's keywords are
 #: in ``config.env``; the source checkpoint is recorded apart, without its local path).

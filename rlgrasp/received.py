@@ -23,6 +23,12 @@ written: ``check_tree`` refuses any symlink inside them (a link moves a read or 
 and ``read_memmap`` checks every tensor file's size against its declared shape before reading it
 into memory itself (TensorDict's ``load_memmap`` opens files writable and grows them).
 
+A policy, from a ``.pt`` file or a policy folder (``rlgrasp.policy_file`` reads the formats), is held
+to the same rules here: a folder's plain data (no link, ``config.json`` of its format, the spec, the
+config read as data) in one call, ``read_policy_meta``, before any tensor is read; and the state a
+reader returns, whichever format it came in, in one call, ``check_state`` (types, counters, spec,
+every tensor finite).
+
 Every refusal is a ``ReceivedError`` whose message is one line. This module imports nothing of
 rlgrasp's at import time but the algorithms' registry and the older layouts' map (``rlgrasp.legacy``;
 strings, no torch), so every reader can use it.
@@ -385,6 +391,75 @@ def check_inside(root: str | os.PathLike, path: str | os.PathLike, source: str) 
             )
 
 
+# --- a policy folder's plain data (its tensors are rlgrasp.policy_file's) -----------------------
+
+#: A policy folder's description, its ``format``, the newest ``format_version`` this rlgrasp reads,
+#: and the kinds of policy it holds (the layout: ``rlgrasp.policy_file``).
+FOLDER_CONFIG = "config.json"
+FOLDER_FORMAT = "rlgrasp-policy"
+FORMAT_VERSION = 1
+FOLDER_KINDS = ("state", "vision")
+#: A config.json larger than this is no policy's (the shipped ones are a few kB).
+_MAX_CONFIG_BYTES = 4 << 20
+
+
+def read_policy_meta(
+    folder: str | os.PathLike, source: str, user: Mapping[str, Any] | None = None
+) -> dict[str, Any]:
+    """A policy folder's ``config.json`` as plain data, in one call before any tensor is read: the
+    folder holds no link, the file is a mapping of this format with a valid ``spec``, and its
+    ``config`` is read as data (``read_config``; ``user`` as there)."""
+    folder = Path(folder)
+    check_tree(folder, source)  # no link anywhere in it: nothing read outside the folder
+    meta = _read_json(folder / FOLDER_CONFIG, source)
+    _check_policy_meta(meta, source)
+    meta["config"] = read_config(meta["config"], f"{source}: {FOLDER_CONFIG}", user)
+    return meta
+
+
+def _read_json(path: Path, source: str) -> Any:
+    """A received JSON file, bounded in size, as Python's values; NaN and Infinity (which Python's
+    writer emits, and JSON has not) refused."""
+    name = path.name
+    if not path.is_file():
+        raise ReceivedError(f"{source}: {name} is missing")
+    if path.stat().st_size > _MAX_CONFIG_BYTES:
+        raise ReceivedError(f"{source}: refused: {name} is larger than {_MAX_CONFIG_BYTES:,} bytes")
+
+    def no_constant(constant: str) -> Any:
+        raise ValueError(f"{constant} is not a JSON number")
+
+    try:
+        return json.loads(path.read_text(encoding="utf-8"), parse_constant=no_constant)
+    except (ValueError, UnicodeDecodeError) as exc:
+        reason = " ".join(str(exc).split())[:200] or type(exc).__name__
+        raise ReceivedError(f"{source}: unreadable {name} ({reason})") from None
+
+
+def _check_policy_meta(meta: Any, source: str) -> None:
+    """``config.json`` of this format and version, with the keys a reader needs."""
+    if not isinstance(meta, dict) or meta.get("format") != FOLDER_FORMAT:
+        got = meta.get("format") if isinstance(meta, dict) else type(meta).__name__
+        raise ReceivedError(f"{source}: refused: {FOLDER_CONFIG} has format {got!r}, not {FOLDER_FORMAT!r}")
+    version = meta.get("format_version")
+    if not isinstance(version, int) or isinstance(version, bool) or not 1 <= version <= FORMAT_VERSION:
+        raise ReceivedError(
+            f"{source}: refused: {FOLDER_CONFIG} has format_version {version!r}; this rlgrasp reads 1 to "
+            f"{FORMAT_VERSION} (a newer one: upgrade rlgrasp)"
+        )
+    for key, kind in (("config", dict), ("spec", dict), ("kind", str)):
+        if not isinstance(meta.get(key), kind):
+            raise ReceivedError(f"{source}: refused: {FOLDER_CONFIG} has no {key} {kind.__name__}")
+    if meta["kind"] not in FOLDER_KINDS:
+        raise ReceivedError(
+            f"{source}: refused: {FOLDER_CONFIG} kind={meta['kind']!r}: must be one of {FOLDER_KINDS}"
+        )
+    check_spec(meta["spec"], f"{source}: {FOLDER_CONFIG}")
+    for key in ("obs_dim", "action_dim", "action_low", "action_high"):
+        if key not in meta["spec"]:
+            raise ReceivedError(f"{source}: refused: {FOLDER_CONFIG} has no spec.{key}")
+
+
 #: What ``TensorDict.memmap`` writes for a TensorDict of plain tensors.
 _PLAIN_TYPE = "<class 'tensordict._td.TensorDict'>"
 _META_KEYS = {"shape", "device", "_type"}
@@ -500,3 +575,75 @@ def check_finite(tensor: Any, key: str, source: str) -> None:
     if tensor.is_floating_point() and tensor.numel() and not bool(tensor.isfinite().all()):
         bad = int((~tensor.isfinite()).sum())
         raise ReceivedError(f"{source}: refused: {key} holds {bad:,} NaN or infinite value(s)")
+
+
+# --- a checkpoint's state -----------------------------------------------------------------------
+
+#: The counters a checkpoint may hold, each a whole number.
+_COUNTERS = ("format", "frames", "updates", "generation")
+
+
+def check_state(state: dict[str, Any], source: str) -> None:
+    """The parts of a checkpoint (a ``.pt`` file's or a policy folder's, its config already read by
+    ``read_config``) that readers index into, in the types they expect, and every floating tensor
+    finite (a diverged run's NaN weights would fail in the first step of a worker): the one check a
+    reader makes of a state, whichever format it came in."""
+    import torch  # lazy: this module stays light for the readers that need no tensors
+
+    if not isinstance(state["actor"], Mapping) or not all(
+        isinstance(k, str) and isinstance(v, torch.Tensor) for k, v in state["actor"].items()
+    ):
+        raise ReceivedError(f"{source}: refused: its actor is not a mapping of names to tensors")
+    if not isinstance(state["config"].get("env"), Mapping):  # every reader builds or compares the env
+        env = state["config"].get("env")
+        raise ReceivedError(f"{source}: refused: config.env is {env!r:.40}, not the env's mapping")
+    for key in _COUNTERS:
+        value = state.get(key, 0)
+        if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+            raise ReceivedError(f"{source}: refused: {key}={state[key]!r} is not a whole number >= 0")
+    spec = state.get("spec")
+    if spec is not None:
+        check_spec(spec, source)
+    for key, tensor in _tensors(state, "", torch.Tensor):
+        if not key.startswith("rng"):
+            check_finite(tensor, key, source)
+
+
+def check_spec(spec: Any, source: str) -> None:
+    """``spec``'s sizes are whole numbers and its bounds one number per action."""
+    if not isinstance(spec, Mapping):
+        raise ReceivedError(f"{source}: refused: spec is a {type(spec).__name__}, not a mapping")
+    for key in ("obs_dim", "action_dim"):
+        value = spec.get(key)
+        if key in spec and (not isinstance(value, int) or isinstance(value, bool) or value < 1):
+            raise ReceivedError(f"{source}: refused: spec.{key}={value!r} is not a whole number >= 1")
+    for key in ("action_low", "action_high"):
+        if key not in spec:
+            continue
+        value = spec[key]
+        values = value.tolist() if _is_tensor(value) else value
+        numbers = isinstance(values, list) and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in values
+        )
+        if not numbers or len(values) != spec.get("action_dim", len(values)):
+            raise ReceivedError(
+                f"{source}: refused: spec.{key} holds not {spec.get('action_dim')} finite numbers"
+            )
+
+
+def _is_tensor(value: Any) -> bool:
+    import torch  # lazy, as above
+
+    return isinstance(value, torch.Tensor)
+
+
+def _tensors(node: Any, path: str, tensor: type) -> Iterator[tuple[str, Any]]:
+    """``(path, tensor)`` of every ``tensor`` in plain containers (``actor.mlp.0.weight``)."""
+    if isinstance(node, tensor):
+        yield path, node
+    elif isinstance(node, Mapping):
+        for key, value in node.items():
+            yield from _tensors(value, f"{path}.{key}" if path else str(key), tensor)
+    elif isinstance(node, (list, tuple)):
+        for i, value in enumerate(node):
+            yield from _tensors(value, f"{path}[{i}]", tensor)

@@ -107,18 +107,19 @@ class ImageEncoder(nn.Module):
 
 
 class VisionActorNet(nn.Module):
-    """(normalized state, images) -> MLP -> (loc, state-independent scale)."""
+    """(normalized state, images) -> MLP -> (loc, state-independent scale). Its state normalizer is
+    its own, of ``state_dim`` (``model.obs_clip``, ``model.obs_norm``): the learner finds it with
+    ``actor_norm``."""
 
     def __init__(
         self,
-        norm: RunningNorm,
         encoders: Mapping[str, ImageEncoder],
         state_dim: int,
         act_dim: int,
         model_cfg: Any,
     ) -> None:
         super().__init__()
-        self.norm = norm
+        self.norm = RunningNorm(state_dim, clip=model_cfg.obs_clip, enabled=model_cfg.obs_norm)
         self.encoders = nn.ModuleDict(dict(encoders))
         features = sum(e.project[0].out_features for e in self.encoders.values())
         self.mlp = _mlp(state_dim + features, act_dim, model_cfg.hidden_sizes, model_cfg.activation, 0.01)
@@ -156,7 +157,7 @@ class VisionActorHead(nn.Module):
 
 
 def image_specs(spec: Mapping[str, Any]) -> dict[str, tuple[int, ...]]:
-    """The image entries of an env spec (``rlgrasp.train.collect.env_spec``): key -> shape."""
+    """The image entries of an env spec (``rlgrasp.models.spec.env_spec``): key -> shape."""
     return {k: tuple(spec["images"][k]) for k in IMAGE_KEYS if k in spec.get("images", {})}
 
 
@@ -186,9 +187,8 @@ def build_vision_actor(
         k: ImageEncoder(k, shape, spec.get("far", 1.0), model_cfg.channels, model_cfg.image_features, **conv)
         for k, shape in images.items()
     }
-    norm = RunningNorm(spec["obs_dim"], clip=model_cfg.obs_clip, enabled=model_cfg.obs_norm)
     low, high = torch.as_tensor(spec["action_low"]), torch.as_tensor(spec["action_high"])
-    net = VisionActorNet(norm, encoders, spec["obs_dim"], int(low.numel()), model_cfg)
+    net = VisionActorNet(encoders, spec["obs_dim"], int(low.numel()), model_cfg)
     module = TensorDictModule(net, in_keys=[OBS_KEY, *images], out_keys=["loc", "scale"])
     return ProbabilisticActor(
         module,

@@ -1,4 +1,5 @@
-"""The shape of a camera env's observation and action, for building and checking camera policies."""
+"""The shape of an env's observation and action, read from one throw-away env: what a policy is built
+for (a state policy's, ``env_spec``; a camera policy's, ``vision_spec``) and checked against."""
 
 from __future__ import annotations
 
@@ -12,6 +13,38 @@ from rlgrasp.models.cnn import IMAGE_KEYS
 
 #: The entry holding the full state no robot senses: what a teacher or an asymmetric critic reads.
 PRIVILEGED_KEY = "privileged"
+
+
+def env_spec(make_env: EnvFactory) -> dict[str, Any]:
+    """Observation/action sizes and bounds and the reward's term names, from one throw-away env.
+    A goal task's Dict observation is refused in one line: these learners read one vector."""
+    env = make_env()
+    try:
+        space = env.action_space
+        if isinstance(env.observation_space, gym.spaces.Dict):
+            keys = ", ".join(env.observation_space.spaces)
+            key = getattr(env.unwrapped, "observation_key", "env.task.observation")  # env=gym: its own
+            raise ConfigError(
+                f"{key}=dict: the env observes a Dict ({keys}) and this learner reads one "
+                f"vector; set {key}=flat (the goal appended to the state)"
+            )
+        spec = {
+            "obs_key": "observation",
+            "obs_dim": int(env.observation_space.shape[-1]),
+            "action_dim": int(space.shape[0]),
+            "action_low": [float(x) for x in space.low.flatten()],
+            "action_high": [float(x) for x in space.high.flatten()],
+            "reward_terms": reward_term_names(env),
+        }
+    finally:
+        env.close()
+    return spec
+
+
+def reward_term_names(env: Any) -> list[str]:
+    """The names of the env's reward terms (none for an env without a task part: a user's own env)."""
+    reward = getattr(getattr(env.unwrapped, "task", None), "reward", None)
+    return list(getattr(reward, "names", ()))
 
 
 def vision_spec(make_env: EnvFactory) -> dict[str, Any]:

@@ -23,7 +23,6 @@ from torchrl.envs import EnvBase, GymWrapper, default_info_dict_reader
 from torchrl.envs.transforms import Compose, RewardSum, StepCounter, TransformedEnv
 
 from rlgrasp.envs.factory import EnvFactory
-from rlgrasp.errors import ConfigError
 from rlgrasp.utils import die_with_parent
 
 ERROR_FILE_PREFIX = "env_error_"
@@ -35,38 +34,6 @@ INFO_DTYPES = {
     "adr_boundary": torch.int64,  # rlgrasp.adr: the episode's boundary code (ADR runs only)
     "reward_terms": torch.float32,  # each reward term's sum so far this episode (a vector)
 }
-
-
-def env_spec(make_env: EnvFactory) -> dict[str, Any]:
-    """Observation/action sizes and bounds and the reward's term names, from one throw-away env.
-    A goal task's Dict observation is refused in one line: these learners read one vector."""
-    env = make_env()
-    try:
-        space = env.action_space
-        if isinstance(env.observation_space, gym.spaces.Dict):
-            keys = ", ".join(env.observation_space.spaces)
-            key = getattr(env.unwrapped, "observation_key", "env.task.observation")  # env=gym: its own
-            raise ConfigError(
-                f"{key}=dict: the env observes a Dict ({keys}) and this learner reads one "
-                f"vector; set {key}=flat (the goal appended to the state)"
-            )
-        spec = {
-            "obs_key": "observation",
-            "obs_dim": int(env.observation_space.shape[-1]),
-            "action_dim": int(space.shape[0]),
-            "action_low": [float(x) for x in space.low.flatten()],
-            "action_high": [float(x) for x in space.high.flatten()],
-            "reward_terms": reward_term_names(env),
-        }
-    finally:
-        env.close()
-    return spec
-
-
-def reward_term_names(env: Any) -> list[str]:
-    """The names of the env's reward terms (none for an env without a task part: a user's own env)."""
-    reward = getattr(getattr(env.unwrapped, "task", None), "reward", None)
-    return list(getattr(reward, "names", ()))
 
 
 def _guard(env: Any, name: str, error_dir: str | None) -> Any:

@@ -17,9 +17,9 @@ from torchrl.collectors import BaseCollector
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.models.cnn import actor_norm, build_vision_actor
 from rlgrasp.models.mlp import OBS_KEY, RunningNorm, build_critic, build_models
-from rlgrasp.models.spec import PRIVILEGED_KEY, vision_spec
+from rlgrasp.models.spec import PRIVILEGED_KEY, env_spec, vision_spec
 from rlgrasp.train.batches import Batches
-from rlgrasp.train.collect import EnvFactory, env_spec
+from rlgrasp.train.collect import EnvFactory
 from rlgrasp.train.collectors import CollectorBackend, collector_backend, shut_down
 from rlgrasp.train.metrics import Phases
 
@@ -76,10 +76,11 @@ def build_parts(cfg: Any, device: torch.device | str = "cpu") -> Parts:
     """Env factory and spec, then the models (their init draws from torch's global RNG: seed first)."""
     make_env = env_factory(cfg.env)
     collector = collector_backend(cfg.collector)
-    if cfg.env.get("camera"):
-        spec, actor, critic, norms = _camera_models(make_env, cfg.model)
+    camera = bool(cfg.env.get("camera"))
+    spec = vision_spec(make_env) if camera else env_spec(make_env)
+    if camera:
+        actor, critic, norms = _camera_models(spec, cfg.model)
     else:
-        spec = env_spec(make_env)
         actor, critic, norm = build_models(
             spec["obs_dim"], torch.tensor(spec["action_low"]), torch.tensor(spec["action_high"]), cfg.model
         )
@@ -87,12 +88,11 @@ def build_parts(cfg: Any, device: torch.device | str = "cpu") -> Parts:
     return Parts(cfg, make_env, spec, actor.to(device), critic.to(device), norms[OBS_KEY], collector, norms)
 
 
-def _camera_models(make_env: EnvFactory, model_cfg: Any) -> tuple[dict, Any, Any, dict[str, RunningNorm]]:
+def _camera_models(spec: dict[str, Any], model_cfg: Any) -> tuple[Any, Any, dict[str, RunningNorm]]:
     """The camera actor (proprioception + images) and an MLP critic on the privileged state, each
     with its own normalizer: the critic is never deployed, so it may read what no robot senses
     (Pinto et al. 2018), which gives the advantages a value that does not have to be seen."""
-    spec = vision_spec(make_env)
     actor = build_vision_actor(spec, model_cfg)
     critic_norm = RunningNorm(spec["privileged_dim"], clip=model_cfg.obs_clip, enabled=model_cfg.obs_norm)
     critic = build_critic(critic_norm, spec["privileged_dim"], model_cfg, in_key=PRIVILEGED_KEY)
-    return spec, actor, critic, {OBS_KEY: actor_norm(actor), PRIVILEGED_KEY: critic_norm}
+    return actor, critic, {OBS_KEY: actor_norm(actor), PRIVILEGED_KEY: critic_norm}

@@ -89,10 +89,21 @@ def prepare_run(cfg: DictConfig, changed: Iterable[str] | None = None) -> tuple[
             )
         source = None
     if source is None:
-        validate_train(cfg)
-        return cfg, None
-    # The file's config is data; a class of the user's own is one their own config names at that node.
-    user = OmegaConf.to_container(cfg, resolve=False)
+        run_cfg, state = cfg, None
+    else:
+        user = OmegaConf.to_container(cfg, resolve=False)
+        path, state = _resumed_state(source, resume, user)
+        run_cfg = _resumed_config(cfg, state, resume, changed, user)
+    validate_train(run_cfg)  # once, whichever config the run goes on with
+    if state is not None:
+        log.info("resuming from %s (%s frames)", path, f"{state['frames']:,}")
+    return run_cfg, state
+
+
+def _resumed_state(source: Path, resume: str, user: dict) -> tuple[Path, dict]:
+    """``(path, state)`` of the checkpoint ``resume`` continues, refused in one line when it holds no
+    training state. Its config is data; a class of the user's own (``user``: the command line's
+    config, unresolved) is one their own config names at that node."""
     if source.is_dir():
         path, state = policy_file.newest_readable(source, user=user)
     else:
@@ -102,17 +113,23 @@ def prepare_run(cfg: DictConfig, changed: Iterable[str] | None = None) -> tuple[
             f"resume={resume}: {path} is a policy file (no training state to continue); resume takes a "
             f"run directory or its checkpoint; to start a new run from this policy: algo.init_from={path}"
         )
+    return path, state
+
+
+def _resumed_config(
+    cfg: DictConfig, state: dict, resume: str, changed: Iterable[str] | None, user: dict
+) -> DictConfig:
+    """The checkpoint's config with the command line's changes (``merged_config``), logging where
+    the command line says (never a file's logger: where the curves go is the user's to say)."""
     merged = merged_config(cfg, state["config"], changed)
-    merged.logger = cfg.logger  # never a file's: where the curves go is the user's to say
+    merged.logger = cfg.logger
     theirs, ours = logger_name(state["config"]), logger_name({"logger": user.get("logger")})
     if theirs and theirs != ours:
         log.info(
             "resume: logging with this command line's logger (%s), not the checkpoint's (%s)", ours, theirs
         )
     merged.resume = resume  # what it resumed with, also when a requeue chose it
-    validate_train(merged)
-    log.info("resuming from %s (%s frames)", path, f"{state['frames']:,}")
-    return merged, state
+    return merged
 
 
 def requeued_resume() -> str | None:

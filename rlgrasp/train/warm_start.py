@@ -28,8 +28,9 @@ def warm_start(actor: nn.Module, path: str, env_cfg: Any, model_cfg: Any) -> str
     repository root) into ``actor``, all but its std; returns a line for the log. Refused in one line
     when the policy was trained for another arm, control mode or camera, or with another model."""
     where = f"algo.init_from={path}"
+    source = resolve_policy_path(path)  # a relative path: also from the repository root
     try:
-        ckpt = load_checkpoint(resolve_policy_path(path))
+        ckpt = load_checkpoint(source)
     except CheckpointError as exc:
         raise CheckpointError(f"{where}: {exc}") from exc
     trained_env, trained_model = ckpt["config"]["env"], ckpt["config"]["model"]
