@@ -22,7 +22,7 @@ from rlgrasp.algos.ppo.schema import PPOConfig
 from rlgrasp.compose import compose_train
 from rlgrasp.config import SweepObjective
 from rlgrasp.sweep.cli import is_sweep_override, main
-from rlgrasp.sweep.objective import schedule_overrides
+from rlgrasp.sweep.objective import Interrupted, Objective, schedule_overrides
 from rlgrasp.sweep.runner import compose, run_sweep
 from rlgrasp.sweep.score import RunScore
 from rlgrasp.sweep.space import parse_space, to_overrides
@@ -358,3 +358,29 @@ def test_the_refine_sweep_starts_from_grasp_ppo_fast_on_every_searched_key() -> 
     for key, value in trial0.items():
         assert OmegaConf.select(fast, key) == value, key
     assert not set(cfg.trial.seeds) & {0, 1, 2}  # the benchmark's seeds judge, they do not choose
+
+
+class _Trial:
+    """What an objective reads and writes of an Optuna trial."""
+
+    number = 7
+
+    def __init__(self) -> None:
+        self.user_attrs: dict = {}
+
+    def set_user_attr(self, key: str, value) -> None:
+        self.user_attrs[key] = value
+
+
+def test_a_signal_between_two_runs_still_marks_the_trial_interrupted(monkeypatch) -> None:
+    """Ctrl-C after a run returned (between seeds, or after the last) reaches the objective, not the
+    training loop: the trial must still be marked interrupted, or a resumed sweep would not retry it."""
+
+    def signalled(self, trial):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Objective, "_trial", signalled)
+    trial = _Trial()
+    with pytest.raises(Interrupted, match="during trial 7"):
+        Objective.__call__(object.__new__(Objective), trial)
+    assert trial.user_attrs[ATTR_INTERRUPTED] is True

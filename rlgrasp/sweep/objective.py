@@ -91,6 +91,15 @@ class Objective:
         return compose_train(overrides(seeded), self.config_dir)
 
     def __call__(self, trial: optuna.Trial) -> float:
+        try:
+            return self._trial(trial)
+        except Interrupted:
+            raise
+        except KeyboardInterrupt:  # between two runs or after the last: the trial is still interrupted
+            raise _interrupted(trial) from None
+
+    def _trial(self, trial: optuna.Trial) -> float:
+        """The trial's runs, one per seed, and their mean value."""
         trial.set_user_attr(ATTR_HOST, socket.gethostname())
         trial.set_user_attr(ATTR_PID, os.getpid())
         params = suggest(trial, self.space)
@@ -123,8 +132,13 @@ class Objective:
             trial.set_user_attr("error", f"{type(exc).__name__}: {exc}")
             raise
         if _caught or interrupted:
-            trial.set_user_attr(ATTR_INTERRUPTED, True)
-            raise Interrupted(f"signal {_caught[0] if _caught else 'SIGINT'} during trial {trial.number}")
+            raise _interrupted(trial)
+
+
+def _interrupted(trial: optuna.Trial) -> Interrupted:
+    """Mark the trial interrupted (a resumed sweep runs its parameters again); the exception to raise."""
+    trial.set_user_attr(ATTR_INTERRUPTED, True)
+    return Interrupted(f"signal {_caught[0] if _caught else 'SIGINT'} during trial {trial.number}")
 
 
 class _Report:
