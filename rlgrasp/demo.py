@@ -1,7 +1,8 @@
 """Watch the scripted expert: a few seeded episodes rendered offscreen to a GIF and a contact sheet.
 
-rlgrasp-demo [--episodes 3] [--task lift|pick_place|push|stack] [--randomization default]
-    [--objects cube] [--out outputs/demo] [--size 320x240] [--camera DISTANCE YAW PITCH]
+rlgrasp-demo [--episodes 3] [--task lift|pick_place|push|stack] [--robot panda|kuka_iiwa|xarm6]
+    [--randomization default] [--objects cube] [--out outputs/demo] [--size 320x240]
+    [--camera DISTANCE YAW PITCH]
 
 The expert is the task's (``rlgrasp.envs.experts``); a goal task's renders show its goal marker.
 """
@@ -16,6 +17,7 @@ import numpy as np
 from matplotlib.animation import FuncAnimation, PillowWriter
 
 from rlgrasp.envs import PandaGraspEnv, Randomizer, expert_for
+from rlgrasp.envs.robot import ROBOTS
 from rlgrasp.envs.scene import ViewerConfig
 from rlgrasp.envs.tasks import TASKS
 from rlgrasp.evaluation.source import ENV_ERRORS
@@ -33,14 +35,17 @@ def make_env(
     task: str = "lift",
     size: tuple[int, int] = (320, 240),
     camera: tuple[float, float, float] = CAMERA,
+    robot: str = "panda",
 ) -> PandaGraspEnv:
-    """The demo's env; a bad preset or object set is a ``ValueError`` naming the flag."""
+    """The demo's env; a bad preset, object set or arm is a ``ValueError`` naming the flag."""
     try:
         Randomizer(randomization)
     except ValueError as exc:
         raise ValueError(f"--randomization {randomization}: {exc}") from None
     if task not in TASKS:
         raise ValueError(f"--task {task}: unknown task; tasks: {', '.join(TASKS)}")
+    if robot not in ROBOTS:
+        raise ValueError(f"--robot {robot}: unknown arm; arms: {', '.join(ROBOTS)}")
     distance, yaw, pitch = camera
     try:
         return PandaGraspEnv(
@@ -49,6 +54,7 @@ def make_env(
             objects=objects,
             control={"ee_yaw": True},
             task=task,
+            robot=robot,
             sim={
                 "viewer": {
                     "width": size[0],
@@ -73,9 +79,10 @@ def run(
     size: tuple[int, int] = (320, 240),
     camera: tuple[float, float, float] = CAMERA,
     name: str = "expert",
+    robot: str = "panda",
 ) -> float:
     """Play and render ``episodes`` episodes, then write ``<name>.gif`` and ``<name>.png`` into ``out``."""
-    env = make_env(randomization, objects, task, size, camera)
+    env = make_env(randomization, objects, task, size, camera, robot)
     expert = expert_for(env)
     frames, successes = [], []
     for episode in range(episodes):
@@ -121,6 +128,7 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--objects", default="cube", help="object set, e.g. primitives or random_urdfs_test")
     parser.add_argument("--task", default="lift", help=f"the task: {', '.join(TASKS)}")
+    parser.add_argument("--robot", default="panda", help=f"the arm: {', '.join(ROBOTS)}")
     parser.add_argument("--out", type=Path, default=Path("outputs/demo"))
     parser.add_argument("--name", default="expert", help="file names in --out: <name>.gif, <name>.png")
     parser.add_argument("--size", default="320x240", help="frame WIDTHxHEIGHT in pixels")
@@ -143,7 +151,7 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     if problem:
         parser.error(f"--out {args.out}: cannot write there: {problem}")
     try:
-        make_env(args.randomization, args.objects, args.task).close()
+        make_env(args.randomization, args.objects, args.task, robot=args.robot).close()
     except ValueError as exc:
         parser.error(str(exc))
     return args
@@ -162,6 +170,7 @@ def main(argv: list[str] | None = None) -> None:
         args.size,
         args.camera,
         args.name,
+        args.robot,
     )
 
 

@@ -753,6 +753,7 @@ DEMO = [
     ("an unwritable output directory", ["--out", "{unwritable}"], "cannot write there"),
     ("negative seed", ["--seed", "-1"], "--seed -1: must be at least 0"),
     ("unknown task", ["--task", "pick"], "--task pick: unknown task; tasks: lift, pick_place, push, stack"),
+    ("unknown arm", ["--robot", "ur5"], "--robot ur5: unknown arm; arms: panda, kuka_iiwa, xarm6"),
     ("a frame size that is not WxH", ["--size", "big"], "--size big: must be WIDTHxHEIGHT, each at least 16"),
     ("unknown flag", ["--bogus"], "unrecognized arguments: --bogus"),
 ]
