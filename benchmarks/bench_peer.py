@@ -517,7 +517,7 @@ def run_sb3(cfg: Any, out_json: Path) -> None:
 def sb3_child(args: argparse.Namespace) -> None:
     """``--sb3-child``: compose the config as training would and run the SB3 side in this process."""
     from rlgrasp.compose import compose_train
-    from rlgrasp.config import validate_train
+    from rlgrasp.train.validate import validate_train
 
     run_dir = args.out / f"sb3_seed{args.seed}"
     cfg = compose_train(

@@ -26,9 +26,9 @@ import torch
 from omegaconf import OmegaConf
 
 from rlgrasp.compose import compose_train
-from rlgrasp.config import validate_train
 from rlgrasp.policy_file import CHECKPOINT_FORMAT
 from rlgrasp.train.loop import Trainer
+from rlgrasp.train.validate import validate_train
 from rlgrasp.utils import markdown_table
 from tests.helpers import bad_input_files, demo_files, our_lines, run_entry
 

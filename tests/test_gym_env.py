@@ -20,13 +20,14 @@ from omegaconf import OmegaConf
 from tensordict import TensorDict
 
 from rlgrasp.algos.sac.her import goal_layout
-from rlgrasp.config import ConfigError, validate_train
+from rlgrasp.config import ConfigError
 from rlgrasp.envs.factory import env_factory, episode_steps
 from rlgrasp.envs.gym_env import OBSERVATIONS, TARGET, make_gym_env
 from rlgrasp.policy_file import load_checkpoint, policy_from_checkpoint
 from rlgrasp.received import ReceivedError, read_config
 from rlgrasp.train.loop import train
 from rlgrasp.train.parts import build_parts
+from rlgrasp.train.validate import validate_train
 from tests.helpers import our_lines, run_entry
 from tests.standins import PENDULUM_DICT
 

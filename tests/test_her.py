@@ -18,10 +18,11 @@ from tensordict import TensorDict
 from rlgrasp.algos.sac import SAC
 from rlgrasp.algos.sac.her import EPISODE_KEY, GoalLayout
 from rlgrasp.compose import compose_train
-from rlgrasp.config import ConfigError, validate_train
+from rlgrasp.config import ConfigError
 from rlgrasp.envs.tasks.goal import GoalTask
 from rlgrasp.train.loop import train
 from rlgrasp.train.parts import build_parts
+from rlgrasp.train.validate import validate_train
 from tests.helpers import our_lines, run_entry
 from tests.test_sac import SMALL
 

@@ -20,12 +20,13 @@ from omegaconf import OmegaConf
 import rlgrasp
 from rlgrasp import policy_file
 from rlgrasp.compose import compose_train
-from rlgrasp.config import ConfigError, validate_train
+from rlgrasp.config import ConfigError
 from rlgrasp.evaluation.source import EvaluationError, load_checked_checkpoint
 from rlgrasp.rundir import remove_refused_start, run_dir
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.loop import Trainer
 from rlgrasp.train.resume import command_line_keys, merged_config, prepare_run
+from rlgrasp.train.validate import validate_train
 from tests.procs import wait_for
 
 ROOT = Path(__file__).resolve().parents[1]

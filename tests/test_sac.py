@@ -17,7 +17,7 @@ from torchrl.envs import ExplorationType, set_exploration_type
 from rlgrasp.algos.sac import SAC
 from rlgrasp.algos.sac.replay_files import LEGACY_FILE, REPLAY_DIR, ReplayFiles
 from rlgrasp.compose import compose_config, compose_train
-from rlgrasp.config import ConfigError, validate_train
+from rlgrasp.config import ConfigError
 from rlgrasp.demos.cli import record_demos
 from rlgrasp.demos.dataset import DemoError, demo_transitions, load_demos
 from rlgrasp.policy_file import load_checkpoint
@@ -25,6 +25,7 @@ from rlgrasp.train.algorithm import algorithm_class
 from rlgrasp.train.loop import Trainer, train
 from rlgrasp.train.parts import build_parts
 from rlgrasp.train.resume import prepare_run
+from rlgrasp.train.validate import validate_train
 
 #: A SAC run small enough for a test: one in-process worker, tiny networks, updates from the start.
 SMALL = [

@@ -16,12 +16,13 @@ from tensordict import TensorDict
 from rlgrasp.algos.registry import algorithms
 from rlgrasp.algos.tqc import TQC
 from rlgrasp.compose import compose_train
-from rlgrasp.config import ConfigError, validate_train
+from rlgrasp.config import ConfigError
 from rlgrasp.policy_file import load_checkpoint
 from rlgrasp.train.algorithm import algorithm_class
 from rlgrasp.train.loop import Trainer
 from rlgrasp.train.parts import build_parts
 from rlgrasp.train.resume import prepare_run
+from rlgrasp.train.validate import validate_train
 
 ROOT = Path(__file__).resolve().parents[1]
 #: A TQC run small enough for a test: in-process collection, tiny networks, few quantiles.

@@ -15,12 +15,13 @@ from omegaconf import OmegaConf
 from omegaconf.errors import ConfigKeyError, ValidationError
 
 from rlgrasp.algos.registry import algorithms
-from rlgrasp.config import CONFIG_DIR, ConfigError, validate_train
+from rlgrasp.config import CONFIG_DIR, ConfigError
 from rlgrasp.envs import PandaGraspEnv
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.envs.grasp_env import EnvConfig
 from rlgrasp.train.collectors import CollectorBackend, RayCollector, SingleCollector, collector_backend
 from rlgrasp.train.logger import ConsoleLogger
+from rlgrasp.train.validate import validate_train
 
 EXPERIMENTS = sorted(p.stem for p in (Path(CONFIG_DIR) / "experiment").glob("*.yaml"))
 

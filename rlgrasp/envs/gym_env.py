@@ -22,7 +22,7 @@ included, so that rlgrasp's learners can be judged on tasks no one here wrote.
 An id another package registers names that package first, gymnasium's ``module:id``
 (``panda_gym:PandaReach-v3``): gymnasium imports the module before it looks the id up, in every
 collector worker too, where nothing imported it before. Bad input is refused in one line naming its
-key by ``check_config`` (rlgrasp.config.validate_train), before any worker starts.
+key by ``check_config`` (rlgrasp.train.validate.validate_train), before any worker starts.
 """
 
 from __future__ import annotations

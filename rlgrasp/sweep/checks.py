@@ -13,7 +13,7 @@ import optuna
 from optuna.distributions import BaseDistribution, CategoricalDistribution
 
 from rlgrasp.compose import compose_train
-from rlgrasp.config import ConfigError, validate_train
+from rlgrasp.config import ConfigError
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.evaluation.source import ENV_ERRORS
 from rlgrasp.overrides import CommandLineError, check, unwritable
@@ -22,6 +22,7 @@ from rlgrasp.sweep.objective import schedule_overrides, trial_overrides
 from rlgrasp.sweep.score import KINDS
 from rlgrasp.sweep.space import Space, to_overrides
 from rlgrasp.sweep.study import PRUNERS, SAMPLERS, open_study, study_dir
+from rlgrasp.train.validate import validate_train
 from rlgrasp.utils import flatten
 
 #: What training reports to ``on_eval`` (``rlgrasp.train.evaluate.Evaluator.run``): the metrics a
@@ -151,7 +152,7 @@ def check_training(
     enqueue: Sequence[Mapping[str, Any]],
     config_dir: str | Path,
 ) -> None:
-    """The training config of a trial composes and is valid (``rlgrasp.config.validate_train``), and so
+    """The training config of a trial composes and is valid (``rlgrasp.train.validate``), and so
     do those with a value of every parameter (every choice of a named one) and with each enqueued
     set (a key naming no training key fails here). ``CommandLineError`` (the command line) or
     ``SweepError`` (a sweep value)."""

@@ -26,10 +26,11 @@ from omegaconf import DictConfig, OmegaConf
 
 from rlgrasp import policy_file
 from rlgrasp.compose import compose_train
-from rlgrasp.config import CONFIG_DIR, ConfigError, validate_train
+from rlgrasp.config import CONFIG_DIR, ConfigError
 from rlgrasp.legacy import algorithm_state
 from rlgrasp.received import logger_name
 from rlgrasp.rundir import CHECKPOINTS
+from rlgrasp.train.validate import validate_train
 from rlgrasp.utils import flatten
 
 log = logging.getLogger("rlgrasp.train")

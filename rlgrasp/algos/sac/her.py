@@ -110,7 +110,7 @@ def goal_layout(make_env: EnvFactory) -> GoalLayout:
 def _gym_layout(env: GymEnv) -> GoalLayout:
     """Another package's goal env (``env=gym``): its goals' slices, and its own ``compute_reward``,
     which keeps the env open until the layout is dropped (panda-gym's is a method of the env's task).
-    An env without goals is refused in one line (``rlgrasp.config.validate_train`` says it first)."""
+    An env without goals is refused in one line (``rlgrasp.train.validate.validate_train`` says it first)."""
     if not env.goal_env or not env.flat:
         env.close()
         raise ConfigError(
