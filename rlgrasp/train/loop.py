@@ -203,6 +203,7 @@ class Trainer:
                 with self.phases("shutdown"):
                     batches.close()  # a batch in flight (a time budget's end) arrives
                     begin_shutdown(batches.collector)  # the workers end during the final eval
+                return self.finish()
         return self.finish()
 
     def stop_requested(self) -> bool:
