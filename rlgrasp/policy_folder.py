@@ -16,6 +16,7 @@ import torch
 import yaml
 
 from rlgrasp.envs.part_config import env_setting
+from rlgrasp.envs.robot import robot_label
 from rlgrasp.export import dumps
 from rlgrasp.policy_file import (
     CARD,
@@ -136,7 +137,7 @@ def card_metadata(meta: Mapping[str, Any], name: str) -> dict[str, Any]:
     ``model-index`` with the run's own evaluation when it recorded one)."""
     env = meta["config"]["env"]
     algo = meta["config"]["algo"].get("name", "unknown")
-    robot = env_setting(env, "robot.name")
+    robot = robot_label(env.get("robot"))  # a name, or a user's arm as {name, model}
     task, objects = _task_name(env), str(env.get("objects", "cube"))
     tags = ["reinforcement-learning", "robotics", "pybullet", "grasping", "rlgrasp", algo, robot, task]
     if meta["kind"] == "vision":
@@ -191,7 +192,7 @@ def model_card(meta: Mapping[str, Any], name: str) -> str:
 # {name}
 
 An rlgrasp policy trained with `{algo}`: the
-`{env_setting(env, "robot.name")}` arm, task `{_task_name(env)}`, objects `{env.get("objects", "cube")}`,
+`{robot_label(env.get("robot"))}` arm, task `{_task_name(env)}`, objects `{env.get("objects", "cube")}`,
 randomization `{env.get("randomization")}`, `{env_setting(env, "control.mode")}` control at
 {meta["interface"].get("control_hz")} Hz. It maps a {spec["obs_dim"]}-value observation{images} to
 {spec["action_dim"]} actions in [-1, 1]; `{CONFIG}`'s `interface` says what each entry means.

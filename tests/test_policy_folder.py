@@ -180,6 +180,25 @@ def test_the_model_card_names_the_env_and_the_algorithm() -> None:
     assert meta["config"]["algo"] == {"name": "ppo"} and len(meta["interface"]["action_meaning"]) == 8
 
 
+@pytest.mark.parametrize(
+    ("robot", "label"), [("kuka_iiwa", "kuka_iiwa"), ({"name": "mine", "model": "a.urdf"}, "mine")]
+)
+def test_the_model_card_names_the_arm_however_the_config_gives_it(robot, label) -> None:
+    """Today's configs give the arm as a name (``robot: kuka_iiwa``), a user's arm as a mapping: the card
+    names it either way (it read ``robot.name`` only, and wrote "the `None` arm" for a name)."""
+    from rlgrasp.policy_folder import card_metadata, model_card
+
+    meta = {
+        "config": {"env": {"robot": robot, "randomization": "default"}, "algo": {"name": "sac"}},
+        "kind": "state",
+        "interface": {"control_hz": 20},
+        "spec": {"obs_dim": 46, "action_dim": 5},
+        "source": {"file": "p.pt", "sha256": "0" * 64},
+    }
+    assert {label, "sac", "lift"} <= set(card_metadata(meta, "p")["tags"])
+    assert f"`{label}` arm" in model_card(meta, "p")
+
+
 def test_the_docs_read_a_folder_without_rlgrasp(monkeypatch) -> None:
     """docs/export.md's numpy reader of the shipped folder acts as rlgrasp does (to float32 rounding)."""
     text = (ROOT / "docs" / "export.md").read_text()
