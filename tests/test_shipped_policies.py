@@ -20,6 +20,7 @@ CASES = [
     ("grasp_ppo_xarm6.pt", "cube", 17, 14),
     ("grasp_vision_depth.pt", "cube", 17, 14),  # a wrist depth camera student of grasp_ppo.pt
     ("pick_place_sac.pt", "cube", 19, 16),  # a goal task: the checkpoint rebuilds its task and goal
+    ("grasp_sac", "cube", 19, 16),  # a policy folder (safetensors + JSON), shipped as nothing else
 ]
 
 
