@@ -32,8 +32,8 @@ from rlgrasp.train.batches import Batches
 from rlgrasp.train.callbacks import Callback
 from rlgrasp.train.collect import read_env_errors
 from rlgrasp.train.collectors import begin_shutdown
-from rlgrasp.train.evaluations import EvalCallback, Evaluations, Stopped, TrainingError
-from rlgrasp.train.lifecycle import guarded
+from rlgrasp.train.evaluations import EvalCallback, Evaluations
+from rlgrasp.train.lifecycle import Stopped, TrainingError, guarded
 from rlgrasp.train.logger import final_metrics, log, progress_line, setup_text_log
 from rlgrasp.train.metrics import Due, Phases, Throughput, finished_episodes
 from rlgrasp.train.parts import build_parts
