@@ -210,7 +210,9 @@ def _layout() -> dict:
         (
             {
                 "algo": {
-                    "terms": {"rnd": {"_target_": "rlgrasp.train.rnd.RND", "net": {"_target_": "os.getcwd"}}}
+                    "terms": {
+                        "rnd": {"_target_": "rlgrasp.algos.ppo.rnd.RND", "net": {"_target_": "os.getcwd"}}
+                    }
                 }
             },
             "config.algo.terms.rnd.net._target_ would be called",

@@ -196,7 +196,7 @@ algo:
     imitation: {_target_: rlgrasp.demos.bc.Imitation, coeff: 0.1, decay: 0.95, minibatch_size: 256}
     teacher: {_target_: rlgrasp.vision.teacher_term.TeacherImitation, checkpoint: null, coeff: 1.0,
               decay: 1.0}
-    rnd: {_target_: rlgrasp.train.rnd.RND, coeff: 0.0, gamma: 0.99, features: 64, update_fraction: 0.25}
+    rnd: {_target_: rlgrasp.algos.ppo.rnd.RND, coeff: 0.0, gamma: 0.99, features: 64, update_fraction: 0.25}
   init_from: null
 model: {name: mlp, hidden_sizes: [64, 64], activation: tanh, init_log_std: -0.5, min_std: 0.05,
         obs_norm: true, obs_clip: 10.0, distribution: tanh_normal}
