@@ -26,6 +26,9 @@ from rlgrasp.algos.registry import entry
 #: ProcessCollector``); ``rlgrasp.received`` reads each ``_target_`` through ``moved_target`` first. No
 #: module is left at an old path: this map is how an old name still loads.
 MOVED_MODULES = {
+    # rlgrasp.train split by role: collection, periodic evaluation, tracking.
+    **{f"rlgrasp.train.{m}": f"rlgrasp.train.collection.{m}" for m in ("collect", "collectors", "batches")},
+    "rlgrasp.train.adr_sync": "rlgrasp.train.collection.adr_sync",
     # PPO's curiosity term, beside PPO (was in the training core).
     "rlgrasp.train.rnd": "rlgrasp.algos.ppo.rnd",
 }

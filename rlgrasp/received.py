@@ -66,9 +66,9 @@ PARTS: dict[str, dict[str, str]] = {
     },
     "reward_term": {},  # only a user's own config names these
     "collector": {
-        "process": "rlgrasp.train.collectors.ProcessCollector",
-        "single": "rlgrasp.train.collectors.SingleCollector",
-        "ray": "rlgrasp.train.collectors.RayCollector",
+        "process": "rlgrasp.train.collection.collectors.ProcessCollector",
+        "single": "rlgrasp.train.collection.collectors.SingleCollector",
+        "ray": "rlgrasp.train.collection.collectors.RayCollector",
     },
     # Each algorithm package's class (rlgrasp.algos.registry: a registry of strings, no torch).
     "algo": class_paths(),

@@ -7,7 +7,7 @@ import functools
 import torch
 
 from rlgrasp.envs import PandaGraspEnv
-from rlgrasp.train.collect import make_batched_env
+from rlgrasp.train.collection.collect import make_batched_env
 from rlgrasp.train.metrics import finished_episodes
 
 EPISODE = 10

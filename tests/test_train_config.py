@@ -19,7 +19,12 @@ from rlgrasp.config import CONFIG_DIR, ConfigError
 from rlgrasp.envs import PandaGraspEnv
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.envs.grasp_env import EnvConfig
-from rlgrasp.train.collectors import CollectorBackend, RayCollector, SingleCollector, collector_backend
+from rlgrasp.train.collection.collectors import (
+    CollectorBackend,
+    RayCollector,
+    SingleCollector,
+    collector_backend,
+)
 from rlgrasp.train.logger import ConsoleLogger
 from rlgrasp.train.validate import validate_train
 
@@ -50,7 +55,7 @@ def test_group_options_compose(group: str, train_cfg) -> None:
     if group.startswith("randomization"):
         assert cfg.env.randomization == group.split("=")[1]
     if group in ("collector=single", "debug=default"):
-        assert cfg.collector._target_ == "rlgrasp.train.collectors.SingleCollector"
+        assert cfg.collector._target_ == "rlgrasp.train.collection.collectors.SingleCollector"
 
 
 def _options(group: str) -> list[str]:
@@ -90,8 +95,9 @@ def test_the_command_lines_of_the_string_backends_still_work(train_cfg) -> None:
     ("override", "message"),
     [
         (
-            "collector._target_=rlgrasp.train.collectors.Bogus",
-            "collector._target_='rlgrasp.train.collectors.Bogus' cannot be built: Error locating target",
+            "collector._target_=rlgrasp.train.collection.collectors.Bogus",
+            "collector._target_='rlgrasp.train.collection.collectors.Bogus' cannot be built: Error locating "
+            "target",
         ),
         ("logger._target_=nowhere.Logger", "logger._target_='nowhere.Logger' cannot be built"),
         ("collector.num_workers=-1", "collector.num_workers=-1: must be >= 0"),

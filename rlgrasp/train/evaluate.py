@@ -14,7 +14,7 @@ from tensordict import TensorDictBase
 from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
 
 from rlgrasp.envs.factory import env_factory, episode_steps
-from rlgrasp.train.collect import EnvFactory, make_batched_env
+from rlgrasp.train.collection.collect import EnvFactory, make_batched_env
 from rlgrasp.utils import plain
 
 

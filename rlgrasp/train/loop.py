@@ -26,12 +26,12 @@ from rlgrasp.envs.factory import episode_steps
 from rlgrasp.legacy import algorithm_state
 from rlgrasp.rundir import CHECKPOINTS, ENV_ERRORS
 from rlgrasp.train import checkpoint as ckpt_lib
-from rlgrasp.train.adr_sync import AdrSync
 from rlgrasp.train.algorithm import Algorithm, algorithm_class
-from rlgrasp.train.batches import Batches
 from rlgrasp.train.callbacks import Callback
-from rlgrasp.train.collect import read_env_errors
-from rlgrasp.train.collectors import begin_shutdown
+from rlgrasp.train.collection.adr_sync import AdrSync
+from rlgrasp.train.collection.batches import Batches
+from rlgrasp.train.collection.collect import read_env_errors
+from rlgrasp.train.collection.collectors import begin_shutdown
 from rlgrasp.train.evaluations import EvalCallback, Evaluations
 from rlgrasp.train.lifecycle import Stopped, TrainingError, guarded
 from rlgrasp.train.logger import final_metrics, log, progress_line, setup_text_log
