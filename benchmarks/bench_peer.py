@@ -481,7 +481,7 @@ def run_sb3(cfg: Any, out_json: Path) -> None:
 
     from rlgrasp.envs.factory import env_factory
     from rlgrasp.train.collection.collect import worker_seed
-    from rlgrasp.train.evaluate import periodic_evaluator
+    from rlgrasp.train.evaluation.evaluate import periodic_evaluator
     from rlgrasp.train.loop import resolve_device
 
     torch.set_num_threads(cfg.collector.torch_threads)  # rlgrasp's learner threads (Trainer sets them)

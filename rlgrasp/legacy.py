@@ -22,14 +22,20 @@ from typing import Any
 from rlgrasp.algos.registry import entry
 
 #: Modules that moved, by their dotted path of before -> today's. A checkpoint or a run folder written
-#: before names its parts by the old path (``collector._target_: rlgrasp.train.collectors.
-#: ProcessCollector``); ``rlgrasp.received`` reads each ``_target_`` through ``moved_target`` first. No
-#: module is left at an old path: this map is how an old name still loads.
+#: before names its parts by the old path (its ``collector._target_`` is
+#: ``rlgrasp.train.collectors.ProcessCollector``); ``rlgrasp.received`` reads each ``_target_`` through
+#: ``moved_target`` first. No module is left at an old path: this map is how an old name still loads.
 MOVED_MODULES = {
-    # rlgrasp.train split by role: collection, periodic evaluation, tracking.
-    **{f"rlgrasp.train.{m}": f"rlgrasp.train.collection.{m}" for m in ("collect", "collectors", "batches")},
+    # rlgrasp.train split by role: the way to the learner's batches, ...
+    "rlgrasp.train.collect": "rlgrasp.train.collection.collect",
+    "rlgrasp.train.collectors": "rlgrasp.train.collection.collectors",
+    "rlgrasp.train.batches": "rlgrasp.train.collection.batches",
     "rlgrasp.train.adr_sync": "rlgrasp.train.collection.adr_sync",
-    # PPO's curiosity term, beside PPO (was in the training core).
+    # ... the evaluations beside the loop, ...
+    "rlgrasp.train.evaluate": "rlgrasp.train.evaluation.evaluate",
+    "rlgrasp.train.evaluations": "rlgrasp.train.evaluation.evaluations",
+    "rlgrasp.train.eval_process": "rlgrasp.train.evaluation.eval_process",
+    # PPO's curiosity term, beside PPO.
     "rlgrasp.train.rnd": "rlgrasp.algos.ppo.rnd",
 }
 

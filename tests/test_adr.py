@@ -20,7 +20,7 @@ from rlgrasp.envs.randomization import PARAMS, Randomizer, Range
 from rlgrasp.policy_file import load_checkpoint
 from rlgrasp.train.collection.adr_sync import RANGES_FILE, AdrSync
 from rlgrasp.train.collection.collectors import shut_down
-from rlgrasp.train.evaluate import periodic_evaluator
+from rlgrasp.train.evaluation.evaluate import periodic_evaluator
 from rlgrasp.train.loop import train
 from rlgrasp.train.parts import build_parts
 from tests.helpers import record_differences, train_twice

@@ -31,7 +31,7 @@ from rlgrasp.train.logger import log
 from rlgrasp.train.preemption import StopSignals
 
 if TYPE_CHECKING:  # the evaluations raise this module's exceptions: imported for the type only
-    from rlgrasp.train.evaluations import Evaluations
+    from rlgrasp.train.evaluation.evaluations import Evaluations
 
 
 class TrainingError(RuntimeError):

@@ -32,7 +32,7 @@ from rlgrasp.train.collection.adr_sync import AdrSync
 from rlgrasp.train.collection.batches import Batches
 from rlgrasp.train.collection.collect import read_env_errors
 from rlgrasp.train.collection.collectors import begin_shutdown
-from rlgrasp.train.evaluations import EvalCallback, Evaluations
+from rlgrasp.train.evaluation.evaluations import EvalCallback, Evaluations
 from rlgrasp.train.lifecycle import Stopped, TrainingError, guarded
 from rlgrasp.train.logger import final_metrics, log, progress_line, setup_text_log
 from rlgrasp.train.metrics import Due, Phases, Throughput, finished_episodes

@@ -1,7 +1,8 @@
 """Periodic evaluation: deterministic actions on the same seeded episodes every time.
 
 Runs on a small vector env (built like a collector worker's): in the learner's process, or with
-``eval.background`` in a process of its own (``rlgrasp.train.eval_process``) that runs this same code.
+``eval.background`` in a process of its own (``rlgrasp.train.evaluation.eval_process``) that runs this
+same code.
 """
 
 from __future__ import annotations

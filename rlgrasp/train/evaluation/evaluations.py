@@ -22,8 +22,8 @@ from omegaconf import DictConfig
 from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.callbacks import Callback
-from rlgrasp.train.eval_process import EvalProcessError, background_evaluator
-from rlgrasp.train.evaluate import EnvFactory, periodic_evaluator, summarize
+from rlgrasp.train.evaluation.eval_process import EvalProcessError, background_evaluator
+from rlgrasp.train.evaluation.evaluate import EnvFactory, periodic_evaluator, summarize
 from rlgrasp.train.lifecycle import CallbackStop, Stopped, TrainingError
 from rlgrasp.train.logger import log
 
