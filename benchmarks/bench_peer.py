@@ -422,7 +422,7 @@ class PeriodicEval(BaseCallback):
         slices: dict[str, slice] | None = None,
     ) -> None:
         # the schedule and SPS training itself uses (imported here: see the module docstring)
-        from rlgrasp.train.metrics import Due, Throughput
+        from rlgrasp.train.tracking.metrics import Due, Throughput
 
         super().__init__()
         self.cfg, self.evaluator, self.vecnorm, self.slices = cfg, evaluator, vecnorm, slices

@@ -35,7 +35,11 @@ MOVED_MODULES = {
     "rlgrasp.train.evaluate": "rlgrasp.train.evaluation.evaluate",
     "rlgrasp.train.evaluations": "rlgrasp.train.evaluation.evaluations",
     "rlgrasp.train.eval_process": "rlgrasp.train.evaluation.eval_process",
-    # PPO's curiosity term, beside PPO.
+    # ... where the curves go, ...
+    "rlgrasp.train.logger": "rlgrasp.train.tracking.logger",
+    "rlgrasp.train.trackers": "rlgrasp.train.tracking.trackers",
+    "rlgrasp.train.metrics": "rlgrasp.train.tracking.metrics",
+    # ... and PPO's curiosity term, beside PPO.
     "rlgrasp.train.rnd": "rlgrasp.algos.ppo.rnd",
 }
 

@@ -79,10 +79,10 @@ PARTS: dict[str, dict[str, str]] = {
     },
     # Read from a file only to record which one it used (never built from a file).
     "logger": {
-        "tensorboard": "rlgrasp.train.logger.TensorBoardLogger",
-        "none": "rlgrasp.train.logger.ConsoleLogger",
-        "wandb": "rlgrasp.train.trackers.WandbLogger",
-        "mlflow": "rlgrasp.train.trackers.MlflowLogger",
+        "tensorboard": "rlgrasp.train.tracking.logger.TensorBoardLogger",
+        "none": "rlgrasp.train.tracking.logger.ConsoleLogger",
+        "wandb": "rlgrasp.train.tracking.trackers.WandbLogger",
+        "mlflow": "rlgrasp.train.tracking.trackers.MlflowLogger",
     },
 }
 #: Other spellings of a part's class that files carry (the same class under an older name; a class whose

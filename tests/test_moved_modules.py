@@ -5,12 +5,17 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+from pathlib import Path
 from typing import Any
 
 import pytest
+import torch
 
 from rlgrasp.legacy import MOVED_MODULES, moved_target
+from rlgrasp.policy_file import read_checkpoint
 from rlgrasp.received import PARTS, ReceivedError, read_config
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def _old_parts() -> list[tuple[str, str, str, str]]:
@@ -44,11 +49,33 @@ def test_a_part_named_by_its_old_module_reads_as_todays_class(kind: str, name: s
     assert moved_target(old) == new
 
 
-def test_an_old_rnd_term_reads_as_ppos() -> None:
+def test_a_config_naming_the_old_modules_reads_as_todays_classes() -> None:
     old = {
-        "algo": {"_target_": "rlgrasp.algos.ppo.PPO", "terms": {"rnd": {"_target_": "rlgrasp.train.rnd.RND"}}}
+        "collector": {"_target_": "rlgrasp.train.collectors.ProcessCollector", "num_workers": 2},
+        "algo": {
+            "_target_": "rlgrasp.algos.ppo.PPO",
+            "terms": {"rnd": {"_target_": "rlgrasp.train.rnd.RND"}},
+        },
+        "logger": {"_target_": "rlgrasp.train.trackers.WandbLogger", "project": "p"},
     }
-    assert read_config(old, "old.pt")["algo"]["terms"]["rnd"]["_target_"] == "rlgrasp.algos.ppo.rnd.RND"
+    read = read_config(old, "old.pt")
+    assert read["collector"] == {
+        "_target_": "rlgrasp.train.collection.collectors.ProcessCollector",
+        "num_workers": 2,
+    }
+    assert read["algo"]["terms"]["rnd"]["_target_"] == "rlgrasp.algos.ppo.rnd.RND"
+    assert read["logger"] == {"name": "wandb"}
+    tensorboard = read_config({"logger": {"_target_": "rlgrasp.train.logger.TensorBoardLogger"}}, "old.pt")
+    assert tensorboard["logger"] == {"name": "tensorboard"}
+
+
+def test_a_shipped_policy_written_before_the_split_loads() -> None:
+    path = ROOT / "policies" / "grasp_ppo_xarm6.pt"
+    saved = torch.load(path, weights_only=True)["config"]
+    assert saved["collector"]["_target_"] == "rlgrasp.train.collectors.ProcessCollector"  # as written then
+    state = read_checkpoint(path)
+    assert state["config"]["collector"]["_target_"] == PARTS["collector"]["process"]
+    assert state["config"]["logger"] == {"name": "tensorboard"}
 
 
 def test_a_moved_module_is_gone_from_its_old_path_and_imports_at_its_new_one() -> None:

@@ -31,7 +31,7 @@ from tests.procs import wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 SMOKE = ["experiment=smoke", "logger=none"]
-COLLECTORS, LOGGERS = "rlgrasp.train.collection.collectors", "rlgrasp.train.logger"
+COLLECTORS, LOGGERS = "rlgrasp.train.collection.collectors", "rlgrasp.train.tracking.logger"
 
 
 @pytest.fixture(scope="module")

@@ -25,7 +25,7 @@ from rlgrasp.train.collection.collectors import (
     SingleCollector,
     collector_backend,
 )
-from rlgrasp.train.logger import ConsoleLogger
+from rlgrasp.train.tracking.logger import ConsoleLogger
 from rlgrasp.train.validate import validate_train
 
 EXPERIMENTS = sorted(p.stem for p in (Path(CONFIG_DIR) / "experiment").glob("*.yaml"))
@@ -86,7 +86,7 @@ def test_the_command_lines_of_the_string_backends_still_work(train_cfg) -> None:
     assert isinstance(collector_backend(train_cfg("collector=single").collector), SingleCollector)
     ray = collector_backend(train_cfg("collector=ray", "collector.ray.address=auto").collector)
     assert isinstance(ray, RayCollector) and ray.ray.address == "auto"
-    assert train_cfg("logger=none").logger._target_ == "rlgrasp.train.logger.ConsoleLogger"
+    assert train_cfg("logger=none").logger._target_ == "rlgrasp.train.tracking.logger.ConsoleLogger"
     assert train_cfg("logger=wandb", "logger.mode=offline").logger._target_.endswith("trackers.WandbLogger")
     assert collector_backend(train_cfg("collector.num_workers=4").collector).num_workers == 4
 
@@ -194,7 +194,7 @@ def test_bad_override_fails_naming_the_key(override: str, error: type, names: li
 
 
 def test_progress_line_shows_a_spent_time_budget_as_zero_left() -> None:
-    from rlgrasp.train.logger import progress_line
+    from rlgrasp.train.tracking.logger import progress_line
 
     line = progress_line(100, 1000, 50.0, None, None, None, eta_s=-7.5)
     assert line.endswith("ETA 0:00:00")

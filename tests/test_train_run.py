@@ -203,7 +203,7 @@ model: {name: mlp, hidden_sizes: [64, 64], activation: tanh, init_log_std: -0.5,
 collector: {_target_: rlgrasp.train.collection.collectors.ProcessCollector, num_workers: 2,
             envs_per_worker: 2, steps_per_env: 256, torch_threads: 1, overlap: true, stagger_starts: false,
             worker_timeout_s: 600.0}
-logger: {_target_: rlgrasp.train.logger.TensorBoardLogger, console_interval_s: 0.0}
+logger: {_target_: rlgrasp.train.tracking.logger.TensorBoardLogger, console_interval_s: 0.0}
 eval: {interval_frames: 1024, episodes: 4, final_episodes: 8, num_envs: 4, seed_offset: 1000000,
        background: false, randomization: null}
 checkpoint: {interval_frames: 1024, keep_last: 2}

@@ -27,8 +27,8 @@ from rlgrasp.errors import ConfigError
 from rlgrasp.rundir import RunLockedError, run_lock
 from rlgrasp.train.algorithm import NonFiniteError
 from rlgrasp.train.callbacks import Callback
-from rlgrasp.train.logger import log
 from rlgrasp.train.preemption import StopSignals
+from rlgrasp.train.tracking.logger import log
 
 if TYPE_CHECKING:  # the evaluations raise this module's exceptions: imported for the type only
     from rlgrasp.train.evaluation.evaluations import Evaluations

@@ -21,7 +21,7 @@ from rlgrasp.models.spec import PRIVILEGED_KEY, env_spec, vision_spec
 from rlgrasp.train.collection.batches import Batches
 from rlgrasp.train.collection.collect import EnvFactory
 from rlgrasp.train.collection.collectors import CollectorBackend, collector_backend, shut_down
-from rlgrasp.train.metrics import Phases
+from rlgrasp.train.tracking.metrics import Phases
 
 
 @dataclass

@@ -22,8 +22,8 @@ from torchrl.collectors import BaseCollector
 from rlgrasp.adr import BOUNDS, NOT_BOUNDARY, AdrState
 from rlgrasp.envs.randomization import Randomizer
 from rlgrasp.train.callbacks import Callback
-from rlgrasp.train.logger import log
-from rlgrasp.train.metrics import finished_mask
+from rlgrasp.train.tracking.logger import log
+from rlgrasp.train.tracking.metrics import finished_mask
 
 #: The run's final ranges, loadable as ``env.randomization=<run dir>/adr_ranges.yaml`` (docs/adr.md).
 RANGES_FILE = "adr_ranges.yaml"

@@ -25,7 +25,7 @@ from rlgrasp.train.callbacks import Callback
 from rlgrasp.train.evaluation.eval_process import EvalProcessError, background_evaluator
 from rlgrasp.train.evaluation.evaluate import EnvFactory, periodic_evaluator, summarize
 from rlgrasp.train.lifecycle import CallbackStop, Stopped, TrainingError
-from rlgrasp.train.logger import log
+from rlgrasp.train.tracking.logger import log
 
 #: Called after each evaluation with (frames, metrics); see ``rlgrasp.train.loop.train``.
 EvalCallback = Callable[[int, dict[str, float]], None]
