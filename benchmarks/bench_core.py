@@ -44,7 +44,7 @@ from bench_collect import bench_collector, bench_raw
 
 from rlgrasp.compose import compose_train
 from rlgrasp.envs.factory import env_factory
-from rlgrasp.train.metrics import parse_phases
+from rlgrasp.train.tracking.metrics import parse_phases
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -79,7 +79,7 @@ class LinearLR:
 
 def n_envs(cfg: Any) -> int:
     """SB3's env count: rlgrasp's workers x envs per worker (same frames per batch)."""
-    from rlgrasp.train.collectors import collector_backend
+    from rlgrasp.train.collection.collectors import collector_backend
 
     return collector_backend(cfg.collector).frames_per_batch // cfg.collector.steps_per_env
 
@@ -334,7 +334,7 @@ def her_unmatched(cfg: Any) -> list[str]:
 
 def sac_unmatched(cfg: Any) -> list[str]:
     """SAC's differences: the std, the rates, the critics' make-up, the warm-up, the batch timing."""
-    from rlgrasp.train.collectors import collector_backend
+    from rlgrasp.train.collection.collectors import collector_backend
 
     a, m, name = cfg.algo, cfg.model, sb3_algo(cfg)
     notes = [
@@ -422,7 +422,7 @@ class PeriodicEval(BaseCallback):
         slices: dict[str, slice] | None = None,
     ) -> None:
         # the schedule and SPS training itself uses (imported here: see the module docstring)
-        from rlgrasp.train.metrics import Due, Throughput
+        from rlgrasp.train.tracking.metrics import Due, Throughput
 
         super().__init__()
         self.cfg, self.evaluator, self.vecnorm, self.slices = cfg, evaluator, vecnorm, slices
@@ -480,8 +480,8 @@ def run_sb3(cfg: Any, out_json: Path) -> None:
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
     from rlgrasp.envs.factory import env_factory
-    from rlgrasp.train.collect import worker_seed
-    from rlgrasp.train.evaluate import periodic_evaluator
+    from rlgrasp.train.collection.collect import worker_seed
+    from rlgrasp.train.evaluation.evaluate import periodic_evaluator
     from rlgrasp.train.loop import resolve_device
 
     torch.set_num_threads(cfg.collector.torch_threads)  # rlgrasp's learner threads (Trainer sets them)

@@ -51,7 +51,7 @@ import torch
 from rlgrasp.algos.ppo.learner import PPOLearner
 from rlgrasp.compose import compose_train
 from rlgrasp.train.algorithm import algorithm_class
-from rlgrasp.train.collectors import collector_backend
+from rlgrasp.train.collection.collectors import collector_backend
 from rlgrasp.train.parts import build_parts
 from rlgrasp.utils import keep_freed_memory
 

@@ -18,7 +18,7 @@ import torch
 from torchrl.collectors import Collector
 
 from rlgrasp.compose import compose_train
-from rlgrasp.train.collect import make_batched_env
+from rlgrasp.train.collection.collect import make_batched_env
 from rlgrasp.train.parts import build_parts
 
 

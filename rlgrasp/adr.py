@@ -3,8 +3,8 @@
 Pure logic, no simulator: the settings a config gives, the learner's state (ranges and per-bound
 buffers of boundary-episode outcomes) and the draw that makes an episode a boundary episode. The env
 side (``rlgrasp.envs.randomization``) samples from the ranges the learner pushes; the training side
-(``rlgrasp.train.adr_sync``) feeds outcomes in and pushes ranges out. Algorithm: OpenAI et al. 2019,
-"Solving Rubik's Cube with a Robot Hand", Algorithm 1; docs/adr.md explains the settings.
+(``rlgrasp.train.collection.adr_sync``) feeds outcomes in and pushes ranges out. Algorithm: OpenAI et
+al. 2019, "Solving Rubik's Cube with a Robot Hand", Algorithm 1; docs/adr.md explains the settings.
 
 A boundary is coded as one integer, ``2 * parameter_index + bound`` (bound 0 low, 1 high; -1: not a
 boundary episode), so that it travels through ``info`` and a tensordict as a plain number.

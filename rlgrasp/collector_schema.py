@@ -1,5 +1,6 @@
 """The collectors' schema (``collector=process|single|ray``), apart from their code so that the config
-module, at the bottom of the layers, imports no collector: rlgrasp.train.collectors builds from it."""
+module, at the bottom of the layers, imports no collector: rlgrasp.train.collection.collectors builds
+from it."""
 
 from __future__ import annotations
 
@@ -8,21 +9,23 @@ from dataclasses import dataclass, field
 
 @dataclass
 class CollectorConfig:
-    """How frames are collected: ``_target_`` is the backend, a class of ``rlgrasp.train.collectors``
-    built from the other keys (``collector=process``: TorchRL's collector over worker processes;
-    ``single``: in-process; ``ray``: collector actors on a Ray cluster). Each worker steps one
-    gymnasium ``SyncVectorEnv`` of ``envs_per_worker`` envs and runs the actor on the whole batch;
-    frames per batch = workers x envs_per_worker x steps_per_env."""
+    """How frames are collected: ``_target_`` is the backend, a class of
+    ``rlgrasp.train.collection.collectors`` built from the other keys (``collector=process``:
+    TorchRL's collector over worker processes; ``single``: in-process; ``ray``: collector actors on a
+    Ray cluster). Each worker steps one gymnasium ``SyncVectorEnv`` of ``envs_per_worker`` envs and
+    runs the actor on the whole batch; frames per batch = workers x envs_per_worker x steps_per_env."""
 
-    _target_: str = "rlgrasp.train.collectors.ProcessCollector"
+    _target_: str = "rlgrasp.train.collection.collectors.ProcessCollector"
     num_workers: int = 2  # 0: in-process
     envs_per_worker: int = 4
     steps_per_env: int = 128
     torch_threads: int = 1
-    # Collect the next batch while the learner updates (one update of lag; rlgrasp/train/batches.py, ppo.py).
+    # Collect the next batch while the learner updates (one update of lag;
+    # rlgrasp/train/collection/batches.py, ppo.py).
     overlap: bool = True
     # Cut each env's first episode at a different length so that a worker's envs are not in phase:
-    # needed when steps_per_env is short against an episode (rlgrasp/train/collect.py StaggeredStart).
+    # needed when steps_per_env is short against an episode (rlgrasp/train/collection/collect.py
+    # StaggeredStart).
     stagger_starts: bool = False
     # A batch not delivered within this many seconds ends the run (a worker that hangs, not dies: a
     # checkpoint is saved and the run stops in one line, instead of waiting for ever).
@@ -47,5 +50,5 @@ class RayConfig:
 class RayCollectorConfig(CollectorConfig):
     """``collector=ray``: the process backend's keys plus where Ray runs (``collector.ray.*``)."""
 
-    _target_: str = "rlgrasp.train.collectors.RayCollector"
+    _target_: str = "rlgrasp.train.collection.collectors.RayCollector"
     ray: RayConfig = field(default_factory=RayConfig)

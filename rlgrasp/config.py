@@ -52,10 +52,10 @@ class PeriodicEvalConfig:
     final_episodes: int | None = 100
     num_envs: int = 8
     seed_offset: int = 1_000_000
-    # The periodic evaluations in a process of their own (rlgrasp.train.eval_process) while training
-    # goes on; each result is logged at the frames of the weights it evaluated, and picked up when the
-    # next one is due (so a sweep's pruner hears of it one interval later). false: in the learner's
-    # process, training waits. The final evaluation runs in the learner's process, shared with the
+    # The periodic evaluations in a process of their own (rlgrasp.train.evaluation.eval_process) while
+    # training goes on; each result is logged at the frames of the weights it evaluated, and picked up
+    # when the next one is due (so a sweep's pruner hears of it one interval later). false: in the
+    # learner's process, training waits. The final evaluation runs in the learner's process, shared with the
     # evaluation process when this one started it (the later rounds there, the same figures).
     background: bool = False
     # null: the training env's randomization. A preset, a ranges file or ranges over a preset, as

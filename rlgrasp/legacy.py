@@ -5,6 +5,8 @@ Older checkpoints keep ``algo``'s keys flat (``algo.lr``, where today's config h
 do; before the task was a part its reward keys were the env's; PPO's and DAgger's state sat at the top
 level of a checkpoint. ``rlgrasp.received.read_config`` applies ``nest_config`` to every config read
 from a file, and an old override on the command line is told its new key (``rlgrasp.overrides``).
+Modules that moved (``MOVED_MODULES``) are named by their old path in the ``_target_`` of a part in
+older files; ``moved_target`` gives today's path, which ``read_config`` reads back into a short name.
 
 The one place that knows the older layouts. It sits at the bottom of the package beside
 ``rlgrasp.received`` (strings and the algorithms' registry, no torch), so that reading a received
@@ -18,6 +20,37 @@ from collections.abc import Mapping
 from typing import Any
 
 from rlgrasp.algos.registry import entry
+
+#: Modules that moved, by their dotted path of before -> today's. A checkpoint or a run folder written
+#: before names its parts by the old path (its ``collector._target_`` is
+#: ``rlgrasp.train.collectors.ProcessCollector``); ``rlgrasp.received`` reads each ``_target_`` through
+#: ``moved_target`` first. No module is left at an old path: this map is how an old name still loads.
+MOVED_MODULES = {
+    # rlgrasp.train split by role: the way to the learner's batches, ...
+    "rlgrasp.train.collect": "rlgrasp.train.collection.collect",
+    "rlgrasp.train.collectors": "rlgrasp.train.collection.collectors",
+    "rlgrasp.train.batches": "rlgrasp.train.collection.batches",
+    "rlgrasp.train.adr_sync": "rlgrasp.train.collection.adr_sync",
+    # ... the evaluations beside the loop, ...
+    "rlgrasp.train.evaluate": "rlgrasp.train.evaluation.evaluate",
+    "rlgrasp.train.evaluations": "rlgrasp.train.evaluation.evaluations",
+    "rlgrasp.train.eval_process": "rlgrasp.train.evaluation.eval_process",
+    # ... where the curves go, ...
+    "rlgrasp.train.logger": "rlgrasp.train.tracking.logger",
+    "rlgrasp.train.trackers": "rlgrasp.train.tracking.trackers",
+    "rlgrasp.train.metrics": "rlgrasp.train.tracking.metrics",
+    # ... and PPO's curiosity term, beside PPO.
+    "rlgrasp.train.rnd": "rlgrasp.algos.ppo.rnd",
+}
+
+
+def moved_target(target: str) -> str:
+    """Today's dotted path of a ``module.Class`` path of before (``rlgrasp.train.rnd.RND`` ->
+    ``rlgrasp.algos.ppo.rnd.RND``); any other string comes back unchanged."""
+    module, dot, name = target.rpartition(".")
+    new = MOVED_MODULES.get(module)
+    return f"{new}.{name}" if dot and new else target
+
 
 #: Where each flat ``algo`` key of before lives now (``algo.<key>`` -> ``algo.<path>``), for every
 #: algorithm of then; a key moves only where the algorithm's schema has the path (``teacher`` is PPO's

@@ -12,8 +12,9 @@ config is read as data instead (``read_config``):
    (``NODES``);
 2. older formats upgraded into data: a ``gym_factory`` env, string-named backends, a flat ``algo``;
 3. each built node's ``_target_`` read back into a short name of ``PARTS`` for that node's kind (a
-   logger's class at ``env`` names nothing there), or a class the user's own config names at that
-   very node (``user_parts``: how a run of the user's own task or algorithm is read back);
+   logger's class at ``env`` names nothing there; a class whose module moved is read by its path of
+   today, ``rlgrasp.legacy.MOVED_MODULES``), or a class the user's own config names at that very node
+   (``user_parts``: how a run of the user's own task or algorithm is read back);
 4. the buildable config written from the registry: each ``_target_`` is ``PARTS``'s string for the
    short name (or the user's), never the file's. The logger is never taken from a file: the node
    keeps only its short name (``{"name": "tensorboard"}``) and a resumed run builds the user's.
@@ -44,7 +45,7 @@ from pathlib import Path
 from typing import Any
 
 from rlgrasp.algos.registry import alias_paths, class_paths
-from rlgrasp.legacy import nest_config
+from rlgrasp.legacy import moved_target, nest_config
 
 #: rlgrasp's own parts, by kind: the short name a file may choose -> the class rlgrasp builds it with.
 #: Adding a kind or a part is one entry here (and its node path in ``NODES``).
@@ -65,26 +66,27 @@ PARTS: dict[str, dict[str, str]] = {
     },
     "reward_term": {},  # only a user's own config names these
     "collector": {
-        "process": "rlgrasp.train.collectors.ProcessCollector",
-        "single": "rlgrasp.train.collectors.SingleCollector",
-        "ray": "rlgrasp.train.collectors.RayCollector",
+        "process": "rlgrasp.train.collection.collectors.ProcessCollector",
+        "single": "rlgrasp.train.collection.collectors.SingleCollector",
+        "ray": "rlgrasp.train.collection.collectors.RayCollector",
     },
     # Each algorithm package's class (rlgrasp.algos.registry: a registry of strings, no torch).
     "algo": class_paths(),
     "algo_term": {
         "imitation": "rlgrasp.demos.bc.Imitation",
         "teacher": "rlgrasp.vision.teacher_term.TeacherImitation",
-        "rnd": "rlgrasp.train.rnd.RND",
+        "rnd": "rlgrasp.algos.ppo.rnd.RND",
     },
     # Read from a file only to record which one it used (never built from a file).
     "logger": {
-        "tensorboard": "rlgrasp.train.logger.TensorBoardLogger",
-        "none": "rlgrasp.train.logger.ConsoleLogger",
-        "wandb": "rlgrasp.train.trackers.WandbLogger",
-        "mlflow": "rlgrasp.train.trackers.MlflowLogger",
+        "tensorboard": "rlgrasp.train.tracking.logger.TensorBoardLogger",
+        "none": "rlgrasp.train.tracking.logger.ConsoleLogger",
+        "wandb": "rlgrasp.train.tracking.trackers.WandbLogger",
+        "mlflow": "rlgrasp.train.tracking.trackers.MlflowLogger",
     },
 }
-#: Other spellings of a part's class that files carry (the same class under an older name).
+#: Other spellings of a part's class that files carry (the same class under an older name; a class whose
+#: whole module moved is ``rlgrasp.legacy.MOVED_MODULES``'s, applied before these).
 ALIASES: dict[str, dict[str, str]] = {
     "env": {"rlgrasp.envs.GraspEnv": "grasp", "rlgrasp.envs.grasp_env.GraspEnv": "grasp"},
     "task": {
@@ -186,10 +188,7 @@ def _logger_name(node: Mapping[str, Any]) -> str:
 
 
 def _short_name(kind: str, target: Any) -> str:
-    for name, cls in PARTS[kind].items():
-        if cls == target:
-            return name
-    return ALIASES.get(kind, {}).get(str(target), "another")
+    return _known(kind, target) or "another"
 
 
 def _copy(node: Any) -> Any:
@@ -284,8 +283,11 @@ def _class_for(
 
 
 def _known(kind: str, target: Any) -> str | None:
+    """The short name of ``PARTS[kind]`` that ``target`` names (by today's path, an alias, or the path
+    of before its module moved), None for any other."""
     if not isinstance(target, str):
         return None
+    target = moved_target(target)
     for name, cls in PARTS[kind].items():
         if cls == target:
             return name

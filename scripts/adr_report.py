@@ -25,7 +25,7 @@ from rlgrasp.envs.randomization import PARAMS, Randomizer  # noqa: E402
 from rlgrasp.evaluation.episodes import timed_run  # noqa: E402
 from rlgrasp.evaluation.metrics import summarize  # noqa: E402
 from rlgrasp.evaluation.source import EvaluationError, prepare  # noqa: E402
-from rlgrasp.train.adr_sync import RANGES_FILE  # noqa: E402
+from rlgrasp.train.collection.adr_sync import RANGES_FILE  # noqa: E402
 from rlgrasp.utils import markdown_table  # noqa: E402
 
 

@@ -18,9 +18,9 @@ from rlgrasp.adr import NOT_BOUNDARY, AdrState, draw_boundary, parse_settings
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.envs.randomization import PARAMS, Randomizer, Range
 from rlgrasp.policy_file import load_checkpoint
-from rlgrasp.train.adr_sync import RANGES_FILE, AdrSync
-from rlgrasp.train.collectors import shut_down
-from rlgrasp.train.evaluate import periodic_evaluator
+from rlgrasp.train.collection.adr_sync import RANGES_FILE, AdrSync
+from rlgrasp.train.collection.collectors import shut_down
+from rlgrasp.train.evaluation.evaluate import periodic_evaluator
 from rlgrasp.train.loop import train
 from rlgrasp.train.parts import build_parts
 from tests.helpers import record_differences, train_twice
@@ -273,7 +273,7 @@ def _check_the_ranges_reach_the_envs(train_cfg, *collector: str) -> None:
         batches = iter(collector_)
         first = next(batches)  # built from the config: no boundary episode yet
         assert (first["next", "adr_boundary"] == NOT_BOUNDARY).all()
-        sync.push(collector_)  # between batches, as rlgrasp.train.batches does
+        sync.push(collector_)  # between batches, as rlgrasp.train.collection.batches does
         # episodes already running keep their draw; those that start after the push are boundary ones
         second, third = next(batches), next(batches)
         done = third["next", "done"].squeeze(-1)

@@ -8,7 +8,7 @@ import time
 import pytest
 import torch
 
-from rlgrasp.train.batches import Batches, WorkerTimeoutError
+from rlgrasp.train.collection.batches import Batches, WorkerTimeoutError
 
 
 class RecordingCollector:

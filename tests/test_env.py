@@ -38,7 +38,7 @@ def test_torchrl_env_specs_and_info_keys():
 
     from torchrl.envs.utils import check_env_specs
 
-    from rlgrasp.train.collect import make_batched_env
+    from rlgrasp.train.collection.collect import make_batched_env
 
     make_env = functools.partial(PandaGraspEnv, randomization="default", objects="primitives")
     env = make_batched_env(make_env, 2, base_seed=0, episode_stats=False, seed_torch=False)

@@ -12,8 +12,8 @@ import torch
 from omegaconf import OmegaConf
 
 from rlgrasp.envs.factory import env_factory
-from rlgrasp.train.eval_process import BackgroundEvaluator, EvalProcessError
-from rlgrasp.train.evaluate import periodic_evaluator, summarize
+from rlgrasp.train.evaluation.eval_process import BackgroundEvaluator, EvalProcessError
+from rlgrasp.train.evaluation.evaluate import periodic_evaluator, summarize
 from rlgrasp.train.loop import seed_everything
 from rlgrasp.train.parts import build_parts
 

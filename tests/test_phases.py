@@ -1,10 +1,10 @@
-"""Where a run's wall clock goes (``rlgrasp.train.metrics.Phases``): train.log's last line."""
+"""Where a run's wall clock goes (``rlgrasp.train.tracking.metrics.Phases``): train.log's last line."""
 
 from __future__ import annotations
 
 import time
 
-from rlgrasp.train.metrics import Phases, parse_phases, process_age_s
+from rlgrasp.train.tracking.metrics import Phases, parse_phases, process_age_s
 
 
 def test_phases_take_inner_phases_out_of_outer_ones_and_read_back() -> None:

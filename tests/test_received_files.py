@@ -210,7 +210,9 @@ def _layout() -> dict:
         (
             {
                 "algo": {
-                    "terms": {"rnd": {"_target_": "rlgrasp.train.rnd.RND", "net": {"_target_": "os.getcwd"}}}
+                    "terms": {
+                        "rnd": {"_target_": "rlgrasp.algos.ppo.rnd.RND", "net": {"_target_": "os.getcwd"}}
+                    }
                 }
             },
             "config.algo.terms.rnd.net._target_ would be called",
@@ -228,8 +230,14 @@ def _layout() -> dict:
             "config.collector.backend='shutil.copyfile' is not a collector rlgrasp builds",
         ),
         (  # the trust is per kind: one of rlgrasp's loggers is nothing at env (route 4)
-            {"env": {"_target_": "rlgrasp.train.trackers.MlflowLogger", "tracking_uri": "file:///x"}},
-            "config.env._target_='rlgrasp.train.trackers.MlflowLogger' is not a part rlgrasp builds at env",
+            {
+                "env": {
+                    "_target_": "rlgrasp.train.tracking.trackers.MlflowLogger",
+                    "tracking_uri": "file:///x",
+                }
+            },
+            "config.env._target_='rlgrasp.train.tracking.trackers.MlflowLogger' is not a part rlgrasp builds "
+            "at env",
         ),
         (  # a dotted top-level key (route 8)
             {"algo.terms.x": {"_target_": "builtins.open"}},
@@ -246,7 +254,10 @@ def test_a_received_config_names_the_key_and_the_target(config: dict, where: str
 
 def test_a_files_logger_is_only_named_and_never_built() -> None:
     """Route 3 of #81: an MLflow tracking URI of the file's choosing; the node keeps only a name."""
-    endpoint = {"_target_": "rlgrasp.train.trackers.MlflowLogger", "tracking_uri": "http://203.0.113.1:5000"}
+    endpoint = {
+        "_target_": "rlgrasp.train.tracking.trackers.MlflowLogger",
+        "tracking_uri": "http://203.0.113.1:5000",
+    }
     assert read_config({"logger": endpoint}, "f.pt")["logger"] == {"name": "mlflow"}
     assert read_config({"logger": {"_target_": "os.remove", "path": "/x"}}, "f.pt")["logger"] == {
         "name": "another"
@@ -290,7 +301,7 @@ def test_reading_a_read_config_keeps_its_logger_record() -> None:
     the record stays what it was, and a name that is not rlgrasp's is recorded as "another"."""
     from rlgrasp.received import read_config
 
-    once = read_config({"logger": {"_target_": "rlgrasp.train.logger.TensorBoardLogger"}}, "test")
+    once = read_config({"logger": {"_target_": "rlgrasp.train.tracking.logger.TensorBoardLogger"}}, "test")
     assert once["logger"] == {"name": "tensorboard"}
     assert read_config(once, "test")["logger"] == {"name": "tensorboard"}
     assert read_config({"logger": {"name": "os.system"}}, "test")["logger"] == {"name": "another"}

@@ -31,7 +31,7 @@ from tests.procs import wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 SMOKE = ["experiment=smoke", "logger=none"]
-COLLECTORS, LOGGERS = "rlgrasp.train.collectors", "rlgrasp.train.logger"
+COLLECTORS, LOGGERS = "rlgrasp.train.collection.collectors", "rlgrasp.train.tracking.logger"
 
 
 @pytest.fixture(scope="module")
@@ -126,7 +126,7 @@ def test_resume_may_switch_the_collector_and_logger_classes(run: Path) -> None:
     saved = policy_file.load_checkpoint(run)["config"]
     cfg = compose_train([*SMOKE, f"paths.output_dir={run}", "collector=ray", "collector.ray.address=auto"])
     to_ray = merged_config(cfg, saved, {"collector._target_", "collector.ray.address"})
-    assert to_ray.collector._target_ == "rlgrasp.train.collectors.RayCollector"
+    assert to_ray.collector._target_ == "rlgrasp.train.collection.collectors.RayCollector"
     assert to_ray.collector.ray.address == "auto"
     cfg = compose_train([*SMOKE, f"paths.output_dir={run}", "collector=process", "logger=tensorboard"])
     back = merged_config(cfg, OmegaConf.to_container(to_ray), {"collector._target_", "logger._target_"})

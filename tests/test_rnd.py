@@ -9,11 +9,11 @@ from omegaconf import OmegaConf
 from tensordict import TensorDict
 
 from rlgrasp.algos.ppo.learner import PPOLearner
+from rlgrasp.algos.ppo.rnd import INTRINSIC_REWARD, RND
 from rlgrasp.compose import compose_train
 from rlgrasp.models.mlp import MLPConfig, RunningNorm, build_models
 from rlgrasp.train.loop import Trainer
 from rlgrasp.train.resume import prepare_run
-from rlgrasp.train.rnd import INTRINSIC_REWARD, RND
 from tests.helpers import SMOKE_IN_PROCESS, logged_scalars, ppo_algo
 
 OBS_DIM, ENVS, STEPS = 6, 4, 32

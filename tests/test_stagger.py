@@ -7,8 +7,8 @@ import functools
 import torch
 
 from rlgrasp.envs import PandaGraspEnv
-from rlgrasp.train.collect import make_batched_env
-from rlgrasp.train.metrics import finished_episodes
+from rlgrasp.train.collection.collect import make_batched_env
+from rlgrasp.train.tracking.metrics import finished_episodes
 
 EPISODE = 10
 

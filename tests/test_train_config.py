@@ -19,8 +19,13 @@ from rlgrasp.config import CONFIG_DIR, ConfigError
 from rlgrasp.envs import PandaGraspEnv
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.envs.grasp_env import EnvConfig
-from rlgrasp.train.collectors import CollectorBackend, RayCollector, SingleCollector, collector_backend
-from rlgrasp.train.logger import ConsoleLogger
+from rlgrasp.train.collection.collectors import (
+    CollectorBackend,
+    RayCollector,
+    SingleCollector,
+    collector_backend,
+)
+from rlgrasp.train.tracking.logger import ConsoleLogger
 from rlgrasp.train.validate import validate_train
 
 EXPERIMENTS = sorted(p.stem for p in (Path(CONFIG_DIR) / "experiment").glob("*.yaml"))
@@ -50,7 +55,7 @@ def test_group_options_compose(group: str, train_cfg) -> None:
     if group.startswith("randomization"):
         assert cfg.env.randomization == group.split("=")[1]
     if group in ("collector=single", "debug=default"):
-        assert cfg.collector._target_ == "rlgrasp.train.collectors.SingleCollector"
+        assert cfg.collector._target_ == "rlgrasp.train.collection.collectors.SingleCollector"
 
 
 def _options(group: str) -> list[str]:
@@ -81,7 +86,7 @@ def test_the_command_lines_of_the_string_backends_still_work(train_cfg) -> None:
     assert isinstance(collector_backend(train_cfg("collector=single").collector), SingleCollector)
     ray = collector_backend(train_cfg("collector=ray", "collector.ray.address=auto").collector)
     assert isinstance(ray, RayCollector) and ray.ray.address == "auto"
-    assert train_cfg("logger=none").logger._target_ == "rlgrasp.train.logger.ConsoleLogger"
+    assert train_cfg("logger=none").logger._target_ == "rlgrasp.train.tracking.logger.ConsoleLogger"
     assert train_cfg("logger=wandb", "logger.mode=offline").logger._target_.endswith("trackers.WandbLogger")
     assert collector_backend(train_cfg("collector.num_workers=4").collector).num_workers == 4
 
@@ -90,8 +95,9 @@ def test_the_command_lines_of_the_string_backends_still_work(train_cfg) -> None:
     ("override", "message"),
     [
         (
-            "collector._target_=rlgrasp.train.collectors.Bogus",
-            "collector._target_='rlgrasp.train.collectors.Bogus' cannot be built: Error locating target",
+            "collector._target_=rlgrasp.train.collection.collectors.Bogus",
+            "collector._target_='rlgrasp.train.collection.collectors.Bogus' cannot be built: Error locating "
+            "target",
         ),
         ("logger._target_=nowhere.Logger", "logger._target_='nowhere.Logger' cannot be built"),
         ("collector.num_workers=-1", "collector.num_workers=-1: must be >= 0"),
@@ -188,7 +194,7 @@ def test_bad_override_fails_naming_the_key(override: str, error: type, names: li
 
 
 def test_progress_line_shows_a_spent_time_budget_as_zero_left() -> None:
-    from rlgrasp.train.logger import progress_line
+    from rlgrasp.train.tracking.logger import progress_line
 
     line = progress_line(100, 1000, 50.0, None, None, None, eta_s=-7.5)
     assert line.endswith("ETA 0:00:00")

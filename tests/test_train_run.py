@@ -135,7 +135,7 @@ def test_a_seed_gives_one_run_on_this_machine(tmp_path: Path, train_cfg) -> None
     bit for bit. Not across machines: another CPU's kernels round differently."""
     overrides = ("collector.steps_per_env=128",)  # 512-frame batches: 4 updates in 2,048 frames
     cfg = train_cfg("experiment=smoke", *overrides)
-    assert cfg.collector._target_ == "rlgrasp.train.collectors.ProcessCollector"
+    assert cfg.collector._target_ == "rlgrasp.train.collection.collectors.ProcessCollector"
     assert cfg.collector.num_workers == 2 and cfg.collector.overlap
     first, second = train_twice(train_cfg, tmp_path, *overrides)
     assert len(first["curves"]["losses/policy_loss"]) == 4 and len(first["checkpoints"]) >= 3
@@ -196,14 +196,14 @@ algo:
     imitation: {_target_: rlgrasp.demos.bc.Imitation, coeff: 0.1, decay: 0.95, minibatch_size: 256}
     teacher: {_target_: rlgrasp.vision.teacher_term.TeacherImitation, checkpoint: null, coeff: 1.0,
               decay: 1.0}
-    rnd: {_target_: rlgrasp.train.rnd.RND, coeff: 0.0, gamma: 0.99, features: 64, update_fraction: 0.25}
+    rnd: {_target_: rlgrasp.algos.ppo.rnd.RND, coeff: 0.0, gamma: 0.99, features: 64, update_fraction: 0.25}
   init_from: null
 model: {name: mlp, hidden_sizes: [64, 64], activation: tanh, init_log_std: -0.5, min_std: 0.05,
         obs_norm: true, obs_clip: 10.0, distribution: tanh_normal}
-collector: {_target_: rlgrasp.train.collectors.ProcessCollector, num_workers: 2, envs_per_worker: 2,
-            steps_per_env: 256, torch_threads: 1, overlap: true, stagger_starts: false,
+collector: {_target_: rlgrasp.train.collection.collectors.ProcessCollector, num_workers: 2,
+            envs_per_worker: 2, steps_per_env: 256, torch_threads: 1, overlap: true, stagger_starts: false,
             worker_timeout_s: 600.0}
-logger: {_target_: rlgrasp.train.logger.TensorBoardLogger, console_interval_s: 0.0}
+logger: {_target_: rlgrasp.train.tracking.logger.TensorBoardLogger, console_interval_s: 0.0}
 eval: {interval_frames: 1024, episodes: 4, final_episodes: 8, num_envs: 4, seed_offset: 1000000,
        background: false, randomization: null}
 checkpoint: {interval_frames: 1024, keep_last: 2}

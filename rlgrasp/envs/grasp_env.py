@@ -340,7 +340,7 @@ class GraspEnv(gym.Env):
         return info
 
     def set_randomization_ranges(self, ranges: Mapping[str, Any], boundary_prob: float) -> None:
-        """ADR's current ranges, from the learner between batches (``rlgrasp.train.adr_sync``)."""
+        """ADR's current ranges, from the learner between batches (``rlgrasp.train.collection.adr_sync``)."""
         self.randomizer.set_ranges(ranges, boundary_prob)
 
     # --- what tools read -------------------------------------------------------------------------

@@ -14,8 +14,9 @@ included, so that rlgrasp's learners can be judged on tasks no one here wrote.
 - **``compute_reward``** of the env itself, reached through gymnasium's wrappers: HER relabels with
   the env's own rule and scale (panda-gym pays -1 / 0 where rlgrasp's tasks pay 0 / 1).
 - **``info`` keeps ``is_success`` only**, as a bool: it is the one entry the trainer reads
-  (``rlgrasp.train.collect.INFO_DTYPES``: the success rate), a vector env stacks every entry of every
-  env's info each step, and another env's entry could carry a name rlgrasp reads with its own meaning.
+  (``rlgrasp.train.collection.collect.INFO_DTYPES``: the success rate), a vector env stacks every
+  entry of every env's info each step, and another env's entry could carry a name rlgrasp reads with
+  its own meaning.
 - **``max_episode_steps``** as an attribute: the collector's staggered starts and the periodic
   evaluation read an episode's length from the env (``gymnasium.make``'s ``TimeLimit`` ends them).
 

@@ -25,7 +25,7 @@ from rlgrasp.sweep.study import PRUNERS, SAMPLERS, open_study, study_dir
 from rlgrasp.train.validate import validate_train
 from rlgrasp.utils import flatten
 
-#: What training reports to ``on_eval`` (``rlgrasp.train.evaluate.Evaluator.run``): the metrics a
+#: What training reports to ``on_eval`` (``rlgrasp.train.evaluation.evaluate.Evaluator.run``): the metrics a
 #: sweep can optimize.
 METRICS = ("success_rate", "mean_reward")
 DIRECTIONS = ("maximize", "minimize")

@@ -9,7 +9,7 @@ adding a package (``rlgrasp.algos.registry``) and a config file, not a branch in
 
 The policy that acts in evaluation, is saved as the checkpoint's ``actor`` and is exported is
 ``actor``; the workers run a copy of ``behaviour`` (the actor itself, or DAgger's mixture of its
-student and teacher), refreshed between batches (``rlgrasp.train.batches``).
+student and teacher), refreshed between batches (``rlgrasp.train.collection.batches``).
 """
 
 from __future__ import annotations

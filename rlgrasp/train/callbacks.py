@@ -1,8 +1,8 @@
 """What runs beside the training loop, the lightning-hydra-template's way: the loop calls each
 callback's hooks at fixed points and knows nothing of what they do.
 
-Two ship: the evaluations (``rlgrasp.train.evaluations``: periodic and final evaluations, the best
-checkpoint, the sweep's reports through ``on_eval``) and ADR (``rlgrasp.train.adr_sync``: its
+Two ship: the evaluations (``rlgrasp.train.evaluation.evaluations``: periodic and final evaluations, the best
+checkpoint, the sweep's reports through ``on_eval``) and ADR (``rlgrasp.train.collection.adr_sync``: its
 ranges' curves, state and file). A hook a callback does not need stays this base's no-op.
 """
 

@@ -21,15 +21,35 @@ import signal
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, NoReturn, Protocol
+from typing import TYPE_CHECKING, Any, NoReturn, Protocol
 
 from rlgrasp.errors import ConfigError
 from rlgrasp.rundir import RunLockedError, run_lock
 from rlgrasp.train.algorithm import NonFiniteError
 from rlgrasp.train.callbacks import Callback
-from rlgrasp.train.evaluations import CallbackStop, Evaluations, Stopped, TrainingError
-from rlgrasp.train.logger import log
 from rlgrasp.train.preemption import StopSignals
+from rlgrasp.train.tracking.logger import log
+
+if TYPE_CHECKING:  # the evaluations raise this module's exceptions: imported for the type only
+    from rlgrasp.train.evaluation.evaluations import Evaluations
+
+
+class TrainingError(RuntimeError):
+    """Training stopped on a fault (env crash, NaN, a failed evaluation process); the message says
+    what and where."""
+
+
+class Stopped(Exception):
+    """A stop signal arrived: save and leave the loop."""
+
+
+class CallbackStop(Exception):
+    """Carries what ``on_eval`` raised (a sweep's pruner) past the loop's fault handler, to be
+    re-raised unchanged by ``train``."""
+
+    def __init__(self, raised: BaseException) -> None:
+        super().__init__(repr(raised))
+        self.raised = raised
 
 
 class Run(Protocol):

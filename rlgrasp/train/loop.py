@@ -26,19 +26,19 @@ from rlgrasp.envs.factory import episode_steps
 from rlgrasp.legacy import algorithm_state
 from rlgrasp.rundir import CHECKPOINTS, ENV_ERRORS
 from rlgrasp.train import checkpoint as ckpt_lib
-from rlgrasp.train.adr_sync import AdrSync
 from rlgrasp.train.algorithm import Algorithm, algorithm_class
-from rlgrasp.train.batches import Batches
 from rlgrasp.train.callbacks import Callback
-from rlgrasp.train.collect import read_env_errors
-from rlgrasp.train.collectors import begin_shutdown
-from rlgrasp.train.evaluations import EvalCallback, Evaluations, Stopped, TrainingError
-from rlgrasp.train.lifecycle import guarded
-from rlgrasp.train.logger import final_metrics, log, progress_line, setup_text_log
-from rlgrasp.train.metrics import Due, Phases, Throughput, finished_episodes
+from rlgrasp.train.collection.adr_sync import AdrSync
+from rlgrasp.train.collection.batches import Batches
+from rlgrasp.train.collection.collect import read_env_errors
+from rlgrasp.train.collection.collectors import begin_shutdown
+from rlgrasp.train.evaluation.evaluations import EvalCallback, Evaluations
+from rlgrasp.train.lifecycle import Stopped, TrainingError, guarded
 from rlgrasp.train.parts import build_parts
 from rlgrasp.train.preemption import StopSignals
 from rlgrasp.train.resume import prepare_run
+from rlgrasp.train.tracking.logger import final_metrics, log, progress_line, setup_text_log
+from rlgrasp.train.tracking.metrics import Due, Phases, Throughput, finished_episodes
 from rlgrasp.train.warm_start import warm_start
 from rlgrasp.utils import flatten, keep_freed_memory
 
@@ -103,7 +103,8 @@ class Trainer:
         elif cfg.algo.get("init_from"):
             log.info(warm_start(self.actor, cfg.algo.init_from, cfg.env, cfg.model))
 
-        # The class logger._target_ names (rlgrasp.train.logger, .trackers), given the run's own arguments.
+        # The class logger._target_ names (rlgrasp.train.tracking.logger, .trackers), given the run's
+        # own arguments.
         self.logger = instantiate(cfg.logger, _partial_=True, _convert_="all")(
             run_dir=self.run_dir, config=self.config, resumed_frames=None if resumed is None else self.frames
         )

@@ -18,10 +18,10 @@ from rlgrasp.envs.factory import env_factory
 from rlgrasp.models.cnn import actor_norm, build_vision_actor
 from rlgrasp.models.mlp import OBS_KEY, RunningNorm, build_critic, build_models
 from rlgrasp.models.spec import PRIVILEGED_KEY, env_spec, vision_spec
-from rlgrasp.train.batches import Batches
-from rlgrasp.train.collect import EnvFactory
-from rlgrasp.train.collectors import CollectorBackend, collector_backend, shut_down
-from rlgrasp.train.metrics import Phases
+from rlgrasp.train.collection.batches import Batches
+from rlgrasp.train.collection.collect import EnvFactory
+from rlgrasp.train.collection.collectors import CollectorBackend, collector_backend, shut_down
+from rlgrasp.train.tracking.metrics import Phases
 
 
 @dataclass
@@ -56,7 +56,7 @@ class Parts:
     def open_batches(
         self, learner: torch.nn.Module, generation: int, error_dir: Path, env_sync: Any, phases: Phases
     ) -> Iterator[Batches]:
-        """The collector's batches (``rlgrasp.train.batches``), run by a copy of ``learner`` that
+        """The collector's batches (``rlgrasp.train.collection.batches``), run by a copy of ``learner`` that
         takes its weights between batches; the workers are shut down however the loop ends."""
         behaviour = copy.deepcopy(learner)
         with phases("first batch"):  # the workers' start-up: spawned, imports, envs built

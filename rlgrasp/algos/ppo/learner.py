@@ -3,7 +3,7 @@
 TorchRL provides the pieces (``GAE``, ``ClipPPOLoss``, ``SamplerWithoutReplacement``); this module
 only adds what it lacks: the learning-rate schedule (linear, or KL-adaptive), the target-KL stop,
 finiteness checks, the per-update metrics, the refreshed log-probs of stale batches, and auxiliary
-terms (``extras``: the imitation term of ``rlgrasp.demos.bc``, the curiosity of ``rlgrasp.train.rnd``).
+terms (``extras``: the imitation term of ``rlgrasp.demos.bc``, the curiosity of ``rlgrasp.algos.ppo.rnd``).
 
 Stale batches (collected with the weights of one update before, ``collector.overlap``): their
 log-probs are recomputed with the learner's weights before the epochs, so the clip and the

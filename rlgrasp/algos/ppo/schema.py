@@ -101,10 +101,10 @@ class TeacherTermConfig:
 
 @dataclass
 class RNDTermConfig:
-    """Random Network Distillation (``rlgrasp.train.rnd``): coeff x the intrinsic advantage joins
+    """Random Network Distillation (``rlgrasp.algos.ppo.rnd``): coeff x the intrinsic advantage joins
     PPO's (0: off)."""
 
-    _target_: str = "rlgrasp.train.rnd.RND"
+    _target_: str = "rlgrasp.algos.ppo.rnd.RND"
     coeff: float = 0.0
     gamma: float = 0.99  # intrinsic returns are non-episodic
     features: int = 64
@@ -209,7 +209,7 @@ def _ppo_checks(a: Any, batch: int) -> list[Check]:
 
 def _ppo_term_checks(a: Any, camera: Any) -> list[Check]:
     """PPO's pre-training and auxiliary terms: demonstrations and curiosity (``rlgrasp.demos``,
-    ``rlgrasp.train.rnd``) for state policies only, a teacher for camera policies only."""
+    ``rlgrasp.algos.ppo.rnd``) for state policies only, a teacher for camera policies only."""
     state, p, t = not camera, a.pretrain, a.terms
     imitation, teacher, rnd = t.get("imitation"), t.get("teacher"), t.get("rnd")
     checks = [

@@ -45,7 +45,7 @@ from rlgrasp.models.cnn import head_actor, image_specs, vision_net
 from rlgrasp.models.mlp import OBS_KEY
 from rlgrasp.models.spec import PRIVILEGED_KEY
 from rlgrasp.train.algorithm import Algorithm, finite_or_raise
-from rlgrasp.train.logger import log
+from rlgrasp.train.tracking.logger import log
 from rlgrasp.vision.augment import augment_images
 from rlgrasp.vision.auxiliary import ObjectFromImages
 from rlgrasp.vision.object_map import ObjectMap

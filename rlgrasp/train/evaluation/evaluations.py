@@ -22,30 +22,13 @@ from omegaconf import DictConfig
 from rlgrasp.stats import wilson_interval
 from rlgrasp.train import checkpoint as ckpt_lib
 from rlgrasp.train.callbacks import Callback
-from rlgrasp.train.eval_process import EvalProcessError, background_evaluator
-from rlgrasp.train.evaluate import EnvFactory, periodic_evaluator, summarize
-from rlgrasp.train.logger import log
+from rlgrasp.train.evaluation.eval_process import EvalProcessError, background_evaluator
+from rlgrasp.train.evaluation.evaluate import EnvFactory, periodic_evaluator, summarize
+from rlgrasp.train.lifecycle import CallbackStop, Stopped, TrainingError
+from rlgrasp.train.tracking.logger import log
 
 #: Called after each evaluation with (frames, metrics); see ``rlgrasp.train.loop.train``.
 EvalCallback = Callable[[int, dict[str, float]], None]
-
-
-class TrainingError(RuntimeError):
-    """Training stopped on a fault (env crash, NaN, a failed evaluation process); the message says
-    what and where."""
-
-
-class Stopped(Exception):
-    """A stop signal arrived: save and leave the loop."""
-
-
-class CallbackStop(Exception):
-    """Carries what ``on_eval`` raised (a sweep's pruner) past the loop's fault handler, to be
-    re-raised unchanged by ``train``."""
-
-    def __init__(self, raised: BaseException) -> None:
-        super().__init__(repr(raised))
-        self.raised = raised
 
 
 class Host(Protocol):

@@ -2,7 +2,7 @@
 
 The policy runs inside the workers, once per step on a whole ``SyncVectorEnv`` of envs: with
 TorchRL's ``ParallelEnv`` the policy would run in the parent once per step per env and TorchRL's
-per-step cost would dominate the physics. Where the workers run: ``rlgrasp.train.collectors``.
+per-step cost would dominate the physics. Where the workers run: ``rlgrasp.train.collection.collectors``.
 """
 
 from __future__ import annotations

@@ -1,7 +1,8 @@
 """Periodic evaluation: deterministic actions on the same seeded episodes every time.
 
 Runs on a small vector env (built like a collector worker's): in the learner's process, or with
-``eval.background`` in a process of its own (``rlgrasp.train.eval_process``) that runs this same code.
+``eval.background`` in a process of its own (``rlgrasp.train.evaluation.eval_process``) that runs this
+same code.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from tensordict import TensorDictBase
 from torchrl.envs import EnvBase, ExplorationType, set_exploration_type
 
 from rlgrasp.envs.factory import env_factory, episode_steps
-from rlgrasp.train.collect import EnvFactory, make_batched_env
+from rlgrasp.train.collection.collect import EnvFactory, make_batched_env
 from rlgrasp.utils import plain
 
 

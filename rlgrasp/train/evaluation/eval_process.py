@@ -1,7 +1,7 @@
 """Training's periodic evaluation in a process of its own, beside collection and learning.
 
 The learner hands over a copy of the actor's weights (``submit``) and goes on training; the spawned
-process runs ``rlgrasp.train.evaluate.Evaluator.run`` on them, the same code on the same seeded
+process runs ``rlgrasp.train.evaluation.evaluate.Evaluator.run`` on them, the same code on the same seeded
 episodes as the in-process evaluation, so a snapshot gets the numbers the learner would have
 computed. The learner picks the result up (``wait``) at a point its loop fixes (the next evaluation
 due, the end of training), never "whenever it arrives", so one seed still gives one run.
@@ -30,7 +30,7 @@ from typing import Any
 import torch
 
 from rlgrasp.config import PeriodicEvalConfig
-from rlgrasp.train.evaluate import Evaluator
+from rlgrasp.train.evaluation.evaluate import Evaluator
 from rlgrasp.utils import SpawnContextIgnoringCtrlC, die_with_parent
 
 log = logging.getLogger("rlgrasp.train")

@@ -21,7 +21,7 @@ from hydra.utils import instantiate
 from torchrl.collectors import BaseCollector, Collector
 
 from rlgrasp.collector_schema import CollectorConfig, RayCollectorConfig, RayConfig  # noqa: F401
-from rlgrasp.train.collect import EnvFactory, make_batched_env, worker_seed
+from rlgrasp.train.collection.collect import EnvFactory, make_batched_env, worker_seed
 from rlgrasp.utils import guard_spawned_children
 
 log = logging.getLogger("rlgrasp.train")

@@ -1,5 +1,5 @@
 """Run logging: the loggers ``logger._target_`` names (console only, TensorBoard; the trackers are
-in ``rlgrasp.train.trackers``), the console's progress line and the text log.
+in ``rlgrasp.train.tracking.trackers``), the console's progress line and the text log.
 
 Uses torch's ``SummaryWriter`` directly rather than TorchRL's ``TensorboardLogger`` for its
 ``purge_step``: a resumed run appends to the same event directory and drops any events written

@@ -23,7 +23,7 @@ from typing import Any
 from urllib.parse import urlsplit
 
 from rlgrasp.errors import ConfigError
-from rlgrasp.train.logger import TensorBoardLogger
+from rlgrasp.train.tracking.logger import TensorBoardLogger
 from rlgrasp.utils import flatten
 
 log = logging.getLogger("rlgrasp.train")

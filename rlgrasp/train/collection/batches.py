@@ -12,8 +12,9 @@ learner recomputes its log-probs with its own weights before the epochs (``PPOLe
 ``stale_batches``). TorchRL's asynchronous collector overlaps too, but each worker's batch then
 carries whatever weights it had when it started, which depends on timing.
 
-An ``env_sync`` (ADR's ``rlgrasp.train.adr_sync.AdrSync``) reads each batch as it arrives and pushes
-what the envs need at the same idle moment as the weights, so the next batch already uses it.
+An ``env_sync`` (ADR's ``rlgrasp.train.collection.adr_sync.AdrSync``) reads each batch as it arrives
+and pushes what the envs need at the same idle moment as the weights, so the next batch already uses
+it.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 The ranges travel through TorchRL's own channel to a collector's workers, ``collector.map_fn``: it
 calls a method on each worker's inner collector (a pipe message to a process worker, a remote call
 to a Ray actor, a plain call in process), here ``env.base_env._env.call``, gymnasium's vector-env
-call of ``GraspEnv.set_randomization_ranges`` on every env of the worker. ``rlgrasp.train.batches``
+call of ``GraspEnv.set_randomization_ranges`` on every env of the worker. ``rlgrasp.train.collection.batches``
 pushes them while the workers are idle, with the policy weights, so every batch is collected with one
 set of ranges and a seed gives one run.
 """
@@ -22,13 +22,13 @@ from torchrl.collectors import BaseCollector
 from rlgrasp.adr import BOUNDS, NOT_BOUNDARY, AdrState
 from rlgrasp.envs.randomization import Randomizer
 from rlgrasp.train.callbacks import Callback
-from rlgrasp.train.logger import log
-from rlgrasp.train.metrics import finished_mask
+from rlgrasp.train.tracking.logger import log
+from rlgrasp.train.tracking.metrics import finished_mask
 
 #: The run's final ranges, loadable as ``env.randomization=<run dir>/adr_ranges.yaml`` (docs/adr.md).
 RANGES_FILE = "adr_ranges.yaml"
 #: The worker-side method ``map_fn`` calls: the inner collector's env is
-#: ``TransformedEnv(GymWrapper(SyncVectorEnv))`` (``rlgrasp.train.collect.make_batched_env``).
+#: ``TransformedEnv(GymWrapper(SyncVectorEnv))`` (``rlgrasp.train.collection.collect.make_batched_env``).
 _ENV_CALL = "env.base_env._env.call"
 
 
