@@ -15,10 +15,8 @@ import hashlib
 import importlib.util
 import inspect
 import io
-import json
 import logging
 import os
-import re
 import shutil
 import sys
 import warnings
@@ -36,9 +34,9 @@ from torch import nn
 from rlgrasp.config import CONFIG_DIR
 from rlgrasp.deploy import DeployPolicy, deploy_module
 from rlgrasp.envs.control import ControlConfig
+from rlgrasp.envs.env_settings import env_setting
 from rlgrasp.envs.factory import env_factory
 from rlgrasp.envs.observation import PROPRIOCEPTION
-from rlgrasp.envs.part_config import env_setting
 from rlgrasp.evaluation.policies import CheckpointActor
 from rlgrasp.evaluation.source import (
     CKPT_KINDS,
@@ -61,7 +59,9 @@ from rlgrasp.policy_file import (
     package_versions,
     read_checkpoint,
 )
+from rlgrasp.policy_folder import write_policy_folder
 from rlgrasp.received import ReceivedError, check_inside
+from rlgrasp.utils import dumps
 
 log = logging.getLogger("rlgrasp.export")
 
@@ -496,8 +496,6 @@ def _write_folder(
     """The policy folder, written and read back under a temporary name beside ``folder`` (its
     actions compared with the checkpoint's on ``recorded``), then put in place of ``folder``: a
     failed check or write leaves the previous folder as it was and nothing temporary."""
-    from rlgrasp.policy_folder import write_policy_folder  # lazy: it imports this module's describe
-
     folder = folder.absolute()
     tmp = folder.with_name(f".{folder.name}.tmp{os.getpid()}")
     old = folder.with_name(f".{folder.name}.old{os.getpid()}")
@@ -619,12 +617,6 @@ def _one_thread() -> Iterator[None]:
         yield
     finally:
         torch.set_num_threads(threads)
-
-
-def dumps(meta: dict[str, Any]) -> str:
-    """Indented JSON with short lists on one line (the layout stays readable)."""
-    text = json.dumps(meta, indent=2)
-    return re.sub(r"\[\s+([^\[\]{}]*?)\s+\]", lambda m: "[" + " ".join(m.group(1).split()) + "]", text) + "\n"
 
 
 def run(cfg: Any) -> dict[str, dict[str, Any]]:

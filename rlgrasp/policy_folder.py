@@ -15,9 +15,8 @@ from typing import Any
 import torch
 import yaml
 
-from rlgrasp.envs.part_config import env_setting
+from rlgrasp.envs.env_settings import env_setting
 from rlgrasp.envs.robot import robot_label
-from rlgrasp.export import dumps
 from rlgrasp.policy_file import (
     CARD,
     CONFIG,
@@ -27,6 +26,7 @@ from rlgrasp.policy_file import (
     safetensors_torch,
 )
 from rlgrasp.received import FOLDER_FORMAT, FORMAT_VERSION
+from rlgrasp.utils import dumps
 
 #: What ``config.json``'s ``interface`` keeps of ``rlgrasp.export.describe`` (the env's keywords are
 #: in ``config.env``; the source checkpoint is recorded apart, without its local path).

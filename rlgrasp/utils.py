@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import json
 import logging
 import multiprocessing
 import multiprocessing.spawn
 import os
+import re
 import signal
 import sys
 import threading
@@ -311,3 +313,10 @@ class SpawnPool:
         # Waiting for the thread here leaves the pipe closed before the hook runs.
         if manager is not None:
             manager.join(timeout=10)
+
+
+def dumps(meta: dict[str, Any]) -> str:
+    """Indented JSON with short lists on one line (the layout stays readable): policy files' and
+    policy folders' ``config.json``."""
+    text = json.dumps(meta, indent=2)
+    return re.sub(r"\[\s+([^\[\]{}]*?)\s+\]", lambda m: "[" + " ".join(m.group(1).split()) + "]", text) + "\n"

@@ -19,8 +19,8 @@ from omegaconf import DictConfig, OmegaConf
 from rlgrasp.config import CONFIG_DIR, register_configs
 from rlgrasp.demos.dataset import LAYOUT_KEYS, layout_of, summary, write_demos
 from rlgrasp.demos.record import record, to_frames
+from rlgrasp.envs.env_settings import env_setting
 from rlgrasp.envs.factory import env_factory
-from rlgrasp.envs.part_config import env_setting
 from rlgrasp.evaluation.policies import PolicySource
 from rlgrasp.overrides import entry_point, unwritable
 from rlgrasp.policy_file import CheckpointError, load_checkpoint

@@ -21,7 +21,7 @@ from tensordict import TensorDict
 
 from rlgrasp.config import ConfigError
 from rlgrasp.envs.cameras import GROUND_MASK_KEY, CameraSpec
-from rlgrasp.envs.part_config import env_setting
+from rlgrasp.envs.env_settings import env_setting
 from rlgrasp.envs.tasks import task_name
 from rlgrasp.legacy import nest_task
 from rlgrasp.models.cnn import IMAGE_KEYS

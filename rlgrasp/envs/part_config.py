@@ -38,32 +38,3 @@ def _nested_class(cls: type, name: str) -> type | None:
     field = next(f for f in dataclasses.fields(cls) if f.name == name)
     factory = field.default_factory
     return factory if isinstance(factory, type) and dataclasses.is_dataclass(factory) else None
-
-
-#: The env settings that change what an action means: a policy acts in an env only if they agree
-#: (a teacher, a warm start, a DAgger teacher).
-ACTION_SETTINGS = ("control.mode", "control.ee_yaw")
-
-#: ``env_setting``'s default: the value ``EnvConfig`` gives the path.
-SCHEMA_DEFAULT = object()
-
-
-def env_setting(env_cfg: Mapping[str, Any], path: str, default: Any = SCHEMA_DEFAULT) -> Any:
-    """The value at a dotted ``path`` of an env config (``control.mode``, ``sim.substeps``); where a
-    node or the key is missing (a config may leave a part to its defaults), ``default``, by default
-    the one ``EnvConfig`` declares (``None`` for a path it does not have)."""
-    node: Any = env_cfg
-    for key in path.split("."):
-        if not isinstance(node, Mapping) or key not in node or node[key] is None:
-            return _schema_default(path) if default is SCHEMA_DEFAULT else default
-        node = node[key]
-    return node
-
-
-def _schema_default(path: str) -> Any:
-    from rlgrasp.envs.grasp_env import EnvConfig  # lazy: the env module imports this one
-
-    node: Any = EnvConfig()
-    for key in path.split("."):
-        node = getattr(node, key, None)
-    return node

@@ -21,7 +21,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from rlgrasp.config import CONFIG_DIR, register_configs
 from rlgrasp.envs import Randomizer
-from rlgrasp.envs.part_config import env_setting
+from rlgrasp.envs.env_settings import env_setting
 from rlgrasp.evaluation import metrics as M
 from rlgrasp.evaluation.episodes import episode_seeds, timed_run
 from rlgrasp.evaluation.plots import (

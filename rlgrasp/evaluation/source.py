@@ -18,8 +18,8 @@ from hydra.errors import InstantiationException
 from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
+from rlgrasp.envs.env_settings import env_setting
 from rlgrasp.envs.grasp_env import EnvConfig
-from rlgrasp.envs.part_config import env_setting
 from rlgrasp.envs.robot import robot_label
 from rlgrasp.evaluation.policies import POLICIES, PolicySource, build_policy
 from rlgrasp.models.cnn import image_specs

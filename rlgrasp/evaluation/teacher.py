@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rlgrasp.envs.part_config import ACTION_SETTINGS, env_setting
+from rlgrasp.envs.env_settings import ACTION_SETTINGS, env_setting
 from rlgrasp.evaluation.policies import PolicySource, build_policy
 from rlgrasp.evaluation.source import (
     ENV_ERRORS,

@@ -21,7 +21,7 @@ import signal
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NoReturn, Protocol
+from typing import Any, NoReturn, Protocol
 
 from rlgrasp.errors import ConfigError
 from rlgrasp.rundir import RunLockedError, run_lock
@@ -29,9 +29,6 @@ from rlgrasp.train.algorithm import NonFiniteError
 from rlgrasp.train.callbacks import Callback
 from rlgrasp.train.preemption import StopSignals
 from rlgrasp.train.tracking.logger import log
-
-if TYPE_CHECKING:  # the evaluations raise this module's exceptions: imported for the type only
-    from rlgrasp.train.evaluation.evaluations import Evaluations
 
 
 class TrainingError(RuntimeError):
@@ -52,6 +49,13 @@ class CallbackStop(Exception):
         self.raised = raised
 
 
+class Evaluated(Protocol):
+    """What the lifecycle reads of a run's evaluations (``rlgrasp.train.evaluation.evaluations``, which
+    raise this module's exceptions, so it is not imported here): the last one's metrics, if any."""
+
+    last: dict[str, Any] | None
+
+
 class Run(Protocol):
     """What the lifecycle reads of a run (``rlgrasp.train.loop.Trainer``)."""
 
@@ -60,7 +64,7 @@ class Run(Protocol):
     frames: int
     frames_at_start: int
     logger: Any
-    evaluations: Evaluations
+    evaluations: Evaluated
     callbacks: list[Callback]
     signals: StopSignals
 

@@ -15,7 +15,7 @@ from typing import Any
 
 from torch import nn
 
-from rlgrasp.envs.part_config import ACTION_SETTINGS, env_setting
+from rlgrasp.envs.env_settings import ACTION_SETTINGS, env_setting
 from rlgrasp.envs.robot import robot_label
 from rlgrasp.policy_file import CheckpointError, load_checkpoint, resolve_policy_path
 from rlgrasp.utils import plain

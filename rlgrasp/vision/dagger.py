@@ -13,7 +13,7 @@ from torchrl.data import LazyTensorStorage, ReplayBuffer
 from torchrl.data.replay_buffers import RandomSampler
 from torchrl.envs import ExplorationType, set_exploration_type
 
-from rlgrasp.envs.part_config import ACTION_SETTINGS, env_setting
+from rlgrasp.envs.env_settings import ACTION_SETTINGS, env_setting
 from rlgrasp.envs.robot import robot_label
 from rlgrasp.models.mlp import OBS_KEY
 from rlgrasp.models.spec import PRIVILEGED_KEY
