@@ -332,7 +332,7 @@ class GraspEnv(gym.Env):
 
         A vector env stacks every key of every env's info at each step: the 20-odd draws every step
         cost training frames/s, for values that change only at a reset
-        (docs/benchmarks/throughput.md#the-episodes-draws-out-of-every-steps-info).
+        (docs/history/throughput.md#the-episodes-draws-out-of-every-steps-info).
         """
         info = {**self.task.info(readings, success), **self.randomizer.info()}
         if episode:

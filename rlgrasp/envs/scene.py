@@ -109,7 +109,7 @@ class Scene:
         # Deterministic overlapping pairs make a replay after restoreState bit-identical; without
         # them the contact order, and so the result, can differ between two runs of one episode.
         # 20 solver iterations instead of PyBullet's 50: faster physics, and the scripted grasp
-        # succeeds as often (docs/benchmarks/throughput.md#env-speed).
+        # succeeds as often (docs/history/throughput.md#env-speed).
         c.setPhysicsEngineParameter(
             deterministicOverlappingPairs=1, numSolverIterations=int(solver_iterations)
         )

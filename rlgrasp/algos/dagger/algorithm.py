@@ -9,7 +9,7 @@ student itself visits (Ross et al. 2011). Every labelled frame is kept (up to
 ``BCLoss``. With ``algo.optim.ema_decay`` the
 policy that acts, is evaluated and is saved as ``actor`` is a moving average of the trained weights:
 the last snapshot of a regressed student varies from update to update, the average less
-(docs/benchmarks/cameras.md#cube-wrist-depth-64x64-visualdefault-teacher-policiesgrasp_ppopt).
+(docs/history/cameras.md#cube-wrist-depth-64x64-visualdefault-teacher-policiesgrasp_ppopt).
 """
 
 from __future__ import annotations
