@@ -2,13 +2,14 @@
 cluster on loopback). Same env, MLP actor, batch layout (grasp_ppo: 2 workers x 8 envs x 64 steps).
 
     python benchmarks/bench_scale.py [--batches 8] [--warmup 2] [--setups process ray ray_2nodes]
-    python benchmarks/bench_scale.py --workers 1 2 4 8 [--setups process]
+    python benchmarks/bench_scale.py --workers 1 2 4 8 [--setups process] [--plot docs/img/workers.png]
 
 Prints one markdown row per setup (and worker count, with ``--workers``): median and IQR of
 frames/s over the timed batches (each batch also pays the weight broadcast that training does after
 every update), and with ``--workers`` the ratio to the first count's rate. ``--record PAGE/ID``
 writes every other row's ratio to the first into that row of docs/benchmarks/results.json and its
-page's table (benchmarks/results_file.py; no target, so "no target"):
+page's table (benchmarks/results_file.py; no target, so "no target"); ``--plot PNG`` draws the
+``--workers`` curve (median and IQR against workers, one line per setup, the machine's cores marked):
 
     python benchmarks/bench_scale.py --batches 8 --warmup 2 --record scaling/ray
 """
@@ -81,10 +82,14 @@ def main() -> None:
     parser.add_argument(
         "--workers", type=int, nargs="+", help="a curve over collector.num_workers (8 envs each by default)"
     )
+    parser.add_argument("--plot", type=Path, help="with --workers: the PNG of frames/s against workers")
     parser.add_argument("overrides", nargs="*", help="training overrides, e.g. collector.envs_per_worker=4")
     results_file.add_options(parser)
     args = parser.parse_args()
+    if args.plot and not args.workers:
+        parser.error("--plot draws the --workers curve: give --workers too")
     medians = {}
+    curves: dict[str, list[tuple[int, list[float]]]] = {}
     print("| backend | workers | frames/s median | IQR | batches | vs first row |")
     print("|---|---|---|---|---|---|")
     first = None
@@ -98,8 +103,38 @@ def main() -> None:
             row = [setup, workers or "config", f"{med:,.0f}", f"{q[0]:,.0f}-{q[2]:,.0f}", len(rates)]
             print("| " + " | ".join(map(str, row)) + f" | {med / first:.2f} |", flush=True)
             medians[setup if workers is None else f"{setup} x{workers}"] = med
+            curves.setdefault(setup, []).append((workers, rates))
+    if args.plot:
+        plot_workers(curves, args.plot)
     if args.record:
         results_file.record(*args.record, record_text(medians), "no target", load=args.record_load)
+
+
+def plot_workers(curves: dict[str, list[tuple[int, list[float]]]], out: Path) -> None:
+    """Frames/s against workers: each setup's median with its interquartile range, and a line at the
+    machine's core count (past it the workers share the cores, so the curve flattens there)."""
+    from rlgrasp.utils import pyplot
+
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(5, 3.6))
+    for setup, points in curves.items():
+        workers = [w for w, _ in points]
+        medians = [statistics.median(r) for _, r in points]
+        quartiles = [statistics.quantiles(r, n=4) for _, r in points]
+        low = [m - q[0] for m, q in zip(medians, quartiles)]
+        high = [q[2] - m for m, q in zip(medians, quartiles)]
+        ax.errorbar(workers, medians, yerr=[low, high], marker="o", capsize=3, label=setup)
+    cores = os.cpu_count() or 1
+    ax.axvline(cores, color="grey", linestyle=":", label=f"{cores} cores")
+    ax.set_xlabel("collector.num_workers")
+    ax.set_ylabel("frames/s (median, IQR)")
+    ax.set_xticks(sorted({w for points in curves.values() for w, _ in points}))
+    ax.set_ylim(bottom=0)
+    ax.legend()
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    print(f"wrote {out}")
 
 
 def record_text(medians: dict[str, float]) -> str:
