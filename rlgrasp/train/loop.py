@@ -103,8 +103,7 @@ class Trainer:
         elif cfg.algo.get("init_from"):
             log.info(warm_start(self.actor, cfg.algo.init_from, cfg.env, cfg.model))
 
-        # The class logger._target_ names (rlgrasp.train.tracking.logger, .trackers), given the run's
-        # own arguments.
+        # The class logger._target_ names (rlgrasp.train.tracking), given the run's own arguments.
         self.logger = instantiate(cfg.logger, _partial_=True, _convert_="all")(
             run_dir=self.run_dir, config=self.config, resumed_frames=None if resumed is None else self.frames
         )
