@@ -46,6 +46,7 @@ def _perturb(actor: torch.nn.Module) -> None:
             p.add_(torch.randn_like(p) * 0.3)
 
 
+@pytest.mark.full  # an end-to-end run: CI's complete suite, out of the quick set (under 5 minutes)
 @pytest.mark.parametrize(
     "parts", [SMOKE, pytest.param(CAMERA, marks=pytest.mark.slow)], indirect=True, ids=["state", "camera"]
 )
@@ -67,6 +68,7 @@ def test_the_background_process_gives_the_learners_numbers_for_the_submitted_wei
     assert _eval_children() == []
 
 
+@pytest.mark.full  # an end-to-end run: CI's complete suite, out of the quick set (under 5 minutes)
 def test_an_evaluation_shared_with_the_process_gives_one_processs_numbers(parts) -> None:
     """The final evaluation's split: the process plays the later rounds (its result can be looked at
     before ``wait`` without waiting), the learner the first ones; joined in order they are

@@ -30,6 +30,7 @@ def test_eval_runs_to_the_end_and_exits(tmp_path: Path, script) -> None:
     assert done.left() == []
 
 
+@pytest.mark.full  # an end-to-end run: CI's complete suite, out of the quick set (under 5 minutes)
 @pytest.mark.parametrize(
     ("sig", "to_group"),
     # `kill <pid>`, a scheduler: the main process only; its pool must end too
@@ -114,6 +115,7 @@ def test_sweep_stops_on_sigterm_then_the_same_command_finishes(tmp_path: Path, s
     assert trials[1].user_attrs[ATTR_RETRY_OF] == 0
 
 
+@pytest.mark.full  # an end-to-end run: CI's complete suite, out of the quick set (under 5 minutes)
 def test_export_runs_to_the_end_and_exits(tmp_path: Path, script) -> None:
     pytest.importorskip("onnxruntime")
     run = make_run(tmp_path)
@@ -158,6 +160,7 @@ def test_training_stopped_mid_background_evaluation_exits_and_leaves_nothing(
     assert started.left() == []  # the evaluation process is of the group too
 
 
+@pytest.mark.full  # an end-to-end run: CI's complete suite, out of the quick set (under 5 minutes)
 def test_eval_killed_with_sigkill_leaves_no_worker(tmp_path: Path, script) -> None:
     """``kill -9`` (the OOM killer's signal) gives the parent no chance to end its pool: the
     workers end themselves (``rlgrasp.utils.die_with_parent``)."""
@@ -183,6 +186,7 @@ def _demos_working(tmp_path: Path, script):
     return started, workers
 
 
+@pytest.mark.full  # an end-to-end run: CI's complete suite, out of the quick set (under 5 minutes)
 def test_demos_stopped_with_sigterm_exits_with_one_line_and_leaves_nothing(tmp_path: Path, script) -> None:
     started, _ = _demos_working(tmp_path, script)
     started.proc.send_signal(signal.SIGTERM)  # `kill <pid>`: the main process only

@@ -385,6 +385,7 @@ def _targets(node: Any) -> set[str]:
     return set()
 
 
+@pytest.mark.full  # an end-to-end run: CI's complete suite, out of the quick set (under 5 minutes)
 @settings(
     max_examples=QUICK, deadline=None, suppress_health_check=list(HealthCheck), database=None, phases=PHASES
 )

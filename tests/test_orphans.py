@@ -44,6 +44,7 @@ def _left_after_kill(proc: subprocess.Popen, after: float = 2.0) -> list[int]:
     return left
 
 
+@pytest.mark.full  # an end-to-end run: CI's complete suite, out of the quick set (under 5 minutes)
 @pytest.mark.parametrize("when", ["workers importing", "1.5 s"])
 def test_kill_9_of_rlgrasp_eval_leaves_no_process(tmp_path: Path, when: str) -> None:
     proc = _eval(tmp_path)

@@ -6,6 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 PROBE = (
     "import importlib.util, sys; import rlgrasp; import tensordict; "
     "print(sys.modules.get('pandas', 'absent') is None, importlib.util.find_spec('pandas') is None)"
@@ -19,6 +21,7 @@ def _probe(extra_path: Path | None = None) -> str:
     return done.stdout.strip()
 
 
+@pytest.mark.full  # an end-to-end run: CI's complete suite, out of the quick set (under 5 minutes)
 def test_a_missing_pandas_is_marked_absent_and_an_installed_one_left_alone(tmp_path: Path) -> None:
     """TensorDict looks pandas up on every module call; without pandas, ``import rlgrasp`` makes
     that lookup a dictionary read (``None`` in ``sys.modules``). A pandas that is there stays

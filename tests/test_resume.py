@@ -316,6 +316,7 @@ def test_stop_signal_saves_then_resume_auto_finishes_and_exits(tmp_path: Path, s
     assert len(list((tmp_path / "outputs" / "train" / "smoke").iterdir())) == 1
 
 
+@pytest.mark.full  # an end-to-end run: CI's complete suite, out of the quick set (under 5 minutes)
 def test_a_resume_keeps_the_launch_config_in_dot_hydra(tmp_path: Path) -> None:
     """Hydra writes each start's config and overrides; a later start in the run (resume, requeue) goes
     to .hydra/resume_<n>/, so .hydra/ keeps the launch's. A refused resume leaves no resume_<n>."""

@@ -648,6 +648,7 @@ def test_an_image_replay_buffer_larger_than_the_memory_is_refused_in_one_line(tm
     assert message.endswith("lower algo.replay.buffer_frames") and "\n" not in message
 
 
+@pytest.mark.full  # an end-to-end run: CI's complete suite, out of the quick set (under 5 minutes)
 def test_a_short_camera_sac_run_resumes_evaluates_and_exports(tmp_path: Path) -> None:
     from rlgrasp.evaluation.cli import evaluate
     from rlgrasp.export import export, register_export_config

@@ -526,6 +526,7 @@ def _ended_job(job_id: str, timeout: float = 60) -> dict[str, str]:
         time.sleep(0.5)
 
 
+@pytest.mark.full  # an end-to-end run: CI's complete suite, out of the quick set (under 5 minutes)
 def test_two_seed_multirun_on_slurm(slurm, tmp_path: Path) -> None:
     """Two seeds as a SLURM job array through hydra/launcher=slurm, sized by the config (1 CPU each)."""
     start = time.monotonic()

@@ -65,6 +65,7 @@ def _wait_for(path: Path, text: str, proc: subprocess.Popen, timeout: float = 24
     raise TimeoutError(f"{text!r} never appeared in {path}")
 
 
+@pytest.mark.full  # an end-to-end run: CI's complete suite, out of the quick set (under 5 minutes)
 def test_sweep_fails_prunes_resumes_and_summarizes(tmp_path: Path) -> None:
     root = tmp_path / "sweeps"
     sweep = [

@@ -138,6 +138,7 @@ def test_a_quantile_setting_that_keeps_none_is_refused_in_one_line(overrides: li
     assert str(refused.value).startswith(line) and "\n" not in str(refused.value)
 
 
+@pytest.mark.full  # an end-to-end run: CI's complete suite, out of the quick set (under 5 minutes)
 def test_the_command_line_refuses_it_before_any_worker_starts(tmp_path: Path) -> None:
     run = tmp_path / "run"
     args = ["experiment=grasp_tqc", "algo.loss.top_quantiles_to_drop_per_net=30", f"hydra.run.dir={run}"]

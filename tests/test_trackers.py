@@ -42,6 +42,7 @@ def _train(train_cfg, run_dir: Path, frames: int, *overrides: str) -> None:
     train(cfg)
 
 
+@pytest.mark.full  # an end-to-end run: CI's complete suite, out of the quick set (under 5 minutes)
 def test_mlflow_gets_tags_config_and_resumes_the_same_run(tmp_path: Path, train_cfg) -> None:
     pytest.importorskip("mlflow")
     from mlflow.tracking import MlflowClient  # an optional extra: skipped above without it
@@ -113,6 +114,7 @@ def _item(item: Any) -> tuple[str, Any]:
     return key, value
 
 
+@pytest.mark.full  # an end-to-end run: CI's complete suite, out of the quick set (under 5 minutes)
 def test_wandb_offline_gets_tags_config_and_resumes_the_same_run(tmp_path: Path, train_cfg) -> None:
     pytest.importorskip("wandb")
     run_dir = tmp_path / "run"

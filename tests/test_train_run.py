@@ -96,6 +96,7 @@ def test_crashing_env_stops_with_a_clear_error(tmp_path: Path, collector: str, t
     assert (tmp_path / "checkpoints" / "last.pt").is_file()
 
 
+@pytest.mark.full  # an end-to-end run: CI's complete suite, out of the quick set (under 5 minutes)
 def test_stand_in_env_from_tests_reaches_spawned_workers(tmp_path: Path, train_cfg) -> None:
     """A `_target_` inside tests/ is importable in the collector's spawned workers too."""
     cfg = train_cfg("experiment=smoke", "collector.num_workers=1", "collector.envs_per_worker=2")
@@ -110,6 +111,7 @@ def test_stand_in_env_from_tests_reaches_spawned_workers(tmp_path: Path, train_c
     assert batch.numel() == parts.frames_per_batch == 512
 
 
+@pytest.mark.full  # an end-to-end run: CI's complete suite, out of the quick set (under 5 minutes)
 def test_process_workers_leave_the_learners_torch_threads_as_set(tmp_path: Path, train_cfg) -> None:
     """TorchRL's collector would give this process the cores left after one a worker (one, with two
     workers on two cores), and the learner would update on it whatever ``algo.learner_threads`` says."""

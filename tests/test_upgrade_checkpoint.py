@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 import torch
 
 from rlgrasp.policy_file import read_checkpoint
@@ -36,6 +37,7 @@ def _upgrade(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run(cmd, capture_output=True, text=True, timeout=120)
 
 
+@pytest.mark.full  # an end-to-end run: CI's complete suite, out of the quick set (under 5 minutes)
 def test_upgrade_needs_trust_then_loads_weights_only(tmp_path: Path) -> None:
     old = _format_one(tmp_path)
     refused = _upgrade(str(old), str(tmp_path / "no.pt"))

@@ -74,6 +74,7 @@ def test_policy_from_checkpoint_rebuilds_the_camera_policy(student: Path) -> Non
 
 
 # --- evaluation ----------------------------------------------------------------------------------
+@pytest.mark.full  # an end-to-end run: CI's complete suite, out of the quick set (under 5 minutes)
 def test_camera_policy_beside_its_teacher_on_held_out_visuals(student: Path, tmp_path: Path) -> None:
     """The student and its teacher on the same seeds, under visuals the student never saw: both
     successes with Wilson intervals, their ratio, the paired outcomes, success per visual parameter,
@@ -240,6 +241,7 @@ def _export_cfg(*overrides: str):
     return compose_config("export", list(overrides))
 
 
+@pytest.mark.full  # an end-to-end run: CI's complete suite, out of the quick set (under 5 minutes)
 @pytest.mark.parametrize(
     "modality, model", [("depth", MODEL), ("rgbd", KEYPOINTS)], ids=["depth", "rgbd-keypoints"]
 )
@@ -280,6 +282,7 @@ def test_exported_camera_policy_acts_as_the_checkpoint(tmp_path: Path) -> None:
     np.testing.assert_allclose(batch, reference[:20], atol=1e-4)
 
 
+@pytest.mark.full  # an end-to-end run: CI's complete suite, out of the quick set (under 5 minutes)
 def test_example_drives_the_camera_env_with_the_file(tmp_path: Path) -> None:
     """examples/run_exported_policy.py feeds the camera env's dict observation to the file, without
     rlgrasp's training code or TorchRL."""
