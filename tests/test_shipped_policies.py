@@ -21,6 +21,7 @@ CASES = [
     ("grasp_vision_depth.pt", "cube", 17, 14),  # a wrist depth camera student of grasp_ppo.pt
     ("pick_place_sac.pt", "cube", 19, 16),  # a goal task: the checkpoint rebuilds its task and goal
     ("grasp_sac", "cube", 19, 16),  # a policy folder (safetensors + JSON), shipped as nothing else
+    ("grasp_vision_sac", "cube", 18, 15),  # a camera policy folder: SAC from the wrist depth camera
 ]
 
 
