@@ -172,6 +172,12 @@ TRAIN = [
         "terms, init_from; algo.lr is algo.optim.lr now",
     ),
     (
+        "a part's module of before, in the user's own config",
+        ["+algo.terms.x._target_=rlgrasp.train.rnd.RND"],
+        "algo.terms.x._target_='rlgrasp.train.rnd.RND' cannot be imported (rlgrasp.train has no 'rnd'); "
+        "it moved: write 'rlgrasp.algos.ppo.rnd.RND'",
+    ),
+    (
         "a string key of before that is a group now",
         [*DEPTH_STUDENT, "algo.augment=colour"],
         "algo.augment is algo.augment.kind now",

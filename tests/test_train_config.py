@@ -96,10 +96,18 @@ def test_the_command_lines_of_the_string_backends_still_work(train_cfg) -> None:
     [
         (
             "collector._target_=rlgrasp.train.collection.collectors.Bogus",
-            "collector._target_='rlgrasp.train.collection.collectors.Bogus' cannot be built: Error locating "
-            "target",
+            "collector._target_='rlgrasp.train.collection.collectors.Bogus' cannot be imported "
+            "(rlgrasp.train.collection.collectors has no 'Bogus')",
         ),
-        ("logger._target_=nowhere.Logger", "logger._target_='nowhere.Logger' cannot be built"),
+        (
+            "logger._target_=nowhere.Logger",
+            "logger._target_='nowhere.Logger' cannot be imported (no module 'nowhere' is installed)",
+        ),
+        (  # a module that moved (rlgrasp.legacy.MOVED_MODULES), named in the user's own config
+            "+algo.terms.x._target_=rlgrasp.train.rnd.RND",
+            "algo.terms.x._target_='rlgrasp.train.rnd.RND' cannot be imported (rlgrasp.train has no 'rnd'); "
+            "it moved: write 'rlgrasp.algos.ppo.rnd.RND'",
+        ),
         ("collector.num_workers=-1", "collector.num_workers=-1: must be >= 0"),
     ],
 )

@@ -10,9 +10,10 @@ parts it reads, so the schemas below need none of them.
 
 from __future__ import annotations
 
+import importlib
 import logging
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import torch
@@ -25,6 +26,7 @@ from rlgrasp.envs import gym_env
 from rlgrasp.envs.grasp_env import EnvConfig
 from rlgrasp.envs.randomization import Randomizer
 from rlgrasp.errors import ConfigError
+from rlgrasp.legacy import moved_target
 from rlgrasp.models.cnn import POOLINGS
 from rlgrasp.utils import plain
 
@@ -211,9 +213,58 @@ def _warn_about_workers(workers: int) -> None:
         )
 
 
+def _targets(node: Any, prefix: str = "") -> Iterator[tuple[str, str]]:
+    """Each ``(key, dotted path)`` of a ``_target_`` in a plain config, its interpolations left out."""
+    if isinstance(node, dict):
+        for key, value in node.items():
+            where = f"{prefix}.{key}" if prefix else str(key)
+            if key == "_target_" and isinstance(value, str) and not value.startswith("${"):
+                yield where, value
+            else:
+                yield from _targets(value, where)
+    elif isinstance(node, list):
+        for i, value in enumerate(node):
+            yield from _targets(value, f"{prefix}[{i}]")
+
+
+def _importable(target: str) -> str | None:
+    """None where ``module.name`` (a class's attribute included) can be had, else why not, in a few
+    words. Not Hydra's ``_locate``: its error is several lines and a hint about HYDRA_FULL_ERROR."""
+    parts = target.split(".")
+    for cut in range(len(parts) - 1, 0, -1):  # the longest prefix that imports is the module
+        try:
+            found: Any = importlib.import_module(".".join(parts[:cut]))
+        except ModuleNotFoundError:
+            continue
+        except Exception as exc:  # noqa: BLE001 - the user's own module failing as it loads
+            return f"importing {'.'.join(parts[:cut])} failed ({type(exc).__name__}: {exc})"
+        for name in parts[cut:]:
+            if not hasattr(found, name):
+                return f"{'.'.join(parts[:cut])} has no {name!r}"
+            found = getattr(found, name)
+        return None
+    return f"no module {parts[0]!r} is installed"
+
+
+def _target_problems(cfg: Any) -> list[str]:
+    """Each ``_target_`` the user's config names (it is the user's own: importing it is what the run
+    would do next) that cannot be imported, as one line; a module that moved says where it is now."""
+    problems = []
+    for key, target in _targets(OmegaConf.to_container(cfg, resolve=False)):
+        why = _importable(target)
+        if why is None:
+            continue
+        today = moved_target(target)
+        hint = f"; it moved: write {today!r}" if today != target else ""
+        problems.append(f"{key}={target!r} cannot be imported ({why}){hint}")
+    return problems
+
+
 def validate_train(cfg: Any) -> None:
     """Refuse a training config with a bad value: ``ConfigError`` naming the first (and how many
     more). The env's own keywords are checked by the env when the learner builds it, before workers."""
+    if OmegaConf.is_config(cfg) and (targets := _target_problems(cfg)):
+        raise ConfigError(targets[0])
     if OmegaConf.is_config(cfg) and cfg.env.get("_target_") == EnvConfig._target_:
         try:
             OmegaConf.merge(OmegaConf.structured(EnvConfig), cfg.env)
