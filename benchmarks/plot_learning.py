@@ -61,7 +61,8 @@ def main() -> None:
     for tag, seeds in read_curves(args.csvs).items():
         for ax, axis in zip(axes, (1, 0)):
             b = band(along(seeds, axis))
-            line = ax.plot(b["x"], b["mean"], label=f"{tag} ({len(seeds)} seeds)")[0]
+            runs = f"{len(seeds)} seed" + ("s" if len(seeds) != 1 else "")
+            line = ax.plot(b["x"], b["mean"], label=f"{tag} ({runs})")[0]
             ax.fill_between(b["x"], b["low"], b["high"], color=line.get_color(), alpha=0.2)
     for ax, xlabel in zip(axes, ("env frames", "wall-clock minutes (from launch)")):
         ax.set_xlabel(xlabel)
