@@ -19,7 +19,7 @@ from rlgrasp.evaluation.cli import evaluate
 from rlgrasp.evaluation.episodes import run_episodes
 from rlgrasp.evaluation.metrics import summarize
 from rlgrasp.evaluation.plots import binned_success
-from rlgrasp.evaluation.source import prepare
+from rlgrasp.evaluation.source import build_env_cfg, prepare
 from tests.helpers import make_run
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -279,3 +279,19 @@ def test_randomization_preset_by_name_reaches_the_env(tmp_path: Path, preset: st
     cfg = _cfg(f"ckpt={make_run(tmp_path)}", f"randomization={preset}")
     source = prepare(cfg.policy, cfg.ckpt, cfg.ckpt_kind, None, OmegaConf.to_container(cfg.env))
     assert source.env_cfg["randomization"] == preset
+
+
+def test_an_env_override_changes_one_keyword_of_the_checkpoints_part() -> None:
+    """``env.control.ee_yaw=true`` keeps the checkpoint's control mode and ``env.task.air_fraction=0``
+    its task (both were replaced whole: a pick-and-place checkpoint became the lift task, a
+    joint_delta one ee_delta); a part of another class, and the robot or objects, are replaced."""
+    place = {"_target_": "rlgrasp.envs.tasks.PickPlaceTask", "reward": "sparse", "air_fraction": 0.5}
+    trained = {"_target_": "rlgrasp.envs.PandaGraspEnv", "task": place, "control": {"mode": "joint_delta"}}
+    trained["objects"] = {"paths": ["a.obj"], "scale": [1.0, 1.0]}
+    given = {"control": {"ee_yaw": True}, "task": {"air_fraction": 0.0}, "objects": {"paths": ["b.obj"]}}
+    env = build_env_cfg(trained, None, given)
+    assert env["control"]["mode"] == "joint_delta" and env["control"]["ee_yaw"] is True
+    assert env["task"] == {**place, "air_fraction": 0.0}
+    assert env["objects"] == {"paths": ["b.obj"]}
+    other = {"_target_": "rlgrasp.envs.tasks.PushTask", "reward": "dense"}
+    assert build_env_cfg(trained, None, {"task": other})["task"] == other

@@ -100,6 +100,23 @@ def load_checked_checkpoint(path: Path) -> dict[str, Any]:
     return ckpt
 
 
+#: The env's parts whose keywords an evaluation override changes one by one: ``env.control.ee_yaw=true``
+#: keeps the checkpoint's control mode, ``env.task.air_fraction=0`` its task. The other parts (the
+#: robot, the objects, the randomization) are a choice of one thing, replaced whole.
+KEYWORD_PARTS = ("task", "control", "sim", "camera")
+
+
+def _over(key: str, trained: Any, given: Any) -> Any:
+    """What an evaluation override ``given`` makes of the checkpoint's ``env.<key>``: its keywords on
+    top of the checkpoint's for a part of ``KEYWORD_PARTS`` of the same class, else ``given``."""
+    same_part = (
+        isinstance(trained, dict)
+        and isinstance(given, dict)
+        and given.get("_target_", trained.get("_target_")) == trained.get("_target_")
+    )
+    return {**trained, **given} if key in KEYWORD_PARTS and same_part else given
+
+
 def build_env_cfg(
     env_cfg: dict[str, Any] | None, randomization: Any = None, overrides: dict[str, Any] | None = None
 ) -> dict[str, Any]:
@@ -108,12 +125,8 @@ def build_env_cfg(
     # A checkpoint's env node was read as data (rlgrasp.received): its _target_ is rlgrasp's own,
     # and an env of before the task part has its reward keys under env.task.
     cfg = dict(env_cfg or asdict(EnvConfig()))
-    overrides = dict(overrides or {})
-    camera = overrides.get("camera")
-    if isinstance(camera, dict) and isinstance(cfg.get("camera"), dict):
-        # env.camera.fov=60 changes one key of the checkpoint's camera, not the whole camera.
-        overrides["camera"] = {**cfg["camera"], **camera}
-    cfg.update(overrides)
+    for key, value in (overrides or {}).items():
+        cfg[key] = _over(key, cfg.get(key), value)
     if randomization is not None:
         cfg["randomization"] = randomization
     cfg["render_mode"] = "rgb_array"
