@@ -206,3 +206,18 @@ def test_progress_line_shows_a_spent_time_budget_as_zero_left() -> None:
 
     line = progress_line(100, 1000, 50.0, None, None, None, eta_s=-7.5)
     assert line.endswith("ETA 0:00:00")
+
+
+def test_a_target_whose_module_lacks_a_package_names_that_package(train_cfg, tmp_path, monkeypatch) -> None:
+    """A user's module that imports a package not installed is refused naming the package, not as a
+    name its parent package lacks."""
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "__init__.py").write_text("")
+    (tmp_path / "mine" / "loggers.py").write_text("import a_package_nobody_installed\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with pytest.raises(ConfigError) as info:
+        validate_train(train_cfg("logger._target_=mine.loggers.MyLogger"))
+    assert str(info.value) == (
+        "logger._target_='mine.loggers.MyLogger' cannot be imported (importing mine.loggers failed "
+        "(ModuleNotFoundError: No module named 'a_package_nobody_installed'))"
+    )

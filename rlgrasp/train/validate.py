@@ -232,15 +232,18 @@ def _importable(target: str) -> str | None:
     words. Not Hydra's ``_locate``: its error is several lines and a hint about HYDRA_FULL_ERROR."""
     parts = target.split(".")
     for cut in range(len(parts) - 1, 0, -1):  # the longest prefix that imports is the module
+        module = ".".join(parts[:cut])
         try:
-            found: Any = importlib.import_module(".".join(parts[:cut]))
-        except ModuleNotFoundError:
-            continue
+            found: Any = importlib.import_module(module)
+        except ModuleNotFoundError as exc:
+            if exc.name and (module == exc.name or module.startswith(exc.name + ".")):
+                continue  # no such module: a shorter prefix may be the module, the rest its names
+            return f"importing {module} failed ({type(exc).__name__}: {exc})"  # a package it needs
         except Exception as exc:  # noqa: BLE001 - the user's own module failing as it loads
-            return f"importing {'.'.join(parts[:cut])} failed ({type(exc).__name__}: {exc})"
+            return f"importing {module} failed ({type(exc).__name__}: {exc})"
         for name in parts[cut:]:
             if not hasattr(found, name):
-                return f"{'.'.join(parts[:cut])} has no {name!r}"
+                return f"{module} has no {name!r}"
             found = getattr(found, name)
         return None
     return f"no module {parts[0]!r} is installed"
