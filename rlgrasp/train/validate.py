@@ -10,7 +10,6 @@ parts it reads, so the schemas below need none of them.
 
 from __future__ import annotations
 
-import importlib
 import logging
 import os
 from collections.abc import Callable, Iterator
@@ -27,6 +26,7 @@ from rlgrasp.envs.grasp_env import EnvConfig
 from rlgrasp.envs.randomization import Randomizer
 from rlgrasp.errors import ConfigError
 from rlgrasp.legacy import moved_target
+from rlgrasp.locate import NotImportable, locate
 from rlgrasp.models.cnn import POOLINGS
 from rlgrasp.utils import plain
 
@@ -228,25 +228,12 @@ def _targets(node: Any, prefix: str = "") -> Iterator[tuple[str, str]]:
 
 
 def _importable(target: str) -> str | None:
-    """None where ``module.name`` (a class's attribute included) can be had, else why not, in a few
-    words. Not Hydra's ``_locate``: its error is several lines and a hint about HYDRA_FULL_ERROR."""
-    parts = target.split(".")
-    for cut in range(len(parts) - 1, 0, -1):  # the longest prefix that imports is the module
-        module = ".".join(parts[:cut])
-        try:
-            found: Any = importlib.import_module(module)
-        except ModuleNotFoundError as exc:
-            if exc.name and (module == exc.name or module.startswith(exc.name + ".")):
-                continue  # no such module: a shorter prefix may be the module, the rest its names
-            return f"importing {module} failed ({type(exc).__name__}: {exc})"  # a package it needs
-        except Exception as exc:  # noqa: BLE001 - the user's own module failing as it loads
-            return f"importing {module} failed ({type(exc).__name__}: {exc})"
-        for name in parts[cut:]:
-            if not hasattr(found, name):
-                return f"{module} has no {name!r}"
-            found = getattr(found, name)
-        return None
-    return f"no module {parts[0]!r} is installed"
+    """None where ``module.name`` can be had, else why not, in a few words."""
+    try:
+        locate(target)
+    except NotImportable as exc:
+        return str(exc)
+    return None
 
 
 def _target_problems(cfg: Any) -> list[str]:

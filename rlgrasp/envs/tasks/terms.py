@@ -12,13 +12,14 @@ term is in [0, 1]) and keeps each term's episode sum for the logs (``info["rewar
 from __future__ import annotations
 
 import functools
-import importlib
 import inspect
 import math
 from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
+
+from rlgrasp.locate import NotImportable, locate
 
 #: A term: ``term(task, readings, **params) -> float``; ``readings`` are the step's true readings
 #: (robot and task parts by name, ``rlgrasp.envs.observation``), ``task`` the task that owns them.
@@ -138,15 +139,11 @@ class RewardTerms:
 
 
 def import_object(target: str, where: str) -> Any:
-    """What a user's own config names (``module.name``), or one line saying why it cannot be had.
-    Not Hydra's ``get_object``: it logs a multi-line error of its own before raising."""
-    module, _, name = target.rpartition(".")
+    """What a user's own config names (``module.name``), or one line saying why it cannot be had."""
     try:
-        return getattr(importlib.import_module(module), name)
-    except (ImportError, AttributeError, ValueError) as exc:
-        raise RewardConfigError(
-            f"{where}._target_={target!r} cannot be imported ({type(exc).__name__}: {exc})"
-        ) from None
+        return locate(target)
+    except NotImportable as exc:
+        raise RewardConfigError(f"{where}._target_={target!r} cannot be imported ({exc})") from None
 
 
 def _import_term(target: str, where: str) -> TermFn:
