@@ -22,6 +22,7 @@ CASES = [
     ("pick_place_sac.pt", "cube", 19, 16),  # a goal task: the checkpoint rebuilds its task and goal
     ("grasp_sac", "cube", 19, 16),  # a policy folder (safetensors + JSON), shipped as nothing else
     ("grasp_vision_sac", "cube", 18, 15),  # a camera policy folder: SAC from the wrist depth camera
+    ("grasp_vision_sac_rgb", "cube", 16, 13),  # SAC from the wrist RGB camera, a policy folder too
 ]
 
 
