@@ -54,7 +54,8 @@ def test_terms_reweighted_given_params_and_unnormalized() -> None:
         ({"spec": {"terms": {"one": {"weight": 0.0}}}}, "must sum to more than 0"),
         (
             {"spec": {"terms": {"x": {"_target_": "no.such.term"}}}},
-            "env.task.reward.terms.x._target_='no.such.term' cannot be imported (no module 'no' is installed)",
+            "env.task.reward.terms.x._target_='no.such.term' cannot be imported "
+            "(no module 'no' is installed)",
         ),
         (
             {"spec": {"terms": {"x": {"_target_": "math.nothing"}}}},
